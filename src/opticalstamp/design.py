@@ -112,7 +112,12 @@ class Gap(_Frozen):
 
 
 class Sensor(_Frozen):
-    """Line sensor and the staggered lattice of used pixels (paper Fig. 3)."""
+    """Line sensor and the staggered lattice of used pixels (paper Fig. 3).
+
+    ``acceptance_half_angle_deg`` is the pixel's angular response, a hard cut-off on the
+    angle of incidence in the medium above the sensor (90: every ray counts, the paper's
+    unstated default).
+    """
 
     pixel_pitch_um: PositiveUm = 42.3
     sensitive_width_um: PositiveUm = 42.3
@@ -123,6 +128,7 @@ class Sensor(_Frozen):
     row_b_offset_x_um: FiniteUm = 84.6
     row_b_offset_y_um: FiniteUm = 84.6
     pixels_per_row: Annotated[int, Field(ge=1, le=1_000_000)] | None = None
+    acceptance_half_angle_deg: Annotated[float, Field(gt=0, le=90)] = 90.0
 
     @model_validator(mode="after")
     def _rules(self) -> Sensor:

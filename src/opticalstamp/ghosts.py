@@ -15,7 +15,7 @@ import numpy as np
 
 from .design import Design
 from .geometry import pixel_center, reverse_path
-from .sources import Source
+from .sources import DEFENSIVE_SHARE, Source, hole_targets, site_index
 from .tally import (
     Estimate,
     KeyedSums,
@@ -72,6 +72,73 @@ class GhostResult:
         return asdict(self)
 
 
+PILOT_RAYS = 1 << 18
+
+
+def pixel_source(design: Design, row: int, k: int) -> Source:
+    """The sensitive area of used pixel (row, k) as a Lambertian virtual source."""
+    cx, cy = pixel_center(design, row, k)
+    s = design.sensor
+    return Source(cx, cy, s.sensitive_width_um, s.sensitive_height_um)
+
+
+def acceptance(design: Design, n0: float, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
+    """Pixel angular response (0 or 1) for invariant directions s in the medium n0."""
+    cut = design.sensor.acceptance_half_angle_deg
+    if cut >= 90.0:
+        return np.ones(sx.shape)
+    return (sx * sx + sy * sy <= (n0 * np.sin(np.radians(cut))) ** 2).astype(np.float64)
+
+
+def allocate_holes(
+    design: Design,
+    path,
+    src: Source,
+    row: int,
+    k: int,
+    seed: int,
+    fresnel: bool,
+    rse_own: float = 1e-3,
+    rse_ghost: float = 1e-2,
+) -> np.ndarray:
+    """Weights over the first mask's holes for importance sampling (from a pilot run).
+
+    A pilot of 2^18 rays (its own random stream, geometric table q) measures, for each
+    first-mask hole j, the sums S_j of the squared own-path and ghost weights. Within each
+    tally, holes get samples in proportion to sqrt(S_j) (the variance-minimising
+    allocation); the split a between the two tallies minimises the rays needed to reach
+    both relative standard errors, predicted by reweighting the pilot:
+    E'[w'^2] = sum_j (q_j / q'_j) S_j / N.
+    """
+    m0 = int(path.slabs[path.first_mask_slab, 2])
+    own = own_code(path.n_masks)
+    n_sites = path.lattice.n_rows * (path.lattice.k_hi - path.lattice.k_lo + 1)
+    s1 = np.zeros((2, n_sites))
+    s2 = np.zeros((2, n_sites))
+    n0 = path.slabs[0, 1]
+    for b in launch(path, src, PILOT_RAYS, seed, stream=1, fresnel=fresnel):
+        w = b.w * acceptance(design, n0, b.sx, b.sy)
+        site = site_index(path, b.hole_row[:, m0], b.hole_k[:, m0])
+        g = (path_codes(b, row, k) != own).astype(np.int64)
+        np.add.at(s1, (g, site), w)
+        np.add.at(s2, (g, site), w * w)
+    q = hole_targets(path, src).q_per_area * path.hole_area(m0)
+    alloc = [np.sqrt(s) / np.sqrt(s).sum() if s.sum() > 0 else None for s in s2]
+    if alloc[1] is None or alloc[0] is None:
+        return alloc[0] if alloc[1] is None else alloc[1]
+    best, best_n = 0.5, np.inf
+    for a in np.linspace(0.05, 0.95, 19):
+        qn = DEFENSIVE_SHARE * q + (1 - DEFENSIVE_SHARE) * (a * alloc[0] + (1 - a) * alloc[1])
+        need = 0.0
+        for t, rse in ((0, rse_own), (1, rse_ghost)):
+            m1 = s1[t].sum() / PILOT_RAYS
+            m2 = (q / qn * s2[t]).sum() / PILOT_RAYS
+            need = max(need, (m2 / m1**2 - 1) / rse**2)
+        if need < best_n:
+            best, best_n = a, need
+    return best * alloc[0] + (1 - best) * alloc[1]
+
+
 def _schedule(n_rays: int | None, max_rays: int) -> list[int]:
     if n_rays is not None:
         return [n_rays]
@@ -83,11 +150,21 @@ def _schedule(n_rays: int | None, max_rays: int) -> list[int]:
     return ends
 
 
-def analyse_ghosts(design: Design, *, pixel: tuple[int, int] = (0, 0),
-                   z_mm: tuple[float, ...] = (0.0,), n_rays: int | None = None,
-                   rse_own: float = 1e-3, rse_ghost: float = 1e-2, max_rays: int = 1 << 27,
-                   seed: int = 0, fresnel: bool = False, detector_half_um: float = 500.0,
-                   chunk: int = 1 << 21, progress: bool = False) -> GhostResult:
+def analyse_ghosts(
+    design: Design,
+    *,
+    pixel: tuple[int, int] = (0, 0),
+    z_mm: tuple[float, ...] = (0.0,),
+    n_rays: int | None = None,
+    rse_own: float = 1e-3,
+    rse_ghost: float = 1e-2,
+    max_rays: int = 1 << 27,
+    seed: int = 0,
+    fresnel: bool = False,
+    detector_half_um: float = 500.0,
+    chunk: int = 1 << 21,
+    progress: bool = False,
+) -> GhostResult:
     """Etendue of the own and ghost paths of one pixel, and where ghost light comes from.
 
     Parameters
@@ -103,9 +180,9 @@ def analyse_ghosts(design: Design, *, pixel: tuple[int, int] = (0, 0),
     """
     path = reverse_path(design)
     row, k = pixel
-    cx, cy = pixel_center(design, row, k)
-    s = design.sensor
-    src = Source(cx, cy, s.sensitive_width_um, s.sensitive_height_um)
+    src = pixel_source(design, row, k)
+    cx, cy = src.x, src.y
+    weights = allocate_holes(design, path, src, row, k, seed, fresnel, rse_own, rse_ghost)
     n_obj = design.index(design.object_medium)
     n0 = path.slabs[0, 1]
     nm = path.n_masks
@@ -116,36 +193,47 @@ def analyse_ghosts(design: Design, *, pixel: tuple[int, int] = (0, 0),
     hist = np.zeros((len(zs), nbins + 1))
     inside = np.zeros(len(zs))
     inside2 = np.zeros(len(zs))
-    nearest: dict[tuple[int, int], float] = {}
+    nearest = np.full((len(zs), 0), np.inf)  # per Z and path slot
     ledger = np.zeros((path.slabs.shape[0], 4), np.int64)
     done = 0
     for end in _schedule(n_rays, max_rays):
-        for b in launch(path, src, end - done, seed, fresnel=fresnel, first_id=done,
-                        chunk=chunk, progress=progress):
+        for b in launch(
+            path,
+            src,
+            end - done,
+            seed,
+            fresnel=fresnel,
+            first_id=done,
+            chunk=chunk,
+            progress=progress,
+            hole_weights=weights,
+        ):
             ledger += b.ledger
             codes = path_codes(b, row, k)
             theta = np.degrees(np.arcsin(np.sqrt(b.sx**2 + b.sy**2) / n0))
-            slot = sums.add(codes, b.w, theta)
+            w = b.w * acceptance(design, n0, b.sx, b.sy)
+            slot = sums.add(codes, w, theta)
             g = codes != own
             for iz, z in enumerate(zs):
                 xo, yo = object_plane(b, z * 1000.0, n_obj)
                 dist = np.hypot(xo[g] - cx, yo[g] - cy)
                 ib = np.minimum((dist / DISTANCE_BIN_UM).astype(np.int64), nbins)
-                np.add.at(hist[iz], ib, b.w[g])
-                box = (np.abs(xo[g] - cx) <= detector_half_um) & (np.abs(yo[g] - cy)
-                                                                  <= detector_half_um)
-                wb = b.w[g][box]
+                np.add.at(hist[iz], ib, w[g])
+                box = (np.abs(xo[g] - cx) <= detector_half_um) & (
+                    np.abs(yo[g] - cy) <= detector_half_um
+                )
+                wb = w[g][box]
                 np.add.at(inside, np.full(wb.size, iz), wb)
                 np.add.at(inside2, np.full(wb.size, iz), wb * wb)
-                for sl in np.unique(slot[g]).tolist():
-                    d = dist[slot[g] == sl].min()
-                    nearest[(iz, sl)] = min(nearest.get((iz, sl), np.inf), float(d))
+                if nearest.shape[1] < len(sums.keys):
+                    grow = len(sums.keys) - nearest.shape[1]
+                    nearest = np.hstack([nearest, np.full((len(zs), grow), np.inf)])
+                np.minimum.at(nearest[iz], slot[g], dist)
         done = end
         n = done
         e_own = _path_estimate(sums, own, n)
         e_gh = _ghost_estimate(sums, own, n)
-        if n_rays is None and e_own.rse <= rse_own and (
-                e_gh.value > 0 and e_gh.rse <= rse_ghost):
+        if n_rays is None and e_own.rse <= rse_own and (e_gh.value > 0 and e_gh.rse <= rse_ghost):
             break
     n = done
     e_own = _path_estimate(sums, own, n)
@@ -157,14 +245,21 @@ def analyse_ghosts(design: Design, *, pixel: tuple[int, int] = (0, 0),
         if code == own:
             continue
         e = estimate(sums.s1[sl], sums.s2[sl], n)
-        holes = [{"mask": names[m], "row": "other" if o else "own", "dk": int(dk)}
-                 for m, (o, dk) in enumerate(decode_path(code, nm))][::-1]
-        paths.append(GhostPath(
-            holes=holes, etendue_um2sr=e.value, etendue_se=e.se,
-            share=e.value / e_gh.value if e_gh.value else 0.0, n_rays=int(sums.count[sl]),
-            emission_angle_deg=(float(sums.lo[sl]), float(sums.hi[sl])),
-            nearest_landing_um={_zkey(z): nearest.get((iz, sl), float("nan"))
-                                for iz, z in enumerate(zs)}))
+        holes = [
+            {"mask": names[m], "row": "other" if o else "own", "dk": int(dk)}
+            for m, (o, dk) in enumerate(decode_path(code, nm))
+        ][::-1]
+        paths.append(
+            GhostPath(
+                holes=holes,
+                etendue_um2sr=e.value,
+                etendue_se=e.se,
+                share=e.value / e_gh.value if e_gh.value else 0.0,
+                n_rays=int(sums.count[sl]),
+                emission_angle_deg=(float(sums.lo[sl]), float(sums.hi[sl])),
+                nearest_landing_um={_zkey(z): _finite(nearest[iz, sl]) for iz, z in enumerate(zs)},
+            )
+        )
     paths.sort(key=lambda p: -p.etendue_um2sr)
     landing = {}
     for iz, z in enumerate(zs):
@@ -174,21 +269,38 @@ def analyse_ghosts(design: Design, *, pixel: tuple[int, int] = (0, 0),
         landing[_zkey(z)] = {
             "bin_um": DISTANCE_BIN_UM,
             "etendue_by_distance_um2sr": h.tolist(),
-            "nearest_um": min((v for (i, _), v in nearest.items() if i == iz), default=None),
+            "nearest_um": _finite(nearest[iz].min(initial=np.inf)),
             "median_um": _weighted_quantile(h, 0.5),
             "within_detector_um2sr": e_in.value,
             "within_detector_se": e_in.se,
             "detector_half_um": detector_half_um,
             "last_nonzero_bin": int(nz[-1]) if nz.size else None,
         }
-    led = {name: {st: int(ledger[i, j]) for j, st in enumerate(STATUS_NAMES) if ledger[i, j]}
-           for i, name in enumerate(_plane_names(design, path))}
+    led = {
+        name: {st: int(ledger[i, j]) for j, st in enumerate(STATUS_NAMES) if ledger[i, j]}
+        for i, name in enumerate(_plane_names(design, path))
+    }
     return GhostResult(
-        design=design.name, fingerprint=design.fingerprint(),
-        pixel={"row": "AB"[row], "k": k, "x_um": cx, "y_um": cy}, seed=seed, n_rays=n,
-        fresnel=fresnel, etendue_own_um2sr=e_own.value, etendue_own_se=e_own.se,
-        etendue_ghost_um2sr=e_gh.value, etendue_ghost_se=e_gh.se, ghost_fraction=frac.value,
-        ghost_fraction_se=frac.se, paths=paths, landing=landing, ledger=led)
+        design=design.name,
+        fingerprint=design.fingerprint(),
+        pixel={"row": "AB"[row], "k": k, "x_um": cx, "y_um": cy},
+        seed=seed,
+        n_rays=n,
+        fresnel=fresnel,
+        etendue_own_um2sr=e_own.value,
+        etendue_own_se=e_own.se,
+        etendue_ghost_um2sr=e_gh.value,
+        etendue_ghost_se=e_gh.se,
+        ghost_fraction=frac.value,
+        ghost_fraction_se=frac.se,
+        paths=paths,
+        landing=landing,
+        ledger=led,
+    )
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
 
 
 def _zkey(z: float) -> str:
@@ -222,6 +334,9 @@ def _plane_names(design: Design, path) -> list[str]:
     for i in range(path.slabs.shape[0]):
         m = int(path.slabs[i, 2])
         z = path.z_exit[i]
-        out.append(path.mask_names[m] if m >= 0 else
-                   ("reference plane" if i == path.slabs.shape[0] - 1 else f"z={z:g}um"))
+        out.append(
+            path.mask_names[m]
+            if m >= 0
+            else ("reference plane" if i == path.slabs.shape[0] - 1 else f"z={z:g}um")
+        )
     return out

@@ -102,8 +102,23 @@ def alias_table(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return prob, alias
 
 
-def hole_targets(path: Path, source: Source) -> Targets:
-    """Importance table: every hole of the first mask, q_j ~ etendue centre -> hole j."""
+#: share of the geometric (defensive) table mixed into a user-given hole allocation
+DEFENSIVE_SHARE = 0.1
+
+
+def site_index(path: Path, row: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Index of lattice site (row, k) in the order of :meth:`Lattice.all_sites`."""
+    lat = path.lattice
+    return np.asarray(row, np.int64) * (lat.k_hi - lat.k_lo + 1) + np.asarray(k) - lat.k_lo
+
+
+def hole_targets(path: Path, source: Source, weights: np.ndarray | None = None) -> Targets:
+    """Importance table over every hole of the first mask.
+
+    q_j is proportional to the etendue from the source centre to hole j alone; if
+    ``weights`` (one per lattice site, >= 0) is given, q = 0.1 q_geometric + 0.9 weights,
+    which stays positive for every hole, so the estimator stays unbiased.
+    """
     n_pre = path.first_mask_slab + 1
     d, n = path.slabs[:n_pre, 0], path.slabs[:n_pre, 1]
     if d.sum() <= 0:
@@ -118,5 +133,7 @@ def hole_targets(path: Path, source: Source) -> Targets:
     area = path.hole_area(m0)
     f = area / jacobian(r, d, n)
     q = f / f.sum()
+    if weights is not None and np.sum(weights) > 0:
+        q = DEFENSIVE_SHARE * q + (1 - DEFENSIVE_SHARE) * weights / np.sum(weights)
     prob, alias = alias_table(q)
     return Targets(hx, hy, prob, alias, q / area, n_pre)

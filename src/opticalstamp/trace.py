@@ -561,12 +561,15 @@ def launch(
     chunk: int = 1 << 21,
     first_id: int = 0,
     progress: bool = False,
+    hole_weights: np.ndarray | None = None,
 ) -> Iterator[RayBatch]:
     """Launch ``n_rays`` Lambertian rays from ``source`` and trace them, chunk by chunk.
 
     Rays first_id ... first_id + n_rays - 1 are drawn from the counter-based generator
     keyed by (seed, stream), so any chunking or thread count yields the same rays.
     Memory is bounded by ``chunk``; a tqdm bar is shown when ``progress``.
+    ``hole_weights`` (one per lattice site) steers importance sampling towards the holes
+    of the first mask that matter (see :func:`~opticalstamp.sources.hole_targets`).
 
     Yields
     ------
@@ -579,7 +582,7 @@ def launch(
     n0 = float(path.slabs[0, 1])
     key = seed_key(seed, stream)
     if importance:
-        tg = hole_targets(path, source)
+        tg = hole_targets(path, source, hole_weights)
         n_pre = tg.n_pre
         d, n = path.slabs[:n_pre, 0], path.slabs[:n_pre, 1]
         n_min = float(n.min())
