@@ -239,7 +239,8 @@ def format_validation_error(err: ValidationError, source: str) -> str:
         if e["type"] == "extra_forbidden":
             msg = "unknown key (not part of the design format)"
         got = e.get("input")
-        shown = "" if isinstance(got, dict | list) or e["type"] == "missing" else f" (got {got!r})"
+        skip = isinstance(got, dict | list) or e["type"] == "missing" or "(got" in msg
+        shown = "" if skip else f" (got {got!r})"
         lines.append(f"  {loc}: {msg}{shown}")
     return "\n".join(lines)
 
