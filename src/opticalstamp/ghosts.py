@@ -213,7 +213,7 @@ def analyse_ghosts(
             theta = np.degrees(np.arcsin(np.sqrt(b.sx**2 + b.sy**2) / n0))
             w = b.w * acceptance(design, n0, b.sx, b.sy)
             slot = sums.add(codes, w, theta)
-            g = codes != own
+            g = (codes != own) & (w > 0)
             for iz, z in enumerate(zs):
                 xo, yo = object_plane(b, z * 1000.0, n_obj)
                 dist = np.hypot(xo[g] - cx, yo[g] - cy)
