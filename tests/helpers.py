@@ -38,7 +38,9 @@ class Tally:
 def assert_agree(a: float, sa: float, b: float, sb: float, k: float = 4.0) -> None:
     """|a - b| within k combined standard errors."""
     tol = k * math.hypot(sa, sb)
-    assert abs(a - b) <= tol, f"{a} +- {sa} vs {b} +- {sb}: differ by {abs(a - b) / math.hypot(sa, sb):.2f} SE"
+    assert abs(a - b) <= tol, (
+        f"{a} +- {sa} vs {b} +- {sb}: differ by {abs(a - b) / math.hypot(sa, sb):.2f} SE"
+    )
 
 
 def preset_dict(name: str) -> dict:
@@ -52,7 +54,9 @@ def _corner(x: float, y: float, c: float) -> float:
     a = math.hypot(x, c)
     b = math.hypot(y, c)
     return (
-        y * a * math.atan2(y, a) + x * b * math.atan2(x, b) - 0.5 * c * c * math.log(x * x + y * y + c * c)
+        y * a * math.atan2(y, a)
+        + x * b * math.atan2(x, b)
+        - 0.5 * c * c * math.log(x * x + y * y + c * c)
     )
 
 

@@ -106,7 +106,11 @@ def test_sensitive_area_larger_than_pitch():
 
 @pytest.mark.parametrize(
     ("where", "field"),
-    [((), "colour"), (("sensor",), "sensor.colour"), (("slabs", 0, "mask_top"), "slabs.0.mask_top.colour")],
+    [
+        ((), "colour"),
+        (("sensor",), "sensor.colour"),
+        (("slabs", 0, "mask_top"), "slabs.0.mask_top.colour"),
+    ],
 )
 def test_unknown_key(where, field):
     def mutate(d):

@@ -1,0 +1,189 @@
+"""Importance sampling is unbiased; launches are reproducible and chunk-independent."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+from helpers import Tally, assert_agree
+from opticalstamp.design import design_from_dict, load_design
+from opticalstamp.geometry import forward_path, reverse_path
+from opticalstamp.ghosts import allocate_holes, analyse_ghosts, pixel_source
+from opticalstamp.sources import Source
+from opticalstamp.tally import own_code, path_codes
+from opticalstamp.trace import ESCAPED, TIR, launch
+
+
+def _etendues(path, src, n_rays, seed, **kw):
+    """(total, own path of pixel A0) etendue tallies over all rays reaching the end."""
+    own = own_code(path.n_masks)
+    total, own_t = Tally(), Tally()
+    for b in launch(path, src, n_rays, seed, **kw):
+        total.add(b.w, b.n_samples)
+        own_t.add(b.w[path_codes(b, 0, 0) == own], b.n_samples)
+    return total, own_t
+
+
+@pytest.mark.parametrize("name", ["paper2016", "fig1b", "fig1d"])
+def test_importance_sampling_is_unbiased(name):
+    design = load_design(name)
+    path = reverse_path(design)
+    src = pixel_source(design, 0, 0)
+    imp_total, imp_own = _etendues(path, src, 1 << 21, 1, importance=True)
+    pl_total, pl_own = _etendues(path, src, 1 << 25, 2, importance=False, chunk=1 << 22)
+    assert imp_own.value > 0 and imp_total.value > imp_own.value
+    assert_agree(imp_total.value, imp_total.se, pl_total.value, pl_total.se)
+    assert_agree(imp_own.value, imp_own.se, pl_own.value, pl_own.se)
+
+
+def test_importance_sampling_is_unbiased_with_fresnel():
+    # Fresnel losses multiply the weights ray by ray; both estimators see the same losses
+    design = load_design("paper2016")
+    path = reverse_path(design)
+    src = pixel_source(design, 0, 0)
+    imp_total, imp_own = _etendues(path, src, 1 << 21, 1, fresnel=True)
+    pl_total, pl_own = _etendues(path, src, 1 << 25, 2, importance=False, fresnel=True)
+    assert_agree(imp_total.value, imp_total.se, pl_total.value, pl_total.se)
+    assert_agree(imp_own.value, imp_own.se, pl_own.value, pl_own.se)
+    # two index steps on the own path (air/glass at z = 450 um, glass/air at 1850 um), crossed
+    # within ~10 degrees of the normal: just under (1 - 0.0426)^2 of the lossless etendue
+    _, lossless_own = _etendues(path, src, 1 << 21, 1)
+    ratio = imp_own.value / lossless_own.value
+    assert 0.90 < ratio < (1 - ((1.52 - 1) / (1.52 + 1)) ** 2) ** 2 + 1e-3
+
+
+def test_importance_sampling_is_unbiased_from_inside_glass():
+    # a pixel under a glass cover: directions with |s| > 1 are totally reflected at the
+    # glass/air interface before the first mask; importance sampling never draws them.
+    data = {
+        "slabs": [
+            {"medium": 1.52, "thickness_um": 300.0},
+            {"medium": "air", "thickness_um": 200.0, "mask_top": {"size_um": 40.0}},
+        ],
+        "reference_gap": {"thickness_um": 500.0},
+    }
+    design = design_from_dict(data)
+    path = reverse_path(design)
+    src = pixel_source(design, 0, 0)
+    imp, _ = _etendues(path, src, 1 << 21, 1)
+    plain = Tally()
+    led = np.zeros((path.slabs.shape[0], 4), np.int64)
+    for b in launch(path, src, 1 << 25, 2, importance=False, chunk=1 << 22):
+        plain.add(b.w, b.n_samples)
+        led += b.ledger
+    assert_agree(imp.value, imp.se, plain.value, plain.se)
+    # the TIR share of a Lambertian emitter in glass is 1 - 1/n^2 (the most grazing of those
+    # rays leave the plate's edge inside the glass first and are counted as escaped)
+    p = 1 - 1 / 1.52**2
+    n = led.sum()
+    assert led[0, TIR] > 0.99 * (led[0, TIR] + led[0, ESCAPED])
+    assert abs((led[0, TIR] + led[0, ESCAPED]) / n - p) < 4 * np.sqrt(p * (1 - p) / n)
+
+
+def test_steered_importance_sampling_is_unbiased():
+    # the pilot-driven hole allocation (with its defensive share) leaves the estimates unbiased
+    design = load_design("paper2016")
+    path = reverse_path(design)
+    src = pixel_source(design, 0, 0)
+    weights = allocate_holes(design, path, src, 0, 0, seed=5, fresnel=False)
+    st_total, st_own = _etendues(path, src, 1 << 21, 6, hole_weights=weights)
+    pl_total, pl_own = _etendues(path, src, 1 << 25, 7, importance=False, chunk=1 << 22)
+    assert_agree(st_total.value, st_total.se, pl_total.value, pl_total.se)
+    assert_agree(st_own.value, st_own.se, pl_own.value, pl_own.se)
+    # and analyse_ghosts, which uses it, reports the same own-path etendue
+    g = analyse_ghosts(design, n_rays=1 << 20, seed=8)
+    assert_agree(g.etendue_own_um2sr, g.etendue_own_se, pl_own.value, pl_own.se)
+    assert_agree(
+        g.etendue_own_um2sr + g.etendue_ghost_um2sr,
+        np.hypot(g.etendue_own_se, g.etendue_ghost_se),
+        pl_total.value,
+        pl_total.se,
+    )
+
+
+def test_importance_sampling_is_unbiased_forward():
+    # an object area emitting down the stack (paper Fig. 10's direction of travel)
+    path = forward_path(load_design("paper2016"), 1000.0)
+    src = Source(40.0, 0.0, 100.0, 100.0)
+    imp = Tally()
+    for b in launch(path, src, 1 << 21, 1):
+        imp.add(b.w, b.n_samples)
+    plain = Tally()
+    for b in launch(path, src, 1 << 25, 2, importance=False, chunk=1 << 22):
+        plain.add(b.w, b.n_samples)
+    assert imp.value > 0
+    assert_agree(imp.value, imp.se, plain.value, plain.se)
+
+
+def _collect(path, src, n_rays, seed, **kw):
+    ids, w, x, sx, holes = [], [], [], [], []
+    n_samples = 0
+    for b in launch(path, src, n_rays, seed, **kw):
+        ids.append(b.ids)
+        w.append(b.w)
+        x.append(b.x)
+        sx.append(b.sx)
+        holes.append(b.hole_k)
+        n_samples += b.n_samples
+    cat = np.concatenate
+    return cat(ids), cat(w), cat(x), cat(sx), cat(holes), n_samples
+
+
+@pytest.mark.parametrize("importance", [True, False])
+def test_chunk_size_does_not_change_results(importance):
+    design = load_design("paper2016")
+    path = reverse_path(design)
+    src = pixel_source(design, 0, 0)
+    n = 1 << 20
+    a = _collect(path, src, n, 42, importance=importance, chunk=4096 * 8)
+    b = _collect(path, src, n, 42, importance=importance, chunk=4096 * 64)
+    assert a[0].size > 0
+    for u, v in zip(a[:5], b[:5], strict=True):
+        np.testing.assert_array_equal(u, v)
+    assert a[5] == b[5] == n
+    assert np.all(np.diff(a[0]) > 0)  # survivors come in launch order
+    # the tally (sum in ray order) is bit-identical
+    assert a[1].sum() == b[1].sum()
+    # different seeds give different rays
+    c = _collect(path, src, n, 43, importance=importance, chunk=4096 * 8)
+    assert a[1].sum() != c[1].sum()
+    assert not np.array_equal(a[0][: min(a[0].size, c[0].size)], c[0][: min(a[0].size, c[0].size)])
+
+
+def test_thread_count_does_not_change_results():
+    design = load_design("paper2016")
+    path = reverse_path(design)
+    src = pixel_source(design, 0, 0)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = [_collect(path, src, 1 << 19, 9, importance=imp) for imp in (True, False)]
+    finally:
+        numba.set_num_threads(before)
+    many = [_collect(path, src, 1 << 19, 9, importance=imp) for imp in (True, False)]
+    for a, b in zip(one, many, strict=True):
+        for u, v in zip(a[:5], b[:5], strict=True):
+            np.testing.assert_array_equal(u, v)
+
+
+def test_first_id_continues_the_sequence():
+    # rays 0..N-1 in one launch equal rays 0..N/2-1 and N/2..N-1 from two launches
+    design = load_design("paper2016")
+    path = reverse_path(design)
+    src = pixel_source(design, 0, 0)
+    n = 1 << 19
+    whole = _collect(path, src, n, 3)
+    first = _collect(path, src, n // 2, 3)
+    second = _collect(path, src, n // 2, 3, first_id=n // 2)
+    for u, v, t in zip(whole[:5], first[:5], second[:5], strict=True):
+        np.testing.assert_array_equal(u, np.concatenate([v, t]))
+
+
+def test_streams_are_independent():
+    design = load_design("paper2016")
+    path = reverse_path(design)
+    src = pixel_source(design, 0, 0)
+    a = _collect(path, src, 1 << 18, 3, stream=0)
+    b = _collect(path, src, 1 << 18, 3, stream=1)
+    assert a[1].sum() != b[1].sum()
