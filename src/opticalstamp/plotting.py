@@ -139,3 +139,157 @@ def plot_ghosts(res: GhostResult, top: int = 12):
     )
     fig.tight_layout()
     return fig
+
+
+def plot_rmtf(res, paper_points: dict | None = None):
+    """RMTF versus object distance, one line per chart dpi (paper Fig. 11).
+
+    Solid: maximum over chart shifts (the paper's RMTF); band: minimum to maximum.
+    ``paper_points`` ({dpi: [(z, rmtf), ...]}) are drawn as dots when given.
+    """
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    z = np.asarray(res.z_mm)
+    for i, (key, vals) in enumerate(res.rmtf_max.items()):
+        c = f"C{i}"
+        ax.plot(z, vals, "-", color=c, label=f"{key} dpi ({res.periods_um[i]:.0f} um)")
+        ax.fill_between(z, res.rmtf_min[key], vals, color=c, alpha=0.12, lw=0)
+        if paper_points and key in paper_points:
+            pz, pv = zip(*paper_points[key], strict=True)
+            ax.plot(pz, pv, "o", color=c)
+    ax.axhline(res.dof_threshold, color="k", lw=0.6, ls=":")
+    dof = res.dof_mm.get(f"{res.dof_dpi:g}")
+    if dof is not None:
+        ax.axvline(dof, color="k", lw=0.6, ls="--")
+        ax.text(dof, 0.95, f" DOF {dof:.2f} mm", fontsize=8, va="top")
+    ax.set_xlabel("object distance Z (mm)")
+    ax.set_ylabel("RMTF")
+    ax.set_ylim(0, 1.02)
+    ax.set_xlim(z[0], z[-1])
+    ax.legend(fontsize=8, loc="lower left")
+    what = "own + ghost light" if res.ghosts else "own path only"
+    ax.set_title(
+        f"{res.design}: RMTF vs Z ({res.method}, {what}; band = min..max over chart shifts)",
+        fontsize=9,
+    )
+    return fig
+
+
+def plot_efficiency(res):
+    """Collected etendue vs Z for finite uniform objects, and the sensitive-area effect."""
+    plt = _plt()
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    zs = sorted(res.by_object_radius, key=float)
+    radii = list(res.by_object_radius[zs[0]])
+    for i, r in enumerate(radii):
+        vals = [res.by_object_radius[z][r] for z in zs]
+        lab = "infinite object" if r == "inf" else f"object radius {r} mm"
+        a1.plot([float(z) for z in zs], vals, "o-", color=f"C{i}", label=lab)
+    a1.axhline(res.etendue_own_um2sr, color="k", lw=0.6, ls=":", label="own path")
+    a1.set_xlabel("object distance Z (mm)")
+    a1.set_ylabel("etendue collected (um^2 sr)")
+    a1.set_title(
+        f"ratio to reference lens 1/{1 / res.ratio:.1f}, working F {res.working_f_number:.0f}",
+        fontsize=9,
+    )
+    a1.legend(fontsize=7)
+    areas = res.sensitive_area
+    x = np.arange(len(areas))
+    a2.bar(x - 0.2, [a["gain_own_vs_design"] for a in areas], 0.4, label="own path")
+    a2.bar(x + 0.2, [a["gain_vs_design"] for a in areas], 0.4, label="own + ghost")
+    a2.plot(x, [a["area_scale"] for a in areas], "k_", ms=30, label="area ratio")
+    a2.set_xticks(x, [f"{a['sensitive_um'][0]:.1f} um" for a in areas])
+    a2.set_ylabel("light relative to the design")
+    a2.set_title("sensitive-area size (paper: 4x area -> 4x light)", fontsize=9)
+    a2.legend(fontsize=7)
+    fig.suptitle(f"{res.design}: light efficiency (paper Fig. 13)", fontsize=10)
+    return fig
+
+
+def plot_diffraction(res):
+    """Slit diffraction at the next layer, per wavelength (paper Fig. 6b)."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    for i, (k, v) in enumerate(res.intensity.items()):
+        ax.plot(res.x_um, v, color=f"C{i}", label=f"{k} um: {res.fraction_outside[k]:.1%} outside")
+    for s in (-1, 1):
+        ax.axvline(s * res.geometric_edge_um, color="k", lw=0.7, ls="--")
+    ax.set_xlabel("X at the next layer (um)")
+    ax.set_ylabel("I / I0")
+    ax.set_title(
+        f"slit {res.slit_um:g} um, Z = {res.z_mm:g} mm (R1 {res.r1_um:.0f} um, "
+        f"R2 {res.r2_um:.0f} um); geometric edge {res.geometric_edge_um:.1f} um",
+        fontsize=9,
+    )
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_study(res):
+    """Parameter study: working F-number against depth of field, per combination."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7.5, 4.6))
+    marks = {"square": "s", "circle": "o"}
+    for r in res.rows:
+        col = "C0" if r["gap_medium"] == "air" else "C1"
+        face = col if r["fresnel"] else "none"
+        size = 60 if r["sensitive_um"] == max(x["sensitive_um"] for x in res.rows) else 25
+        ax.scatter(
+            r["dof_mm"],
+            r["working_f_number"],
+            marker=marks.get(r["hole_shape"], "^"),
+            edgecolors=col,
+            facecolors=face,
+            s=size,
+        )
+    ax.axhline(res.paper["working_f_number"], color="k", lw=0.7, ls=":")
+    ax.axvline(res.paper["dof_mm"], color="k", lw=0.7, ls="--")
+    ax.text(res.paper["dof_mm"], ax.get_ylim()[1], " paper: DOF 3.5 mm, F 60", fontsize=8, va="top")
+    ax.set_xlabel("depth of field at 200 dpi, RMTF >= 0.3 (mm)")
+    ax.set_ylabel("equivalent working F-number")
+    ax.set_title(
+        "square/circle: hole shape; blue: air gap, orange: light guide n=1.49; "
+        "filled: Fresnel losses; large: bigger sensitive area",
+        fontsize=8,
+    )
+    return fig
+
+
+def plot_sfr(res: dict, title: str = ""):
+    """SFR curve of a slanted edge with MTF50 and the 100/200-dpi values."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    ax.plot(res["freq_cy_per_mm"], res["sfr"], "-")
+    ax.axhline(0.5, color="k", lw=0.5, ls=":")
+    for k, v in res["sfr_at_dpi"].items():
+        ax.plot(float(k) / 50.8, v, "o", label=f"{k} dpi: {v:.3f}")
+    ax.axvline(res["nyquist_cy_per_mm"], color="k", lw=0.5, ls="--")
+    ax.set_xlim(0, 2 * res["nyquist_cy_per_mm"])
+    ax.set_ylim(0, 1.1)
+    ax.set_xlabel("spatial frequency (cycles/mm)")
+    ax.set_ylabel("SFR")
+    ax.set_title(
+        f"{title} slanted-edge SFR along {res['direction']}: MTF50 "
+        f"{res['mtf50_cy_per_mm']:.2f} cy/mm",
+        fontsize=9,
+    )
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_chart_profiles(profiles: list[dict]):
+    """Merged-line signals across a bar chart at two distances (paper Fig. 12 c, d)."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
+    for ax, p in zip(axes[0], profiles, strict=True):
+        x = np.asarray(p["x_um"]) / 1000
+        ax.step(x, p["signal"], where="mid")
+        ax.set_ylim(0, 1.05)
+        ax.set_xlim(0, min(x[-1], 2.0))
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("pixel signal (max = 1)")
+        ax.set_title(
+            f"{p['dpi']:g} dpi chart, Z = {p['z_mm']:g} mm: RMTF {p['rmtf_computed']:.2f}",
+            fontsize=9,
+        )
+    return fig
