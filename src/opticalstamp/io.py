@@ -130,6 +130,6 @@ def read_image(path: str | Path, *, linear: bool = False) -> tuple[np.ndarray, f
         raise ImageError(f"image {path}: expected a 2-D image (got shape {arr.shape})")
     if linear:
         arr = srgb_to_linear(np.clip(arr, 0, 1))
-    if dpi is not None and not dpi > 1:
-        dpi = None
+    if dpi is not None:  # PNG stores pixels per metre: 600 dpi reads back as 599.9988
+        dpi = round(float(dpi), 2) if dpi > 1 else None
     return arr, dpi

@@ -1,0 +1,101 @@
+"""Measuring images: slanted-edge SFR against known kernels, bar-chart RMTF."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter1d
+from scipy.special import ndtr
+
+from opticalstamp.measure import measure_rmtf, sfr
+
+
+def _edge(kernel: str, size: float, angle_deg: float = 5.0, shape=(200, 120)):
+    ny, nx = shape
+    yy, xx = np.mgrid[0:ny, 0:nx].astype(float)
+    a = np.radians(angle_deg)
+    d = ((xx - nx / 2) - np.tan(a) * (yy - ny / 2)) * np.cos(a)  # perpendicular distance
+    if kernel == "gauss":
+        return 0.1 + 0.8 * ndtr(d / size)
+    return np.clip((d + size / 2) / size, 0, 1)  # box of width `size` px
+
+
+@pytest.mark.parametrize("sigma", [0.8, 1.5, 3.0])
+def test_sfr_of_gaussian_edge(sigma):
+    """MTF of a Gaussian of sigma px: exp(-2 pi^2 sigma^2 f^2); MTF50 in closed form.
+    Tolerance 0.02: ISO 12233 leaves the 1/4-px binning's sinc uncorrected."""
+    dpi = 300.0
+    r = sfr(_edge("gauss", sigma), dpi)
+    f = r["freq_cy_per_mm"] * 25.4 / dpi
+    m = f <= 0.5
+    np.testing.assert_allclose(r["sfr"][m], np.exp(-2 * np.pi**2 * sigma**2 * f[m] ** 2), atol=0.02)
+    f50 = np.sqrt(np.log(2) / (2 * np.pi**2 * sigma**2)) * dpi / 25.4
+    assert r["mtf50_cy_per_mm"] == pytest.approx(f50, rel=0.02)
+    assert r["edge_angle_deg"] == pytest.approx(-5.0, abs=0.05) or r["edge_angle_deg"] == (
+        pytest.approx(5.0, abs=0.05)
+    )
+    assert r["direction"] == "x"
+
+
+@pytest.mark.parametrize("width", [2.0, 3.0])
+def test_sfr_of_box_edge_along_y(width):
+    """A box of width b px: |sinc(b f)|; a near-horizontal edge gives the SFR along y."""
+    r = sfr(_edge("box", width).T, 600.0)
+    assert r["direction"] == "y"
+    f = r["freq_cy_per_mm"] * 25.4 / 600.0
+    m = f <= 0.5
+    np.testing.assert_allclose(r["sfr"][m], np.abs(np.sinc(width * f[m])), atol=0.02)
+
+
+def test_sfr_value_at_the_paper_frequencies():
+    r = sfr(_edge("gauss", 1.0), 300.0)
+    f200 = 200 / 50.8 * 25.4 / 300  # 200 dpi chart fundamental, cycles per pixel
+    assert r["sfr_at_dpi"]["200"] == pytest.approx(np.exp(-2 * np.pi**2 * f200**2), abs=0.02)
+
+
+def test_sfr_rejects_aligned_edges_and_flat_images():
+    with pytest.raises(ValueError, match="too close to the pixel grid"):
+        sfr(_edge("gauss", 1.0, angle_deg=0.0), 300.0)
+    with pytest.raises(ValueError):
+        sfr(np.ones((50, 50)), 300.0)
+    with pytest.raises(ValueError, match="dpi"):
+        sfr(_edge("gauss", 1.0), 0)
+
+
+def _chart(dpi: float, blocks, blur_um: float, n=3200):
+    px = 25400 / dpi
+    x = (np.arange(n) + 0.5) * px
+    fine = 8  # area-average each pixel over 8 sub-samples
+    xs = ((np.arange(n * fine) + 0.5) / fine) * px
+    f = np.ones_like(xs)
+    for per, a, b in blocks:
+        sel = (xs > a) & (xs < b)
+        f[sel] = ((xs[sel] - a) % per) < per / 2
+    prof = gaussian_filter1d(f, blur_um / px * fine).reshape(n, fine).mean(axis=1)
+    return x, prof, np.tile(prof, (40, 1))
+
+
+def test_measure_rmtf_finds_blocks_and_values():
+    dpi = 1200.0
+    blocks = [(508.0, 2000, 9000), (254.0, 11000, 17000), (205.7, 19000, 25000)]
+    x, prof, img = _chart(dpi, blocks, blur_um=40.0)
+    got = measure_rmtf(img, dpi)
+    nominal = (100, 150, 200, 247)
+    assert [min(nominal, key=lambda d, b=b: abs(d - b["dpi"])) for b in got] == [100, 200, 247]
+    for b, (per, a, e) in zip(got, blocks, strict=True):
+        assert b["period_um"] == pytest.approx(per, rel=0.01)
+        inner = (x > a + per) & (x < e - per)
+        imax, imin = prof[inner].max(), prof[inner].min()
+        assert b["rmtf"] == pytest.approx((imax - imin) / (imax + imin), abs=0.01)
+    # more blur, less contrast, same order of blocks
+    low = measure_rmtf(_chart(dpi, blocks, blur_um=90.0)[2], dpi)
+    assert all(lo["rmtf"] < hi["rmtf"] for lo, hi in zip(low, got, strict=True))
+
+
+def test_measure_rmtf_bars_along_y_and_errors():
+    _, _, img = _chart(1200.0, [(254.0, 2000, 9000)], blur_um=30.0, n=1000)
+    got = measure_rmtf(img.T, 1200.0, axis=1)
+    assert len(got) == 1 and got[0]["period_um"] == pytest.approx(254, rel=0.01)
+    with pytest.raises(ValueError, match="dpi"):
+        measure_rmtf(img, -3)
+    assert measure_rmtf(np.full((20, 500), 0.5), 600.0) == []
