@@ -271,3 +271,150 @@ def paraxial_folded_lsf(design: Design, *, z_mm, periods_um) -> FoldedLSF:
             arr[:, 0, iz] = folded
         h.append(arr)
     return FoldedLSF(zs, per, rows, h, "paraxial", 0, False, False)
+
+
+# -- 2-D responsivity maps for the scan simulation ----------------------------------------
+@numba.njit(parallel=True, cache=True)
+def _maps(
+    x,
+    y,
+    sx,
+    sy,
+    w,
+    own,
+    x0,
+    y0,
+    z_um,
+    n_obj,
+    fine_lo,
+    fine_bin,
+    coarse_lo,
+    coarse_bin,
+    fine,
+    coarse,
+):  # pragma: no cover
+    """fine[iz, iy, ix] += own-path w; coarse[iz, iy, ix] += ghost w (prange over z)."""
+    nfy, nfx = fine.shape[1], fine.shape[2]
+    ncy, ncx = coarse.shape[1], coarse.shape[2]
+    for iz in numba.prange(z_um.size):
+        z = z_um[iz]
+        for i in range(x.size):
+            wi = w[i]
+            if wi == 0.0:
+                continue
+            c = np.sqrt(n_obj * n_obj - sx[i] * sx[i] - sy[i] * sy[i])
+            xo = x[i] + z * sx[i] / c - x0
+            yo = y[i] + z * sy[i] / c - y0
+            if own[i]:
+                jx = int(np.floor((xo - fine_lo) / fine_bin))
+                jy = int(np.floor((yo - fine_lo) / fine_bin))
+                if 0 <= jx < nfx and 0 <= jy < nfy:
+                    fine[iz, jy, jx] += wi
+            else:
+                jx = int(np.floor((xo - coarse_lo[1]) / coarse_bin))
+                jy = int(np.floor((yo - coarse_lo[0]) / coarse_bin))
+                if 0 <= jx < ncx and 0 <= jy < ncy:
+                    coarse[iz, jy, jx] += wi
+
+
+@dataclass(frozen=True)
+class TracedMaps:
+    """Responsivity maps of one pixel (etendue per bin, um^2 sr) at several Z.
+
+    ``own`` (nz, n, n) on a fine grid of ``fine_bin_um`` starting at ``fine_lo_um`` in x and
+    y from the pixel's axis; ``ghost`` (nz, ny, nx) on a coarse grid of
+    ``coarse_bin_um`` starting at ``coarse_lo_um`` (y, x).
+    """
+
+    z_mm: np.ndarray
+    own: np.ndarray
+    fine_lo_um: float
+    fine_bin_um: float
+    ghost: np.ndarray
+    coarse_lo_um: tuple[float, float]
+    coarse_bin_um: float
+    n_rays: int
+
+
+def traced_maps(
+    design: Design,
+    *,
+    z_mm,
+    row: int = 0,
+    n_rays: int = 1 << 22,
+    seed: int = 0,
+    fresnel: bool = False,
+    fine_bin_um: float = 4.0,
+    half_um: float | None = None,
+    coarse_bin_um: float = 500.0,
+    coarse_half_um: tuple[float, float] = (10_000.0, 45_000.0),
+    progress: bool = False,
+) -> TracedMaps:
+    """Own-path maps (fine) and ghost maps (coarse) of pixel (row, 0) at every Z."""
+    zs = np.asarray(z_mm, dtype=np.float64)
+    path = reverse_path(design)
+    n_obj = design.index(design.object_medium)
+    n0 = path.slabs[0, 1]
+    own_c = own_code(path.n_masks)
+    src = pixel_source(design, row, 0)
+    if half_um is None:
+        half_um = _own_half_width(design, float(zs.max()))
+    nf = int(np.ceil(2 * half_um / fine_bin_um))
+    fine_lo = -nf * fine_bin_um / 2
+    ncy = int(np.ceil(2 * coarse_half_um[0] / coarse_bin_um))
+    ncx = int(np.ceil(2 * coarse_half_um[1] / coarse_bin_um))
+    coarse_lo = np.array([-ncy * coarse_bin_um / 2, -ncx * coarse_bin_um / 2])
+    fine = np.zeros((zs.size, nf, nf))
+    coarse = np.zeros((zs.size, ncy, ncx))
+    weights = allocate_holes(design, path, src, row, 0, seed, fresnel, 1e-3, 1e-2)
+    for b in launch(
+        path, src, n_rays, seed, fresnel=fresnel, hole_weights=weights, progress=progress
+    ):
+        w = b.w * acceptance(design, n0, b.sx, b.sy)
+        own = path_codes(b, row, 0) == own_c
+        _maps(
+            b.x,
+            b.y,
+            b.sx,
+            b.sy,
+            w,
+            own,
+            src.x,
+            src.y,
+            zs * 1000.0,
+            n_obj,
+            fine_lo,
+            fine_bin_um,
+            coarse_lo,
+            coarse_bin_um,
+            fine,
+            coarse,
+        )
+    return TracedMaps(
+        zs,
+        fine / n_rays,
+        fine_lo,
+        fine_bin_um,
+        coarse / n_rays,
+        (float(coarse_lo[0]), float(coarse_lo[1])),
+        coarse_bin_um,
+        n_rays,
+    )
+
+
+def _own_half_width(design: Design, z_mm: float) -> float:
+    """Half width (um) enclosing the own-path spot at z_mm (paraxial bound + 20 % margin).
+
+    For circular holes the bound of the circumscribed squares is used."""
+    sq = design
+    if any(m.shape == "circle" for m in design.masks):
+        slabs = design.model_dump(mode="json", exclude_none=True)["slabs"]
+        for sl in slabs:
+            if "mask_top" in sl:
+                sl["mask_top"]["shape"] = "square"
+        from .design import design_from_dict
+
+        sq = design_from_dict(design.model_dump(mode="json", exclude_none=True) | {"slabs": slabs})
+    lo, hi = paraxial_support(sq, z_mm, 0)
+    lo_y, hi_y = paraxial_support(sq, z_mm, 1)
+    return 1.2 * max(abs(lo), abs(hi), abs(lo_y), abs(hi_y)) + 10.0
