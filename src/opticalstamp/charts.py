@@ -100,7 +100,7 @@ def line_chart(
     dpi: float = 1200.0,
     size_mm: float = 16.0,
     line_um: float = 50.0,
-    n_curves: int = 24,
+    n_curves: int = 8,
     supersample: int = 2,
 ) -> np.ndarray:
     """Guilloche rosette of thin lines (width ``line_um``) inside a frame, with a band of
@@ -114,7 +114,7 @@ def line_chart(
     ink = np.zeros(r.shape, bool)
     r0 = size_mm * 1000 * 0.28
     for k in range(n_curves):
-        rc = r0 * (1 + 0.25 * np.sin(6 * th + 2 * np.pi * k / n_curves))
+        rc = r0 * (1 + 0.3 * np.sin(5 * th + 2 * np.pi * k / n_curves))
         ink |= np.abs(r - rc) < line_um / 2
     band = (np.abs(yy) > size_mm * 1000 * 0.38) & (np.abs(yy) < size_mm * 1000 * 0.46)
     pitch = 150 + 150 * (xx - f[0]) / (f[-1] - f[0])  # 150 -> 300 um across

@@ -130,6 +130,112 @@ def read_image(path: str | Path, *, linear: bool = False) -> tuple[np.ndarray, f
         raise ImageError(f"image {path}: expected a 2-D image (got shape {arr.shape})")
     if linear:
         arr = srgb_to_linear(np.clip(arr, 0, 1))
-    if dpi is not None:  # PNG stores pixels per metre: 600 dpi reads back as 599.9988
-        dpi = round(float(dpi), 2) if dpi > 1 else None
-    return arr, dpi
+    return arr, _round_dpi(dpi)  # PNG stores pixels per metre: 600 dpi reads as 599.9988
+
+
+#: Bytes per document pixel and channel while scanning (float32 reflectance, the y pass,
+#: decoding buffers).
+SCAN_BYTES_PER_SAMPLE = 10
+
+
+def available_memory_bytes() -> int:
+    """MemAvailable from /proc/meminfo (or 4 GiB where it cannot be read)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 4 << 30
+
+
+def read_document(
+    path: str | Path, *, color: bool = False, memory_limit_bytes: int | None = None
+) -> tuple[np.ndarray, float | None]:
+    """A document image as linear reflectance (float32, [y, x] or [y, x, 3]) and its dpi.
+
+    8- and 16-bit sRGB values are decoded through a lookup table. The memory the scan
+    will need is estimated from the header first, and a file that would not fit in
+    ``memory_limit_bytes`` (default: 80 % of the available memory) is refused with the
+    numbers, before it is decoded.
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    path = Path(path)
+    if not path.is_file():
+        raise ImageError(f"document {path}: no such file")
+    Image.MAX_IMAGE_PIXELS = None  # the memory check below replaces Pillow's bomb guard
+    try:
+        with Image.open(path) as im:
+            w, h = im.size
+            n_ch = 3 if color and im.mode not in ("L", "I;16", "I;16B", "I;16L", "I", "F") else 1
+            need = w * h * n_ch * SCAN_BYTES_PER_SAMPLE
+            limit = memory_limit_bytes or int(0.8 * available_memory_bytes())
+            if need > limit:
+                raise ImageError(
+                    f"document {path}: {w} x {h} pixels x {n_ch} channel(s) needs about "
+                    f"{need / 2**30:.1f} GiB to scan, more than the {limit / 2**30:.1f} GiB "
+                    "available; crop it or lower its resolution"
+                )
+            dpi = float(im.info["dpi"][0]) if "dpi" in im.info else None
+            im.load()
+            if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+                arr = (
+                    np.asarray(im, dtype=np.uint16)
+                    if im.mode != "I"
+                    else np.clip(np.asarray(im), 0, 65535).astype(np.uint16)
+                )
+                lut = srgb_to_linear(np.arange(65536) / 65535.0).astype(np.float32)
+                return lut[arr], _round_dpi(dpi)
+            if im.mode == "F":
+                return np.clip(np.asarray(im, np.float32), 0, 1), _round_dpi(dpi)
+            im = im.convert("RGB" if n_ch == 3 else "L")
+            arr = np.asarray(im)
+    except (OSError, UnidentifiedImageError, ValueError, SyntaxError) as err:
+        if isinstance(err, ImageError):
+            raise
+        raise ImageError(f"document {path}: cannot read it ({err})") from None
+    lut = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)
+    return lut[arr], _round_dpi(dpi)
+
+
+def _round_dpi(dpi: float | None) -> float | None:
+    return round(float(dpi), 2) if dpi is not None and dpi > 1 else None
+
+
+def linear_to_srgb(v: np.ndarray) -> np.ndarray:
+    v = np.clip(np.asarray(v, dtype=np.float64), 0, 1)
+    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
+
+
+def write_png(path: str | Path, linear: np.ndarray, dpi: float, *, srgb: bool = True) -> Path:
+    """8-bit PNG (sRGB-encoded unless ``srgb`` is False) with its resolution, atomically."""
+    import io as _io
+
+    from PIL import Image
+
+    v = linear_to_srgb(linear) if srgb else np.clip(linear, 0, 1)
+    im = Image.fromarray(np.round(v * 255).astype(np.uint8))
+    buf = _io.BytesIO()
+    im.save(buf, format="PNG", dpi=(dpi, dpi))
+    return write_atomic(path, buf.getvalue())
+
+
+def write_tiff16(path: str | Path, linear: np.ndarray, dpi: float, description: str = ""):
+    """16-bit TIFF of linear values (0..65535) with its resolution in dpi, atomically."""
+    import io as _io
+
+    import tifffile
+
+    buf = _io.BytesIO()
+    data = np.round(np.clip(linear, 0, 1) * 65535).astype(np.uint16)
+    tifffile.imwrite(
+        buf,
+        data,
+        resolution=(dpi, dpi),
+        resolutionunit="INCH",
+        description=description or None,
+        photometric="rgb" if data.ndim == 3 else "minisblack",
+    )
+    return write_atomic(path, buf.getvalue())

@@ -293,3 +293,46 @@ def plot_chart_profiles(profiles: list[dict]):
             fontsize=9,
         )
     return fig
+
+
+def plot_scan_panels(panels: list[tuple[str, np.ndarray]], title: str, cols: int = 1):
+    """Simulated scans side by side or stacked (paper Figs. 8, 9, 12 a-b), display-encoded."""
+    plt = _plt()
+    from .io import linear_to_srgb
+
+    rows = int(np.ceil(len(panels) / cols))
+    h, w = panels[0][1].shape[:2]
+    fig, axes = plt.subplots(
+        rows,
+        cols,
+        figsize=(min(12, 3 + 9 * w / max(w, h)), 0.6 + rows * max(1.2, 9 * h / w / cols)),
+        squeeze=False,
+    )
+    for ax, (name, img) in zip(axes.ravel(), panels, strict=False):
+        ax.imshow(linear_to_srgb(img), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+        ax.set_title(name, fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    for ax in axes.ravel()[len(panels) :]:
+        ax.axis("off")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_scan_profiles(profiles: list[dict]):
+    """Profiles across the simulated 200-dpi chart scans (paper Fig. 12 c, d)."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
+    for ax, p in zip(axes[0], profiles, strict=True):
+        x = np.asarray(p["x_mm"])
+        ax.plot(x, p["profile"], "-", lw=1)
+        ax.set_ylim(0, 1.1)
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("output (white = 1)")
+        ax.set_title(
+            f"Z = {p['z_mm']:g} mm: RMTF measured {p['rmtf_measured']:.2f}, computed "
+            f"{p['rmtf_computed_min']:.2f}-{p['rmtf_computed_max']:.2f}",
+            fontsize=9,
+        )
+    return fig

@@ -108,7 +108,8 @@ def _taps(
     i0 = np.floor((centers - reach) / p).astype(np.int64)
     n_taps = int(np.ceil(2 * reach / p)) + 2
     pos = (i0[:, None] + np.arange(n_taps)[None, :] + 0.5) * p  # pixel centres
-    subs = np.linspace(-smear / 2, smear / 2, 9) if smear > 0 else np.zeros(1)
+    # the box of the motion, by the midpoint rule on 9 sub-positions
+    subs = ((np.arange(9) + 0.5) / 9 - 0.5) * smear if smear > 0 else np.zeros(1)
     w = np.zeros((kern.scale.size,) + pos.shape)
     for sub in subs:
         off = (centers[:, None] + sub - pos) if axis == 0 else (pos - centers[:, None])

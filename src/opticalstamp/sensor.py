@@ -5,7 +5,8 @@ illuminance E (lux) receives the luminous flux E/pi * S * 1e-12 (lm); a photon-r
 (photons per second per lumen of the LED's light), the quantum efficiency and the exposure
 give the mean photo-electrons. Then, per pixel and line: photon shot noise (Poisson),
 PRNU (a fixed gain per pixel), dark signal with its shot noise and DSNU (a fixed offset per
-pixel), read noise, full-well clipping and an ADC of ``adc_bits`` over the full well.
+pixel), full-well clipping, read noise and an ADC of ``adc_bits`` over the full well with a
+black-level pedestal of ``black_level_dn`` (so that dark noise is not clipped at zero).
 
 Default values are typical orders of magnitude for a contact-image-sensor line, not a
 datasheet: 10 klux on the document (CIS light guides deliver 10^4 lux and more), 1 ms
@@ -35,6 +36,7 @@ class SensorModel(BaseModel):
     dsnu_e: float = Field(20.0, ge=0)
     dark_current_e_per_s: float = Field(1000.0, ge=0)
     adc_bits: int = Field(12, ge=1, le=24)
+    black_level_dn: int = Field(64, ge=0)  # ADC pedestal: keeps the dark noise unclipped
     exposure_duty: float = Field(1.0, gt=0, le=1)  # fraction of the line period exposed
     channel_response: tuple[float, float, float] = (0.8, 1.0, 0.6)  # R, G, B relative
 
@@ -78,11 +80,12 @@ def expose(
     ``rng`` None: the noiseless mode (expected values, no fixed pattern, no quantisation).
     """
     if rng is None:
-        return (mean_e + model.dark_e) / model.gain_e_per_dn
+        return (mean_e + model.dark_e) / model.gain_e_per_dn + model.black_level_dn
     gain, offset = pattern
-    # photo-electrons and dark electrons together: a sum of Poisson variables is Poisson
+    # photo-electrons and dark electrons together: a sum of Poisson variables is Poisson;
+    # the well holds at most full_well_e
     e = rng.poisson(np.clip(mean_e * gain, 0, None) + model.dark_e).astype(np.float64)
-    e += offset
+    e = np.minimum(e, model.full_well_e) + offset
     e += model.read_noise_e * rng.standard_normal(e.shape)
-    e = np.clip(e, 0, model.full_well_e)
-    return np.floor(e / model.gain_e_per_dn)
+    dn = np.floor(e / model.gain_e_per_dn) + model.black_level_dn
+    return np.clip(dn, 0, 2**model.adc_bits - 1)
