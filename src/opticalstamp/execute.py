@@ -91,7 +91,9 @@ def run_tasks(
         if bar is not None:
             bar.update(1)
 
-    if dask_address:
+    if not todo:
+        pass  # everything is journalled already: nothing to connect to or start
+    elif dask_address:
         _run_dask(fn, todo, dask_address, retries, record)
     elif (workers or os.cpu_count() or 1) <= 1 or len(todo) <= 1:
         for key, payload in todo:

@@ -248,3 +248,17 @@ def write_tiff16(path: str | Path, linear: np.ndarray, dpi: float, description: 
         photometric="rgb" if data.ndim == 3 else "minisblack",
     )
     return write_atomic(path, buf.getvalue())
+
+
+def save_dataset(ds, path: str | Path) -> Path:
+    """An xarray Dataset as netCDF (scipy engine: NETCDF3, no extra library), atomically.
+
+    Attributes that are not numbers or strings are stored as JSON strings.
+    """
+    ds = ds.copy()
+    ds.attrs = {
+        k: v if isinstance(v, int | float | str) else json.dumps(v, default=_default)
+        for k, v in ds.attrs.items()
+        if v is not None
+    }
+    return write_atomic(path, ds.to_netcdf(engine="scipy"))

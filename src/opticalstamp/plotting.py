@@ -336,3 +336,94 @@ def plot_scan_profiles(profiles: list[dict]):
             fontsize=9,
         )
     return fig
+
+
+def plot_pareto(res, title: str = ""):
+    """Search: every feasible design, the Pareto front, and the base design."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    feas = [r for r in res.records if r["feasible"]]
+    bad = [r for r in res.records if r["ok"] and not r["feasible"]]
+    if bad:
+        ax.scatter(
+            [r["dof_mm"] for r in bad],
+            [r["efficiency_ratio"] for r in bad],
+            s=6,
+            c="0.8",
+            label="infeasible (near ghosts, budget, diffraction)",
+        )
+    if feas:
+        ax.scatter(
+            [r["dof_mm"] for r in feas],
+            [r["efficiency_ratio"] for r in feas],
+            s=10,
+            c="C0",
+            alpha=0.6,
+            label="feasible",
+        )
+    if res.pareto:
+        f = sorted(res.pareto, key=lambda r: r["dof_mm"])
+        ax.plot(
+            [r["dof_mm"] for r in f],
+            [r["efficiency_ratio"] for r in f],
+            "o-",
+            c="C3",
+            ms=4,
+            label="Pareto front",
+        )
+    if res.reference:
+        ax.plot(
+            res.reference["dof_mm"],
+            res.reference["efficiency_ratio"],
+            "*",
+            c="k",
+            ms=14,
+            label=f"base design ({res.base})",
+        )
+    ax.set_xlabel(f"depth of field at {res.meta['dof_dpi']:g} dpi (mm)")
+    ax.set_ylabel("light efficiency, own path (ratio to F10 lens)")
+    ax.set_yscale("log")
+    ax.legend(fontsize=7)
+    ax.set_title(
+        title or f"design search for {res.dpi:g} dpi ({len(res.records)} designs)", fontsize=9
+    )
+    return fig
+
+
+def plot_tolerance(res):
+    """Tolerance study: histograms of RMTF, DOF, efficiency, ghosts; sensitivity bars."""
+    plt = _plt()
+    ok = [s for s in res.samples if s is not None]
+    fig, axes = plt.subplots(1, 4, figsize=(15, 3.4))
+    z_show = [z for z in res.z_mm if z in (1.0, 2.0, 3.0)] or res.z_mm[:3]
+    for i, z in enumerate(z_show):
+        v = [s["rmtf_at"][f"{z:g}"] for s in ok]
+        axes[0].hist(v, bins=30, alpha=0.6, color=f"C{i}", label=f"Z = {z:g} mm")
+        axes[0].axvline(res.nominal["rmtf_at"][f"{z:g}"], color=f"C{i}", ls="--")
+    axes[0].set_xlabel(f"RMTF at {res.dpi:g} dpi (dashed: nominal)")
+    axes[0].legend(fontsize=7)
+    for ax, k, lab in (
+        (axes[1], "dof_mm", "depth of field (mm)"),
+        (axes[2], "ghost_fraction", "ghost fraction"),
+    ):
+        ax.hist([s[k] for s in ok], bins=30, color="C0")
+        ax.axvline(res.nominal[k], color="k", ls="--")
+        ax.set_xlabel(lab)
+    rows = res.sensitivity[:10][::-1]
+    axes[3].barh([r["error"] for r in rows], [r["d_dof_mm"] for r in rows], color="C3")
+    axes[3].set_xlabel("mean |change in DOF| at +-1 sigma (mm)")
+    axes[3].tick_params(labelsize=7)
+    s = res.sigmas
+    fig.suptitle(
+        f"{res.design}: {len(res.samples)} samples, misregistration {s['misregistration_um']:g}"
+        f" um, holes {s['hole_um']:g} um, thickness {s['thickness_um']:g} um, tilt "
+        f"{s['tilt_deg']:g} deg (1 sigma)"
+        + (
+            f"; yield {res.yield_fraction:.1%} for {res.spec}"
+            if res.yield_fraction is not None
+            else ""
+        ),
+        fontsize=9,
+    )
+    fig.tight_layout()
+    return fig

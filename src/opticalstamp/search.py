@@ -101,11 +101,19 @@ class SearchResult:
     meta: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
+        target = self.reference["dof_mm"] if self.reference else None
+        deep = [
+            r
+            for r in self.records
+            if r["feasible"] and target is not None and r["dof_mm"] >= target
+        ]
+        thinnest = min(deep, key=lambda r: (r["stack_um"], -r["efficiency_ratio"]), default=None)
         return {
             "base": self.base,
             "dpi": self.dpi,
             "seed": self.seed,
             "pareto": self.pareto,
+            "thinnest_with_base_dof": thinnest,
             "reference": self.reference,
             "n_evaluations": len(self.records),
             "n_feasible": sum(r["feasible"] for r in self.records),
@@ -152,6 +160,8 @@ def search(
     pinned: dict | None = None,
     space: SearchSpace | None = None,
     ghost_rays: int = 1 << 17,
+    sampler_name: str = "nsga2",
+    warm_start: bool = True,
     workers: int | None = None,
     dask_address: str | None = None,
     journal=None,
@@ -190,7 +200,14 @@ def search(
             "options": options | {"seed": seed},
         }
 
-    sampler = optuna.samplers.NSGAIISampler(population_size=population, seed=seed)
+    if sampler_name == "nsga2":
+        sampler = optuna.samplers.NSGAIISampler(population_size=population, seed=seed)
+    elif sampler_name == "tpe":
+        sampler = optuna.samplers.TPESampler(
+            seed=seed, multivariate=True, constant_liar=True, n_startup_trials=population
+        )
+    else:
+        raise ValueError(f"sampler must be nsga2 or tpe (got {sampler_name!r})")
     study = optuna.create_study(directions=["maximize", "maximize"], sampler=sampler)
     dists = {}
     for j in range(n_h):
@@ -200,6 +217,11 @@ def search(
         lo, hi = sp.thickness_bounds_um[j]
         dists[f"t{j}"] = optuna.distributions.FloatDistribution(lo, hi, step=sp.thickness_step_um)
     records = []
+    if warm_start:  # the base design joins the first generation (NSGA-II breeds from it)
+        p0 = stack_params(design)
+        start = {f"hole{j}": int(round(v)) for j, v in enumerate(p0["holes_um"])}
+        start |= {f"t{j}": float(v) for j, v in enumerate(p0["thicknesses_um"])}
+        study.enqueue_trial({k: v for k, v in start.items() if k not in pins}, skip_if_exists=True)
     # the base design itself, for reference on the front
     ref_params = stack_params(design)
     ref_payload = {
@@ -314,5 +336,53 @@ def _row(
         "stack_um",
     )
     for k in keys:
-        row[k] = float(m[k]) if m is not None else float("nan")
+        v = None if m is None else m[k]
+        # JSON (the journal) has no infinity: a missing nearest ghost means none at all
+        row[k] = (
+            float(v)
+            if v is not None
+            else (math.inf if m is not None and k == "nearest_ghost_mm" else math.nan)
+        )
     return row
+
+
+def search_dataset(res: SearchResult, design: Design, seed: int):
+    """Every evaluation of a search as an xarray Dataset (dims: evaluation, layer, slab)."""
+    import xarray as xr
+
+    from . import __version__
+
+    recs = res.records
+    front = {(tuple(r["holes_um"]), tuple(r["thicknesses_um"])) for r in res.pareto}
+    key = [(tuple(r["holes_um"]), tuple(r["thicknesses_um"])) for r in recs]
+    data = {
+        "hole_um": (("evaluation", "layer"), np.array([r["holes_um"] for r in recs])),
+        "thickness_um": (("evaluation", "slab"), np.array([r["thicknesses_um"] for r in recs])),
+        "feasible": ("evaluation", np.array([r["feasible"] for r in recs], dtype=np.int8)),
+        "on_front": ("evaluation", np.array([k in front for k in key], dtype=np.int8)),
+    }
+    for k in (
+        "efficiency_ratio",
+        "dof_mm",
+        "ghost_fraction",
+        "nearest_ghost_mm",
+        "diffraction_spill",
+        "stack_um",
+    ):
+        v = np.array([r[k] for r in recs], dtype=np.float64)
+        data[k] = ("evaluation", np.where(np.isfinite(v), v, np.nan))
+    return xr.Dataset(
+        data,
+        coords={"evaluation": np.arange(len(recs))},
+        attrs={
+            "kind": "opticalstamp search",
+            "design": design.name,
+            "design_fingerprint": design.fingerprint(),
+            "seed": seed,
+            "opticalstamp_version": __version__,
+            "dpi": res.dpi,
+            "reference": res.reference,
+            "meta": res.meta,
+            "layer_order": "holes: object side first; slabs: sensor first",
+        },
+    )

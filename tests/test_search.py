@@ -1,0 +1,274 @@
+"""Design search, tolerancing and their execution (process pool, Dask, journal)."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+import xarray as xr
+from typer.testing import CliRunner
+
+from opticalstamp.cli import app
+from opticalstamp.design import load_design
+from opticalstamp.evaluate import evaluate_design, rmtf_with_background, with_stack
+from opticalstamp.execute import read_journal, run_tasks, task_key
+from opticalstamp.ghosts import analyse_ghosts
+from opticalstamp.metrics import rmtf
+from opticalstamp.search import base_for_dpi, pareto_front, search
+from opticalstamp.tolerance import apply_errors, draw_errors, parse_spec, tolerance
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return load_design("paper2016")
+
+
+def test_evaluation_agrees_with_the_full_models(paper):
+    """The search's cheap evaluation against the exact tracer's RMTF with ghost light."""
+    m = evaluate_design(paper, ghost_rays=1 << 19)
+    full = rmtf(paper, dpi=(200.0,), z_mm=(1.0, 2.0, 3.0), n_rays=1 << 21)
+    for z, v in zip((1.0, 2.0, 3.0), full.rmtf_max["200"], strict=True):
+        assert m["rmtf_at"][f"{z:g}"] == pytest.approx(v, abs=0.02)
+    g = analyse_ghosts(paper, n_rays=1 << 20)
+    assert m["ghost_fraction"] == pytest.approx(g.ghost_fraction, abs=0.01)
+    assert not m["near_ghost"] and m["nearest_ghost_mm"] > 5
+    # a uniform background B lowers a fully resolved chart to G / (G + B)
+    r = rmtf_with_background(paper, 100.0, [0.0], 1.0)
+    assert r[0] == pytest.approx(m["etendue_own_um2sr"] / (m["etendue_own_um2sr"] + 1.0), abs=1e-3)
+
+
+def test_pareto_front():
+    pts = np.array([[1, 1], [2, 0.5], [0.5, 2], [0.9, 0.9], [2, 0.5]])
+    assert set(pareto_front(pts).tolist()) == {0, 1, 2, 4}
+
+
+def _square(x: float) -> dict:
+    return {"y": x["v"] ** 2}
+
+
+def _fails_on_three(p: dict) -> dict:
+    if p["v"] == 3:
+        raise RuntimeError("three is not allowed")
+    return {"y": p["v"]}
+
+
+def _dies_on_two(p: dict) -> dict:
+    if p["v"] == 2:
+        os._exit(3)  # a worker that dies
+    return {"y": p["v"]}
+
+
+def test_journal_resume_and_failures(tmp_path):
+    j = tmp_path / "j.jsonl"
+    tasks = [(task_key({"v": v}), {"v": v}) for v in range(5)]
+    out = run_tasks(_fails_on_three, tasks, workers=1, journal=j, retries=1)
+    assert [r["ok"] for r in out.values()] == [True, True, True, False, True]
+    bad = out[tasks[3][0]]
+    assert "three is not allowed" in bad["error"] and bad["payload"] == {"v": 3}
+    assert bad["attempts"] == 2
+    # a rerun does not redo finished (or marked) evaluations
+    calls = []
+    again = run_tasks(lambda p: calls.append(p) or {"y": 0}, tasks, workers=1, journal=j)
+    assert calls == [] and again == out
+    # a truncated last line (a kill during a write) is ignored and that task is redone
+    j.write_text(j.read_text() + '{"key": "abc", "payl')
+    assert len(read_journal(j)) == 5
+
+
+def test_process_pool_survives_a_dying_worker(tmp_path):
+    tasks = [(task_key({"v": v}), {"v": v}) for v in range(4)]
+    out = run_tasks(_dies_on_two, tasks, workers=2, journal=tmp_path / "j.jsonl", retries=1)
+    ok = {r["payload"]["v"]: r["ok"] for r in out.values()}
+    assert ok == {0: True, 1: True, 2: False, 3: True}
+    assert "died" in out[tasks[2][0]]["error"]
+
+
+@pytest.fixture(scope="module")
+def dask_cluster():
+    distributed = pytest.importorskip("distributed")
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+    )
+    yield cluster.scheduler_address
+    cluster.close()
+
+
+def test_search_same_for_any_workers_and_on_dask(paper, dask_cluster, tmp_path):
+    kw = dict(dpi=300.0, population=8, generations=2, seed=3, ghost_rays=1 << 15)
+    one = search(paper, workers=1, **kw)
+    two = search(paper, workers=2, **kw)
+    dsk = search(paper, dask_address=dask_cluster, journal=tmp_path / "d.jsonl", **kw)
+    key = [
+        (r["holes_um"], r["thicknesses_um"], r["dof_mm"], r["efficiency_ratio"])
+        for r in one.records
+    ]
+    assert key == [
+        (r["holes_um"], r["thicknesses_um"], r["dof_mm"], r["efficiency_ratio"])
+        for r in two.records
+    ]
+    assert key == [
+        (r["holes_um"], r["thicknesses_um"], r["dof_mm"], r["efficiency_ratio"])
+        for r in dsk.records
+    ]
+    assert one.reference["holes_um"] == [48.0, 40.0, 40.0]
+    # the warm start puts the paper's design in the first generation
+    assert any(
+        r["holes_um"] == [48.0, 40.0, 40.0] and r["thicknesses_um"] == [450.0, 400.0, 1000.0]
+        for r in one.records
+    )
+    # resuming from the Dask run's journal evaluates nothing new
+    again = search(paper, dask_address="tcp://127.0.0.1:1", journal=tmp_path / "d.jsonl", **kw)
+    assert [r["dof_mm"] for r in again.records] == [r["dof_mm"] for r in dsk.records]
+
+
+def test_pins_and_bad_pins(paper):
+    r = search(
+        paper,
+        population=8,
+        generations=1,
+        pinned={"hole0": 48, "t2": 1000.0},
+        ghost_rays=1 << 15,
+        workers=1,
+    )
+    assert all(x["holes_um"][0] == 48 and x["thicknesses_um"][2] == 1000 for x in r.records)
+    with pytest.raises(ValueError, match="unknown variables"):
+        search(paper, population=8, generations=1, pinned={"hole9": 1}, workers=1)
+
+
+def test_base_for_dpi_scales_the_sensor(paper):
+    d600 = base_for_dpi(paper, 600.0)
+    assert d600.sensor.row_pitch_um / 2 == pytest.approx(42.3, rel=2e-3)
+    assert d600.masks[-1].hole_width_um == pytest.approx(24.0, abs=0.1)
+    assert [sl.thickness_um for sl in d600.slabs] == [450.0, 400.0, 1000.0]
+
+
+def test_errors_are_applied_and_reproducible(paper):
+    e = draw_errors(
+        paper, 7, 1, {"misregistration_um": 3, "hole_um": 1, "thickness_um": 10, "tilt_deg": 0.0}
+    )
+    assert e == draw_errors(
+        paper, 7, 1, {"misregistration_um": 3, "hole_um": 1, "thickness_um": 10, "tilt_deg": 0.0}
+    )
+    d = apply_errors(paper, {"dx0": 2.5, "hole1": -1.0, "t1": 20.0})
+    assert d.masks[-1].offset_x_um == 2.5  # mask 0 = object side
+    assert d.masks[1].hole_width_um == 39.0 and d.slabs[1].thickness_um == 420.0
+    tilted = apply_errors(paper, {"tilt": 0.01})
+    assert tilted.slabs[0].thickness_um == pytest.approx(
+        450 + 620 * 169.2 * np.tan(np.radians(0.01)), rel=1e-3
+    )
+    with pytest.raises(ValueError, match="spec"):
+        parse_spec("dof>2")
+
+
+def test_misregistration_lowers_rmtf_on_average(paper):
+    """Paper §5: misalignment of the plates lowers the contrast (never raises it on
+    average): shifting layer 3 by 3 um lowers RMTF(200 dpi) at every Z."""
+    nominal = evaluate_design(paper, ghost_rays=1 << 15)
+    shifted = evaluate_design(
+        with_stack(paper, offsets_um=[(0, 0), (0, 0), (3.0, 0)]), ghost_rays=1 << 15
+    )
+    for z, v in nominal["rmtf_at"].items():
+        assert shifted["rmtf_at"][z] < v
+
+
+def test_tolerance_study(paper, tmp_path):
+    r = tolerance(
+        paper,
+        samples=12,
+        spec="dof>=2.0,ghost<=0.3",
+        workers=1,
+        ghost_rays=1 << 15,
+        journal=tmp_path / "t.jsonl",
+    )
+    d = r.to_dict()
+    assert set(d["rmtf200"]) == {"0.5", "1", "2", "3", "3.5"}
+    assert d["dof_mm"]["p5"] <= d["dof_mm"]["p50"] <= d["dof_mm"]["p95"]
+    assert 0 <= d["yield"] <= 1 and d["n_failed"] == 0
+    names = [row["error"] for row in d["sensitivity"]]
+    assert "dx0" in names and "tilt" in names
+    zero = tolerance(
+        paper,
+        samples=3,
+        sigmas={"misregistration_um": 0, "hole_um": 0, "thickness_um": 0, "tilt_deg": 0},
+        workers=1,
+        ghost_rays=1 << 15,
+    )
+    assert all(s["dof_mm"] == zero.nominal["dof_mm"] for s in zero.samples)
+
+
+def test_cli_search_and_tolerance_write_netcdf(tmp_path):
+    out = tmp_path / "s.nc"
+    res = runner.invoke(
+        app,
+        [
+            "search",
+            "--dpi",
+            "300",
+            "--population",
+            "8",
+            "--generations",
+            "1",
+            "--workers",
+            "1",
+            "-o",
+            str(out),
+            "--json",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    d = json.loads(res.stdout)
+    assert d["pareto"] and {
+        "holes_um",
+        "thicknesses_um",
+        "efficiency_ratio",
+        "dof_mm",
+        "ghost_fraction",
+    } <= set(d["pareto"][0])
+    ds = xr.open_dataset(out, engine="scipy")
+    assert ds.attrs["design"] == "paper2016" and ds.attrs["seed"] == 0
+    assert "opticalstamp_version" in ds.attrs and ds.sizes["evaluation"] == 8
+    ds.close()
+    out = tmp_path / "t.nc"
+    res = runner.invoke(
+        app,
+        [
+            "tolerance",
+            "--samples",
+            "6",
+            "--workers",
+            "1",
+            "--json",
+            "--spec",
+            "dof>=2",
+            "-o",
+            str(out),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    d = json.loads(res.stdout)
+    assert {"rmtf200", "dof_mm", "sensitivity", "yield"} <= set(d)
+    ds = xr.open_dataset(out, engine="scipy")
+    assert ds.sizes["sample"] == 6 and json.loads(ds.attrs["sigmas"])["misregistration_um"] == 3
+    ds.close()
+
+
+@pytest.mark.parametrize(
+    ("args", "text"),
+    [
+        (["search", "--dask", "localhost:8786"], "--dask"),
+        (["search", "--pin", "hole0"], "--pin"),
+        (["search", "--population", "2"], "--population"),
+        (["search", "-o", "x.csv"], "-o"),
+        (["tolerance", "--misregistration-um", "-1"], "must be >= 0"),
+        (["tolerance", "--spec", "yield>3"], "--spec"),
+        (["tolerance", "--samples", "0"], "--samples"),
+    ],
+)
+def test_cli_bad_options(args, text):
+    res = runner.invoke(app, args)
+    assert res.exit_code == 2, res.output
+    assert text in res.output and "Traceback" not in res.output
