@@ -57,6 +57,7 @@ def build_report(
         )
     quality = _quality(design, seed=seed, fresnel=fresnel, progress=progress)
     scans = _scans(design, out, seed=seed)
+    study = _search_and_tolerance(design, seed=seed)
     figs = {
         "ghosts.png": plotting.plot_ghosts(g),
         "spots.png": plotting.plot_spots(sp),
@@ -77,6 +78,8 @@ def build_report(
         "scan_lines.png": plotting.plot_scan_panels(
             scans.pop("line_panels"), "fine line work (paper Fig. 9 analogue)", cols=3
         ),
+        "pareto.png": plotting.plot_pareto(study.pop("search_result")),
+        "tolerance.png": plotting.plot_tolerance(study.pop("tolerance_result")),
         "scan_tilt.png": plotting.plot_scan_panels(
             scans.pop("tilt_panels"), "text on a page tilted from 0 to 4 mm"
         ),
@@ -98,6 +101,8 @@ def build_report(
         "diffraction": quality["slit_result"].to_dict() | {"budget": quality["budget"]},
         "parameter_study": quality["study_result"].to_dict(),
         "scans": scans,
+        "search": study["search"],
+        "tolerance": study["tolerance"],
         "elapsed_s": time.perf_counter() - t0,
     }
     write_atomic(out / "report.json", to_json(data))
@@ -255,6 +260,80 @@ background than the infinite chart of the computed RMTF.</p>
 """
 
 
+def _search_and_tolerance(design: Design, *, seed: int) -> dict:
+    """A compact design search around the design and a tolerance study (the CLI's
+    `search` and `tolerance` run the full budgets)."""
+    from .search import search
+    from .tolerance import tolerance
+
+    out: dict = {}
+    rect = all(m.shape != "circle" for m in design.masks)
+    if not rect:
+        return {"search": None, "tolerance": None, "search_result": None, "tolerance_result": None}
+    dpi = 25400.0 / (design.sensor.row_pitch_um / design.sensor.rows)
+    sr = search(design, dpi=dpi, population=24, generations=10, seed=seed, ghost_rays=1 << 16)
+    tr = tolerance(design, samples=200, seed=seed, spec="dof>=2.2,ghost<=0.2")
+    out["search"] = sr.to_dict()
+    out["tolerance"] = tr.to_dict()
+    out["search_result"], out["tolerance_result"] = sr, tr
+    return out
+
+
+def _search_html(s: dict | None, t: dict | None) -> str:
+    if s is None:
+        return "<h2>Design search and tolerancing</h2><p>(needs square holes)</p>"
+    front = [
+        [
+            str(p["holes_um"]),
+            str(p["thicknesses_um"]),
+            p["efficiency_ratio"],
+            1 / p["efficiency_ratio"],
+            p["dof_mm"],
+            p["ghost_fraction"],
+        ]
+        for p in s["pareto"]
+    ]
+    ref = s["reference"]
+    sens = [
+        [r["error"], r["sigma"], r["d_dof_mm"], r.get("d_rmtf@2", None), r["d_ghost_fraction"]]
+        for r in t["sensitivity"][:10]
+    ]
+    rm = [
+        [z, v["p5"], v["p50"], v["p95"], t["nominal"]["rmtf_at"][z]]
+        for z, v in t["rmtf200"].items()
+    ]
+    return f"""<h2>Design search (paper §3)</h2>
+<p>NSGA-II over hole sizes and slab thicknesses ({s["n_evaluations"]} designs,
+{s["n_feasible"]} feasible: no ghost light within {s["meta"]["near_mm"]:g} mm, stack within
+{s["meta"]["budget_mm"]:g} mm, diffraction spill below {s["meta"]["max_spill"]:g}; a compact
+run, `opticalstamp search` runs 480). This design: efficiency 1/{1 / ref["efficiency_ratio"]:.0f},
+depth of field {ref["dof_mm"]:.2f} mm, dominated by {ref.get("dominated_by", 0)} of the designs
+found.</p>
+{
+        _table(
+            front,
+            [
+                "holes (um, object side first)",
+                "slabs (um, sensor first)",
+                "efficiency",
+                "1/efficiency",
+                "DOF (mm)",
+                "ghost fraction",
+            ],
+        )
+    }
+<img src="pareto.png">
+<h2>Tolerancing (paper §5)</h2>
+<p>{t["n_samples"]} Monte Carlo samples: misregistration {t["sigmas"]["misregistration_um"]:g}
+um, holes {t["sigmas"]["hole_um"]:g} um, plates and gaps {t["sigmas"]["thickness_um"]:g} um,
+tilt {t["sigmas"]["tilt_deg"]:g} deg (1 sigma). Yield for {html.escape(t["spec"])}:
+{t["yield"]:.1%}.</p>
+{_table(rm, ["Z (mm)", "RMTF 5 %", "median", "95 %", "nominal"])}
+{_table(sens, ["error", "sigma", "DOF change (mm)", "RMTF@2mm change", "ghost change"])}
+<img src="tolerance.png">
+"""
+
+
 def _table(rows: list[list], head: list[str]) -> str:
     th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
     body = "".join(
@@ -400,6 +479,7 @@ lands inside the virtual detector (&plusmn;{
 <img src="psf_x0.png"><img src="psf_x42.png">
 {_quality_html(d)}
 {_scans_html(d["scans"])}
+{_search_html(d["search"], d["tolerance"])}
 <p>Generated in {d["elapsed_s"]:.1f} s.</p>
 </body></html>
 """
