@@ -56,8 +56,12 @@ def make_page(path: Path) -> None:
 
 
 def run(src: Path, out: Path, spec: str) -> dict:
-    res = subprocess.run([sys.executable, "-c", CASE, str(src), str(out), spec],
-                         capture_output=True, text=True, check=True)
+    res = subprocess.run(
+        [sys.executable, "-c", CASE, str(src), str(out), spec],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 

@@ -31,7 +31,9 @@ if __name__ == "__main__":
     d = load_design("paper2016")
     print(f"cores: {os.cpu_count()}")
     t, r = timed(lambda: search(d, dpi=300.0, population=32, generations=15))
-    print(f"300-dpi search, {len(r.records)} designs: {t:.1f} s; base design dominated by "
-          f"{r.reference.get('dominated_by')} designs; front of {len(r.pareto)}")
+    print(
+        f"300-dpi search, {len(r.records)} designs: {t:.1f} s; base design dominated by "
+        f"{r.reference.get('dominated_by')} designs; front of {len(r.pareto)}"
+    )
     t, r = timed(lambda: tolerance(d, samples=1000, spec="dof>=2.2,ghost<=0.2"))
     print(f"tolerancing, 1000 samples: {t:.1f} s; yield {r.yield_fraction:.1%}")
