@@ -190,7 +190,7 @@ def search(
     options = {"dpi": dof_dpi, "near_mm": near_mm, "ghost_rays": ghost_rays}
     base_json = design.model_dump(mode="json", exclude_none=True)
 
-    def payload(params: dict, i: int) -> dict:
+    def payload(params: dict) -> dict:
         holes = [float(params[f"hole{j}"]) for j in range(n_h)]
         ts = [float(params[f"t{j}"]) for j in range(n_t)]
         return {
@@ -217,19 +217,18 @@ def search(
         lo, hi = sp.thickness_bounds_um[j]
         dists[f"t{j}"] = optuna.distributions.FloatDistribution(lo, hi, step=sp.thickness_step_um)
     records = []
+    p0 = stack_params(design)
+    base_params = {f"hole{j}": v for j, v in enumerate(p0["holes_um"])}
+    base_params |= {f"t{j}": v for j, v in enumerate(p0["thicknesses_um"])}
     if warm_start:  # the base design joins the first generation (NSGA-II breeds from it)
-        p0 = stack_params(design)
-        start = {f"hole{j}": int(round(v)) for j, v in enumerate(p0["holes_um"])}
-        start |= {f"t{j}": float(v) for j, v in enumerate(p0["thicknesses_um"])}
-        study.enqueue_trial({k: v for k, v in start.items() if k not in pins}, skip_if_exists=True)
+        start = {
+            k: int(round(v)) if k.startswith("hole") else float(v)
+            for k, v in base_params.items()
+            if k not in pins
+        }
+        study.enqueue_trial(start, skip_if_exists=True)
     # the base design itself, for reference on the front
-    ref_params = stack_params(design)
-    ref_payload = {
-        "base": base_json,
-        "holes_um": ref_params["holes_um"],
-        "thicknesses_um": ref_params["thicknesses_um"],
-        "options": options | {"seed": seed},
-    }
+    ref_payload = payload(base_params)
     ref_key = task_key(ref_payload)
     ref_rec = run_tasks(_evaluate_payload, [(ref_key, ref_payload)], workers=1, journal=journal)[
         ref_key
@@ -237,11 +236,10 @@ def search(
     for gen in range(generations):
         trials = []
         tasks = []
-        for i in range(population):
-            fixed = {k: v for k, v in pins.items()}
-            t = study.ask({k: v for k, v in dists.items() if k not in fixed})
-            params = t.params | fixed
-            p = payload(params, i)
+        for _ in range(population):
+            t = study.ask({k: v for k, v in dists.items() if k not in pins})
+            params = t.params | pins
+            p = payload(params)
             trials.append((t, params, task_key(p)))
             tasks.append((task_key(p), p))
         recs = run_tasks(
@@ -279,10 +277,7 @@ def search(
     if ref_rec["ok"]:
         m = ref_rec["result"]
         reference = _row(
-            {
-                **{f"hole{j}": v for j, v in enumerate(ref_params["holes_um"])},
-                **{f"t{j}": v for j, v in enumerate(ref_params["thicknesses_um"])},
-            },
+            base_params,
             ref_rec,
             m,
             all(c <= 0 for c in _feasible(m, budget_um, max_ghost, max_spill)),
