@@ -842,19 +842,22 @@ def tolerance(
         "thickness_um": thickness_um,
         "tilt_deg": tilt_deg,
     }
-    r = run(
-        d,
-        samples=samples,
-        sigmas=sig,
-        dpi=dpi,
-        z_mm=zs,
-        spec=spec,
-        seed=seed,
-        workers=workers,
-        dask_address=dask,
-        journal=_journal(output),
-        progress=not as_json,
-    )
+    try:
+        r = run(
+            d,
+            samples=samples,
+            sigmas=sig,
+            dpi=dpi,
+            z_mm=zs,
+            spec=spec,
+            seed=seed,
+            workers=workers,
+            dask_address=dask,
+            journal=_journal(output),
+            progress=not as_json,
+        )
+    except (ValueError, OSError) as err:
+        _fail(str(err))
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     if output is not None:
         save_dataset(tolerance_dataset(r, d), output)

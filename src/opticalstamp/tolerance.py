@@ -211,6 +211,8 @@ def tolerance(
         progress=progress,
         desc="tolerance",
     )
+    if not recs[nominal_key]["ok"]:
+        raise ValueError(f"the nominal design could not be evaluated: {recs[nominal_key]['error']}")
     nominal = recs[nominal_key]["result"]
     sens = {}
     for name, _sign, (key, _) in oat:
