@@ -99,3 +99,26 @@ def test_measure_rmtf_bars_along_y_and_errors():
     with pytest.raises(ValueError, match="dpi"):
         measure_rmtf(img, -3)
     assert measure_rmtf(np.full((20, 500), 0.5), 600.0) == []
+
+
+def test_sfr_along_x_and_y_of_a_slanted_square():
+    """A dark square tilted by 5 degrees, blurred by a Gaussian of sigma px: both edges
+    give exp(-2 pi^2 sigma^2 f^2)."""
+    from opticalstamp.measure import sfr_xy
+
+    n, sig, a = 240, 1.3, np.radians(5.0)
+    yy, xx = np.mgrid[0:n, 0:n].astype(float) - n / 2
+    u = xx * np.cos(a) + yy * np.sin(a)
+    v = -xx * np.sin(a) + yy * np.cos(a)
+    # distance outside the square |u|, |v| < n/4 (exact near the edges' middles)
+    d = np.maximum(np.abs(u), np.abs(v)) - n / 4
+    img = 0.05 + 0.9 * ndtr(d / sig)
+    res = sfr_xy(img, 600.0)
+    for axis in ("x", "y"):
+        r = res[axis]
+        assert r["direction"] == axis
+        f = r["freq_cy_per_mm"] * 25.4 / 600.0
+        m = f <= 0.4
+        np.testing.assert_allclose(
+            r["sfr"][m], np.exp(-2 * np.pi**2 * sig**2 * f[m] ** 2), atol=0.02
+        )

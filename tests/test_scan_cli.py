@@ -161,3 +161,13 @@ def test_ocr_eval_command(tmp_path):
     d = json.loads(res.stdout)
     assert d["z_mm"] == [0.5, 4.5] and len(d["cer"]) == 2
     assert d["cer"][0] < 0.02 and d["cer"][1] >= d["cer"][0]
+
+
+def test_sfr_both_axes_on_a_scanned_square(tmp_path):
+    """chart edge -> scan -> sfr --direction both: motion smear makes y softer than x."""
+    _ok(_run("chart", "edge", "-o", tmp_path / "e.png"))
+    _ok(_run("scan", tmp_path / "e.png", "-o", tmp_path / "s.tif", "--z", "1", "--noiseless"))
+    res = _ok(_run("sfr", tmp_path / "s.tif", "--direction", "both", "--json"))
+    d = json.loads(res.stdout)
+    assert d["x"]["direction"] == "x" and d["y"]["direction"] == "y"
+    assert d["y"]["mtf50_cy_per_mm"] < d["x"]["mtf50_cy_per_mm"]

@@ -464,7 +464,9 @@ def measure_rmtf(
 def sfr(
     image: ImageArg,
     dpi: DpiOpt = None,
-    direction: Annotated[str, typer.Option(help="x, y or auto")] = "auto",
+    direction: Annotated[
+        str, typer.Option(help="x, y, auto (one edge) or both (a slanted dark square)")
+    ] = "auto",
     roi: Annotated[str | None, typer.Option(help="region x0,y0,x1,y1 (pixels)")] = None,
     linear: LinearOpt = False,
     as_json: JsonOpt = False,
@@ -482,6 +484,28 @@ def sfr(
         if not (x0 < x1 <= img.shape[1] and y0 < y1 <= img.shape[0]):
             _fail(f"--roi: must lie inside the {img.shape[1]} x {img.shape[0]} image")
         img = img[y0:y1, x0:x1]
+    if direction == "both":
+        from .measure import sfr_xy
+
+        if roi:
+            _fail("--roi: not with --direction both (the square's edges are found)")
+        try:
+            both = sfr_xy(img, use)
+        except ValueError as err:
+            _fail(f"{image}: {err}")
+        data = {"image": str(image), "dpi": use} | both
+        lines = [f"{image} at {use:g} dpi, slanted square:"]
+        for axis, r in both.items():
+            lines.append(
+                f"  along {axis}: MTF50 {r['mtf50_cy_per_mm']:.3f} cycles/mm; SFR at 100 dpi "
+                f"{r['sfr_at_dpi']['100']:.3f}, at 200 dpi {r['sfr_at_dpi']['200']:.3f}"
+            )
+        _emit(data, as_json, lines)
+        if plot:
+            from .plotting import plot_sfr
+
+            _plot(plot_sfr(both["x"], f"{image.name} (x)", extra=both["y"]), plot)
+        return
     try:
         r = run(img, use, direction=direction)
     except ValueError as err:

@@ -227,3 +227,38 @@ def sfr(
         "nyquist_cy_per_mm": dpi / 25.4 / 2,
         "oversample": oversample,
     }
+
+
+def square_edge_rois(image: np.ndarray) -> dict[str, tuple[int, int, int, int]]:
+    """Regions (x0, y0, x1, y1) around the left and top edges of a dark, slightly tilted
+    square on a light field (the ISO 12233 slanted-square target, ``chart edge``): "x"
+    holds a near-vertical edge (SFR along x), "y" a near-horizontal one (SFR along y)."""
+    img = np.asarray(image, dtype=np.float64)
+    lo, hi = np.percentile(img, [2, 98])
+    if hi - lo <= 0:
+        raise ValueError("no edge found in the image (it is uniform)")
+    dark = img < (lo + hi) / 2
+    ys, xs = np.nonzero(dark)
+    if ys.size < 64:
+        raise ValueError("no dark square found in the image")
+    y0, y1 = (int(v) for v in np.percentile(ys, [1, 99]))
+    x0, x1 = (int(v) for v in np.percentile(xs, [1, 99]))
+    h, w = y1 - y0, x1 - x0
+    if min(h, w) < 16:
+        raise ValueError("the dark square is too small for a slanted-edge measurement")
+    m = int(0.12 * max(h, w)) + 6
+    n_y, n_x = img.shape
+    return {
+        "x": (max(0, x0 - m), y0 + h // 4, min(n_x, x0 + m), y1 - h // 4),
+        "y": (x0 + w // 4, max(0, y0 - m), x1 - w // 4, min(n_y, y0 + m)),
+    }
+
+
+def sfr_xy(image: np.ndarray, dpi: float, oversample: int = 4) -> dict[str, dict]:
+    """SFR along x and along y from a slanted dark square (:func:`square_edge_rois`)."""
+    out = {}
+    for axis, (x0, y0, x1, y1) in square_edge_rois(image).items():
+        out[axis] = sfr(
+            np.asarray(image)[y0:y1, x0:x1], dpi, direction=axis, oversample=oversample
+        ) | {"roi": [x0, y0, x1, y1]}
+    return out

@@ -255,11 +255,19 @@ def plot_study(res):
     return fig
 
 
-def plot_sfr(res: dict, title: str = ""):
-    """SFR curve of a slanted edge with MTF50 and the 100/200-dpi values."""
+def plot_sfr(res: dict, title: str = "", extra: dict | None = None):
+    """SFR curve of a slanted edge with MTF50 and the 100/200-dpi values (``extra``: a
+    second curve, e.g. along y)."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 3.6))
-    ax.plot(res["freq_cy_per_mm"], res["sfr"], "-")
+    ax.plot(res["freq_cy_per_mm"], res["sfr"], "-", label=f"along {res['direction']}")
+    if extra is not None:
+        ax.plot(
+            extra["freq_cy_per_mm"],
+            extra["sfr"],
+            "-",
+            label=f"along {extra['direction']}: MTF50 {extra['mtf50_cy_per_mm']:.2f}",
+        )
     ax.axhline(0.5, color="k", lw=0.5, ls=":")
     for k, v in res["sfr_at_dpi"].items():
         ax.plot(float(k) / 50.8, v, "o", label=f"{k} dpi: {v:.3f}")

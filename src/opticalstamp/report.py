@@ -218,6 +218,23 @@ def _scans(design: Design, out: Path, *, seed: int) -> dict:
                 "rmtf_computed_min": ref.rmtf_min["200"][iz],
             }
         )
+    from .charts import edge_chart
+    from .measure import sfr_xy
+
+    edge = edge_chart(dpi)
+    res["sfr"] = []
+    for z in (0.5, 3.5):
+        r = simulate_scan(edge, dpi, design, z_mm=z, seed=seed, settings=page)
+        for axis, v in sfr_xy(r.image, r.dpi).items():
+            res["sfr"].append(
+                {
+                    "z_mm": z,
+                    "axis": axis,
+                    "mtf50_cy_per_mm": v["mtf50_cy_per_mm"],
+                    "sfr100": v["sfr_at_dpi"]["100"],
+                    "sfr200": v["sfr_at_dpi"]["200"],
+                }
+            )
     lines = line_chart(dpi, size_mm=12.0)
     res["line_panels"] = [("document (1200 dpi)", lines)] + [
         (f"Z = {z:g} mm", simulate_scan(lines, dpi, design, z_mm=z, seed=seed, settings=page).image)
@@ -234,6 +251,7 @@ def _scans(design: Design, out: Path, *, seed: int) -> dict:
 
 
 def _scans_html(s: dict) -> str:
+    sfr = [[x["z_mm"], x["axis"], x["mtf50_cy_per_mm"], x["sfr100"], x["sfr200"]] for x in s["sfr"]]
     ocr = "".join(f"<li>Z = {o['z_mm']:g} mm: CER {o['cer']:.3f}</li>" for o in s["ocr"])
     ocr_p = (
         f"<p>Tesseract on these scans, character error rate:</p><ul>{ocr}</ul>"
@@ -256,6 +274,9 @@ over chart positions). With ghost light on they differ for a reason, not an erro
 light comes from 6-34 mm away, so a finite chart on a white page gets a different veiling
 background than the infinite chart of the computed RMTF.</p>
 {_table(prof, ["Z (mm)", "measured on the scan", "computed min", "computed max"])}
+<p>Slanted-edge SFR (ISO 12233) of the simulated scans of the slanted-square chart, along
+x (main scan) and y (sub-scan, which adds the motion smear of one line):</p>
+{_table(sfr, ["Z (mm)", "axis", "MTF50 (cycles/mm)", "SFR at 100 dpi", "SFR at 200 dpi"])}
 <img src="scan_lines.png"><img src="scan_tilt.png">
 """
 
