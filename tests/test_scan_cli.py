@@ -86,6 +86,9 @@ def test_scan_height_map_shapes_and_colour(tmp_path):
         (["--z", "1", "--dpi", "-300"], "--dpi"),
         (["--z", "1", "--illumination", "disco"], "--illumination"),
         (["--z", "1", "--speed-error", "3"], "--speed-error"),
+        (["--z", "1", "--illuminance-lux", "-5"], "--illuminance-lux"),
+        (["--z", "1", "--exposure-ms", "0"], "--exposure-ms"),
+        (["--z", "1", "--illumination", "missing.csv"], "--illumination"),
     ],
 )
 def test_scan_bad_options(tmp_path, args, text):
@@ -171,3 +174,27 @@ def test_sfr_both_axes_on_a_scanned_square(tmp_path):
     d = json.loads(res.stdout)
     assert d["x"]["direction"] == "x" and d["y"]["direction"] == "y"
     assert d["y"]["mtf50_cy_per_mm"] < d["x"]["mtf50_cy_per_mm"]
+
+
+def test_user_illumination_profile_is_corrected_by_shading(tmp_path):
+    """A user-given light-guide profile darkens the raw signal where it dips, and the
+    white calibration takes it out again."""
+    _ok(_run("chart", "edge", "-o", tmp_path / "e.png", "--dpi", "600"))
+    (tmp_path / "ill.csv").write_text("# x_mm,relative\n0,1.0\n4,0.5\n8,1.0\n20,1.0\n")
+    _ok(
+        _run(
+            "scan",
+            tmp_path / "e.png",
+            "-o",
+            tmp_path / "a.tif",
+            "--z",
+            "0.5",
+            "--noiseless",
+            "--illumination",
+            tmp_path / "ill.csv",
+        )
+    )
+    _ok(_run("scan", tmp_path / "e.png", "-o", tmp_path / "b.tif", "--z", "0.5", "--noiseless"))
+    a = tifffile.imread(tmp_path / "a.tif").astype(float)
+    b = tifffile.imread(tmp_path / "b.tif").astype(float)
+    assert np.abs(a - b).max() <= 2  # 16-bit rounding

@@ -560,18 +560,51 @@ def _height(spec: str | None, z: float | None, doc_shape, dpi: float, seed: int)
         _fail(str(err))
 
 
-def _settings(illumination: str, kernel: str, speed_error: float, surround: float):
+def _illumination_profile(path: Path) -> tuple:
+    try:
+        arr = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
+    except (OSError, ValueError) as err:
+        _fail(f"--illumination: cannot read {path} as CSV of x_mm,relative ({err})")
+    if arr.shape[1] != 2 or arr.shape[0] < 2 or np.any(np.diff(arr[:, 0]) <= 0):
+        _fail(f"--illumination: {path} needs two columns x_mm,relative with increasing x")
+    if np.any(arr[:, 1] < 0) or not np.all(np.isfinite(arr)):
+        _fail(f"--illumination: {path} has negative or non-finite values")
+    return tuple((float(a), float(b)) for a, b in arr)
+
+
+def _settings(
+    illumination: str,
+    kernel: str,
+    speed_error: float,
+    surround: float,
+    illuminance: float,
+    exposure: float,
+):
     from pydantic import ValidationError
 
     from .scan import ScanSettings
+    from .sensor import SensorModel
 
+    profile = None
+    if illumination not in ("uniform", "ripple"):
+        profile = _illumination_profile(Path(illumination))
+        illumination = "uniform"
     try:
+        sensor = SensorModel(illuminance_lux=illuminance, exposure_ms=exposure)
         return ScanSettings(
-            illumination=illumination, kernel=kernel, speed_error=speed_error, surround=surround
+            sensor=sensor,
+            illumination=illumination,
+            illumination_profile=profile,
+            kernel=kernel,
+            speed_error=speed_error,
+            surround=surround,
         )
     except ValidationError as err:
         e = err.errors()[0]
-        _fail(f"--{str(e['loc'][0]).replace('_', '-')}: {e['msg']} (got {e.get('input')!r})")
+        name = {"illuminance_lux": "illuminance-lux", "exposure_ms": "exposure-ms"}.get(
+            str(e["loc"][-1]), str(e["loc"][0]).replace("_", "-")
+        )
+        _fail(f"--{name}: {e['msg']} (got {e.get('input')!r})")
 
 
 @app.command()
@@ -588,7 +621,13 @@ def scan(
     noiseless: Annotated[bool, typer.Option("--noiseless", help="no noise (analysis)")] = False,
     no_ghosts: Annotated[bool, typer.Option("--no-ghosts", help="leave ghost light out")] = False,
     color: Annotated[bool, typer.Option("--color", help="sequential R, G, B LEDs")] = False,
-    illumination: Annotated[str, typer.Option(help="uniform or ripple")] = "uniform",
+    illumination: Annotated[
+        str, typer.Option(help="uniform, ripple, or a CSV file of x_mm,relative")
+    ] = "uniform",
+    illuminance_lux: Annotated[float, typer.Option(help="illuminance on the page (lux)")] = (
+        10_000.0
+    ),
+    exposure_ms: Annotated[float, typer.Option(help="exposure per line (ms)")] = 1.0,
     kernel: Annotated[str, typer.Option(help="auto, paraxial or trace")] = "auto",
     speed_error: Annotated[float, typer.Option(help="relative scan-speed error")] = 0.0,
     surround: Annotated[float, typer.Option(help="reflectance outside the page")] = 0.0,
@@ -603,7 +642,7 @@ def scan(
     if suffix not in (".png", ".tif", ".tiff"):
         _fail(f"-o: the output must end in .png, .tif or .tiff (got {output.name!r})")
     d = _design(design)
-    st = _settings(illumination, kernel, speed_error, surround)
+    st = _settings(illumination, kernel, speed_error, surround, illuminance_lux, exposure_ms)
     doc, use = _document(image, dpi, color)
     hm = _height(height_map, z, doc.shape, use, seed)
     try:
