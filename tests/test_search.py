@@ -272,3 +272,50 @@ def test_cli_bad_options(args, text):
     res = runner.invoke(app, args)
     assert res.exit_code == 2, res.output
     assert text in res.output and "Traceback" not in res.output
+
+
+def test_structural_variants_and_merged_front(paper):
+    from opticalstamp.responsivity import paraxial_etendue
+    from opticalstamp.search import merged_front, structural_variants
+
+    v = structural_variants(paper, layers=(2, 3), stagger=("yes", "no"))
+    assert len(v) == 4
+    two = v["paper2016, 2 layers, staggered"]
+    assert [m.name for m in two.masks] == ["layer 3", "layer 1"]
+    one_row = v["paper2016, 3 layers, one row"]
+    assert one_row.sensor.rows == 1 and one_row.sensor.row_pitch_um == pytest.approx(84.6)
+    # the middle layer costs only 1 % of the own-path light: it is there for the ghosts
+    assert paraxial_etendue(paper) / paraxial_etendue(two) == pytest.approx(0.99, abs=0.005)
+    with pytest.raises(ValueError, match="layers"):
+        structural_variants(paper, layers=(5,))
+    res = {
+        k: search(d, population=8, generations=1, workers=1, ghost_rays=1 << 15)
+        for k, d in list(v.items())[:2]
+    }
+    front = merged_front(res)
+    assert all("variant" in r for r in front)
+
+
+def test_cli_search_variants(tmp_path):
+    res = runner.invoke(
+        app,
+        [
+            "search",
+            "--layers",
+            "2,3",
+            "--population",
+            "8",
+            "--generations",
+            "1",
+            "--workers",
+            "1",
+            "--json",
+            "-o",
+            str(tmp_path / "v.nc"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    d = json.loads(res.stdout)
+    assert len(d["variants"]) == 2 and (tmp_path / "v.v1.nc").exists()
+    bad = runner.invoke(app, ["search", "--stagger", "maybe"])
+    assert bad.exit_code == 2 and "--stagger" in bad.output

@@ -789,6 +789,12 @@ def search(
     population: Annotated[int, typer.Option(help="designs per generation")] = 32,
     generations: Annotated[int, typer.Option(help="NSGA-II generations")] = 15,
     pin: Annotated[str | None, typer.Option(help="fixed variables, e.g. hole0=48,t2=1000")] = None,
+    layers: Annotated[
+        str | None, typer.Option(help="also search other numbers of mask layers, e.g. 2,3")
+    ] = None,
+    stagger: Annotated[
+        str | None, typer.Option(help="stagger patterns to search: yes, no or yes,no")
+    ] = None,
     workers: WorkersOpt = None,
     dask: DaskOpt = None,
     output: Annotated[Path | None, typer.Option("-o", "--output", help="results .nc")] = None,
@@ -814,51 +820,73 @@ def search(
     # 300 dpi is 84.67 um; the paper's sensor is 84.6 um (600-dpi pixels of 42.3): within
     # 1 % counts as the same resolution
     base = d if abs(25400.0 / dpi / merged - 1) < 0.01 else base_for_dpi(d, dpi)
-    try:
-        r = run(
-            base,
-            dpi=dpi,
-            dof_dpi=dof_dpi,
-            budget_mm=budget_mm,
-            near_mm=near_mm,
-            max_ghost=max_ghost,
-            population=population,
-            generations=generations,
-            seed=seed,
-            pinned=_pins(pin),
-            workers=workers,
-            dask_address=dask,
-            journal=_journal(output),
-            progress=not as_json,
-        )
-    except (ValueError, OSError) as err:
-        _fail(str(err))
+    from .search import merged_front, structural_variants
+
+    if layers or stagger:
+        try:
+            n_l = [int(v) for v in (layers or str(len(base.masks))).split(",")]
+            sts = [v.strip() for v in (stagger or "yes").split(",")]
+            bases = structural_variants(base, layers=n_l, stagger=sts)
+        except ValueError as err:
+            _fail(f"--layers/--stagger: {err}")
+    else:
+        bases = {base.name: base}
+    results = {}
+    for i, (name, b) in enumerate(bases.items()):
+        out_i = output
+        if output is not None and len(bases) > 1:
+            out_i = output.with_name(f"{output.stem}.v{i}{output.suffix}")
+        try:
+            results[name] = run(
+                b,
+                dpi=dpi,
+                dof_dpi=dof_dpi,
+                budget_mm=budget_mm,
+                near_mm=near_mm,
+                max_ghost=max_ghost,
+                population=population,
+                generations=generations,
+                seed=seed,
+                pinned=_pins(pin),
+                workers=workers,
+                dask_address=dask,
+                journal=_journal(out_i),
+                progress=not as_json,
+            )
+        except (ValueError, OSError) as err:
+            _fail(str(err))
+        if out_i is not None:
+            save_dataset(search_dataset(results[name], b, seed), out_i)
+    r = next(iter(results.values()))
     data = r.to_dict() | {"provenance": provenance(base, seed)}
-    if output is not None:
-        save_dataset(search_dataset(r, base, seed), output)
+    if len(results) > 1:
+        data["pareto"] = merged_front(results)
+        data["variants"] = {k: v.to_dict() for k, v in results.items()}
     lines = [
-        f"{base.name}: {len(r.records)} designs, {data['n_feasible']} feasible, "
-        f"{data['n_failed']} failed; Pareto front (holes object side first, um; "
-        "slabs sensor first, um):"
+        f"{base.name}: {sum(len(v.records) for v in results.values())} designs in "
+        f"{len(results)} variant(s); Pareto front (holes object side first, um; slabs sensor "
+        "first, um):"
     ]
-    for p in r.pareto:
+    for p in data["pareto"]:
+        tag = f" [{p['variant']}]" if "variant" in p else ""
         lines.append(
             f"  holes {p['holes_um']} slabs {p['thicknesses_um']}: efficiency "
             f"1/{1 / p['efficiency_ratio']:.0f}, DOF {p['dof_mm']:.2f} mm, ghosts "
-            f"{p['ghost_fraction']:.3f}"
+            f"{p['ghost_fraction']:.3f}{tag}"
         )
-    if r.reference:
-        ref = r.reference
-        lines.append(
-            f"base design: efficiency 1/{1 / ref['efficiency_ratio']:.0f}, DOF "
-            f"{ref['dof_mm']:.2f} mm, dominated by {ref.get('dominated_by', 0)} "
-            "found designs"
-        )
+    for name, res in results.items():
+        ref = res.reference
+        if ref:
+            lines.append(
+                f"base {name}: efficiency 1/{1 / ref['efficiency_ratio']:.0f}, DOF "
+                f"{ref['dof_mm']:.2f} mm, ghosts {ref['ghost_fraction']:.3f}, dominated by "
+                f"{ref.get('dominated_by', 0)} of its variant's designs"
+            )
     _emit(data, as_json, lines)
     if plot:
-        from .plotting import plot_pareto
+        from .plotting import plot_pareto, plot_pareto_variants
 
-        _plot(plot_pareto(r), plot)
+        _plot(plot_pareto(r) if len(results) == 1 else plot_pareto_variants(results), plot)
 
 
 @app.command()

@@ -435,3 +435,32 @@ def plot_tolerance(res):
     )
     fig.tight_layout()
     return fig
+
+
+def plot_pareto_variants(results: dict):
+    """Pareto fronts of searches over structural variants (layers, stagger), one colour
+    each, with the base design."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for i, (name, res) in enumerate(results.items()):
+        f = sorted(res.pareto, key=lambda r: r["dof_mm"])
+        if f:
+            ax.plot(
+                [r["dof_mm"] for r in f],
+                [r["efficiency_ratio"] for r in f],
+                "o-",
+                c=f"C{i}",
+                ms=4,
+                label=name,
+            )
+        if res.reference:
+            ax.plot(
+                res.reference["dof_mm"], res.reference["efficiency_ratio"], "*", c=f"C{i}", ms=12
+            )
+    first = next(iter(results.values()))
+    ax.set_xlabel(f"depth of field at {first.meta['dof_dpi']:g} dpi (mm)")
+    ax.set_ylabel("light efficiency, own path (ratio to F10 lens)")
+    ax.set_yscale("log")
+    ax.legend(fontsize=7)
+    ax.set_title("Pareto fronts by structure (stars: the base of each)", fontsize=9)
+    return fig

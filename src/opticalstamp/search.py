@@ -381,3 +381,48 @@ def search_dataset(res: SearchResult, design: Design, seed: int):
             "layer_order": "holes: object side first; slabs: sensor first",
         },
     )
+
+
+def structural_variants(design: Design, layers=(3,), stagger=("yes",)) -> dict[str, Design]:
+    """Bases that differ in the number of mask layers and the stagger pattern.
+
+    ``layers``: how many masks to keep, dropping masks from the middle of the stack
+    outward (3 -> 2 keeps the object-side and sensor-side masks, as the paper's Fig. 1c/d);
+    ``stagger``: "yes" keeps the two staggered rows, "no" puts every pixel in one row at
+    the merged pitch (paper Fig. 1c), with the same resolution.
+    """
+    out = {}
+    n_masks = len(design.masks)
+    for n in layers:
+        if not 1 <= n <= n_masks:
+            raise ValueError(f"layers: between 1 and {n_masks} (got {n})")
+        for st in stagger:
+            if st not in ("yes", "no"):
+                raise ValueError(f"stagger: yes or no (got {st!r})")
+            data = design.model_dump(mode="json", exclude_none=True)
+            idx = [i for i, sl in enumerate(data["slabs"]) if "mask_top" in sl]
+            keep = {idx[0], idx[-1]} if n >= 2 else {idx[-1]}
+            middle = [i for i in idx if i not in keep]
+            keep |= set(middle[: max(0, n - len(keep))])
+            for i in idx:
+                if i not in keep:
+                    del data["slabs"][i]["mask_top"]
+            s = data["sensor"]
+            if st == "no" and s.get("rows", 2) == 2:
+                s["rows"] = 1
+                s["row_pitch_um"] = s["row_pitch_um"] / 2
+                s.pop("row_b_offset_x_um", None)
+                s.pop("row_b_offset_y_um", None)
+            name = f"{design.name}, {n} layers, {'staggered' if st == 'yes' else 'one row'}"
+            data["name"] = name
+            out[name] = design_from_dict(data, name)
+    return out
+
+
+def merged_front(results: dict[str, SearchResult]) -> list[dict]:
+    """The Pareto front over several searches, each entry tagged with its variant."""
+    rows = [r | {"variant": name} for name, res in results.items() for r in res.pareto]
+    if not rows:
+        return []
+    pts = np.array([[r["efficiency_ratio"], r["dof_mm"]] for r in rows])
+    return sorted((rows[i] for i in pareto_front(pts)), key=lambda r: -r["dof_mm"])
