@@ -635,7 +635,7 @@ def scan(
     """Simulate the scanner's output for a document at a float height (paper Figs. 8, 9)."""
     import json
 
-    from .io import provenance, write_atomic, write_png, write_tiff16
+    from .io import provenance, to_json, write_atomic, write_png, write_tiff16
     from .scan import simulate_scan
 
     suffix = output.suffix.lower()
@@ -672,18 +672,12 @@ def scan(
     tif = output.with_suffix(".tif") if suffix == ".png" else output
     write_png(png, r.image, r.dpi)
     write_tiff16(tif, r.image, r.dpi, description=json.dumps(meta))
-    write_atomic(output.with_suffix(".json"), to_json_text(meta))
+    write_atomic(output.with_suffix(".json"), to_json(meta))
     typer.echo(
         f"wrote {png} (8-bit sRGB), {tif} (16-bit linear) and {output.with_suffix('.json')}: "
         f"{r.image.shape[1]} x {r.image.shape[0]} pixels at {r.dpi:.1f} dpi",
         err=True,
     )
-
-
-def to_json_text(data: dict) -> str:
-    from .io import to_json
-
-    return to_json(data)
 
 
 @app.command()

@@ -56,7 +56,7 @@ def build_report(
             }
         )
     quality = _quality(design, seed=seed, fresnel=fresnel, progress=progress)
-    scans = _scans(design, out, seed=seed)
+    scans = _scans(design, seed=seed)
     study = _search_and_tolerance(design, seed=seed)
     figs = {
         "ghosts.png": plotting.plot_ghosts(g),
@@ -172,7 +172,7 @@ def _quality(design: Design, *, seed: int, fresnel: bool, progress: bool) -> dic
     }
 
 
-def _scans(design: Design, out: Path, *, seed: int) -> dict:
+def _scans(design: Design, *, seed: int) -> dict:
     """Simulated scans of the built-in charts (paper Figs. 8, 9, 12) and their measures."""
     import numpy as np
 
