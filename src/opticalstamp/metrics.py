@@ -81,26 +81,26 @@ def rmtf_curves(
         n = h.shape[-1]
         shifts = np.arange(0.0, per, shift_step_um)
         c_full = chart_correlation(h.sum(axis=1))  # (rows, nz, n)
-        c_batch = chart_correlation(h * h.shape[1])  # each batch scaled to a full estimate
-        vals, vals_b = [], []
-        for r in range(h.shape[0]):
-            v = ((pix[r][None, :] - shifts[:, None]) % per) / per * n  # (shifts, pixels)
-            vals.append(_sample(c_full[r], v))  # (nz, shifts, pixels)
-            vals_b.append(_sample(c_batch[r], v))  # (batches, nz, shifts, pixels)
-        sig = np.concatenate(vals, axis=-1)
-        imax, imin = sig.max(axis=-1), sig.min(axis=-1)
+        phases = [((x[None, :] - shifts[:, None]) % per) / per * n for x in pix]
+        sig = np.concatenate([_sample(c_full[r], v) for r, v in enumerate(phases)], axis=-1)
+        imax, imin = sig.max(axis=-1), sig.min(axis=-1)  # (nz, shifts)
         rm = np.where(imax + imin > 0, (imax - imin) / np.where(imax + imin > 0, imax + imin, 1), 0)
         best = rm.argmax(axis=-1)  # (nz,)
         out["max"][ip] = rm.max(axis=-1)
         out["mean"][ip] = rm.mean(axis=-1)
         out["min"][ip] = rm.min(axis=-1)
         out["best_shift_um"][ip] = shifts[best]
-        if h.shape[1] > 1:
-            sb = np.concatenate(vals_b, axis=-1)  # (batches, nz, shifts, pixels)
-            sb = np.take_along_axis(sb, best[None, :, None, None], axis=2)[:, :, 0, :]
-            bmax, bmin = sb.max(axis=-1), sb.min(axis=-1)
-            rb = (bmax - bmin) / np.where(bmax + bmin > 0, bmax + bmin, 1)
-            out["max_se"][ip] = rb.std(axis=0, ddof=1) / np.sqrt(h.shape[1])
+        n_b = h.shape[1]
+        if n_b > 1:  # batches only at the full estimate's best shift
+            c_batch = chart_correlation(h * n_b)  # each batch scaled to a full estimate
+            for iz, ib in enumerate(best):
+                sb = np.concatenate(
+                    [_sample(c_batch[r, :, iz], phases[r][ib]) for r in range(h.shape[0])],
+                    axis=-1,
+                )  # (batches, pixels)
+                bmax, bmin = sb.max(axis=-1), sb.min(axis=-1)
+                rb = (bmax - bmin) / np.where(bmax + bmin > 0, bmax + bmin, 1)
+                out["max_se"][ip, iz] = rb.std(ddof=1) / np.sqrt(n_b)
     return out
 
 
