@@ -5,8 +5,9 @@ and its seed), the payload is what the worker function needs (plain data). Resul
 appended to a JSON-lines journal as they arrive (flushed and synced), so a study that is
 interrupted resumes where it stopped: tasks whose key is already in the journal are not
 run again. An evaluation that raises is retried ``retries`` times and then journalled as
-failed with its error and payload; a worker process that dies takes its task with it and
-the pool is restarted, the task counted as a failed attempt. Seeds belong to tasks, not
+failed with its error and payload; when a worker process dies, the tasks that were in
+flight with it are rerun one at a time in pools of their own, so that only the task that
+kills its worker is marked ("worker process died"). Seeds belong to tasks, not
 workers, so results are identical for any number of workers.
 """
 
@@ -112,46 +113,51 @@ def run_tasks(
 
 
 def _run_pool(fn, todo, workers, retries, record) -> None:
+    """All tasks on one pool; when a worker dies the pool breaks and every task in flight
+    fails with it, so those tasks are rerun one at a time, each in a pool of its own, and
+    only a task that kills its own worker is charged with the death."""
     import multiprocessing as mp
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    attempts = {k: 0 for k, _ in todo}
-    pending = list(todo)
     ctx = mp.get_context("spawn")  # no fork of numba's threads
-    while pending:
-        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_single_thread) as ex:
-            futs = {}
-            for key, payload in pending:
-                attempts[key] += 1
-                futs[ex.submit(fn, payload)] = (key, payload)
-            pending = []
-            broken = False
-            while futs:
-                fin, _ = wait(futs, return_when=FIRST_COMPLETED)
-                for f in fin:
-                    key, payload = futs.pop(f)
-                    try:
-                        record(key, payload, True, f.result(), attempts[key])
-                    except BrokenProcessPool:
-                        broken = True
-                        pending.append((key, payload))
-                    except Exception as err:  # noqa: BLE001
-                        if attempts[key] <= retries:
-                            pending.append((key, payload))
-                        else:
-                            record(
-                                key, payload, False, f"{type(err).__name__}: {err}", attempts[key]
-                            )
-                if broken:  # the pool is dead: collect what is left and restart it
-                    for key, payload in futs.values():
-                        pending.append((key, payload))
-                    futs = {}
-        # a task that keeps killing its worker is marked, not retried forever
-        for key, payload in list(pending):
-            if attempts[key] > retries:
-                pending.remove((key, payload))
-                record(key, payload, False, "worker process died", attempts[key])
+
+    def pool(n: int):
+        return ProcessPoolExecutor(n, mp_context=ctx, initializer=_single_thread)
+
+    def failed(key, payload, err, attempt) -> bool:
+        """Record a final failure, or say that the task is to be tried again."""
+        if attempt <= retries:
+            return False
+        msg = (
+            "worker process died"
+            if isinstance(err, BrokenProcessPool)
+            else (f"{type(err).__name__}: {err}")
+        )
+        record(key, payload, False, msg, attempt)
+        return True
+
+    suspects = []
+    with pool(workers) as ex:
+        futs = {ex.submit(fn, payload): (key, payload) for key, payload in todo}
+        for f in as_completed(futs):
+            key, payload = futs[f]
+            try:
+                record(key, payload, True, f.result(), 1)
+            except BrokenProcessPool:
+                suspects.append((key, payload))  # it died, or died with another's worker
+            except Exception as err:  # noqa: BLE001 - reported, never dropped
+                if not failed(key, payload, err, 1):
+                    suspects.append((key, payload))
+    for key, payload in suspects:
+        for attempt in range(2, retries + 3):
+            with pool(1) as ex:
+                try:
+                    record(key, payload, True, ex.submit(fn, payload).result(), attempt)
+                    break
+                except Exception as err:  # noqa: BLE001 - BrokenProcessPool included
+                    if failed(key, payload, err, attempt):
+                        break
 
 
 def _run_dask(fn, todo, address, retries, record) -> None:
