@@ -55,6 +55,16 @@ def _rays(n: int | None, default: int) -> int:
     return n
 
 
+def _resolution(path: Path, file_dpi: float | None, dpi: float | None, lo: float) -> float:
+    """The image's dpi: --dpi, else the file's; checked to lie in [lo, 20000]."""
+    use = dpi or file_dpi
+    if use is None:
+        _fail(f"{path}: the file carries no resolution; give --dpi")
+    if not lo <= use <= 20000:
+        _fail(f"--dpi: must lie in [{lo:g}, 20000] (got {use:g})")
+    return use
+
+
 def _emit(data: dict, as_json: bool, lines: list[str]) -> None:
     from .io import to_json
 

@@ -21,6 +21,7 @@ from .cli import (
     _floats,
     _plot,
     _rays,
+    _resolution,
     app,
 )
 
@@ -222,12 +223,7 @@ def _image(path: Path, dpi: float | None, linear: bool):
         img, file_dpi = read_image(path, linear=linear)
     except ImageError as err:
         _fail(str(err))
-    use = dpi or file_dpi
-    if use is None:
-        _fail(f"{path}: the file carries no resolution; give --dpi")
-    if not 10 <= use <= 20000:
-        _fail(f"--dpi: must lie in [10, 20000] (got {use:g})")
-    return img, use
+    return img, _resolution(path, file_dpi, dpi, 10.0)
 
 
 ImageArg = Annotated[Path, typer.Argument(help="image file (PNG, TIFF, JPEG)")]

@@ -16,6 +16,7 @@ from .cli import (
     _emit,
     _fail,
     _floats,
+    _resolution,
     app,
 )
 from .cli_metrics import DpiOpt, ImageArg
@@ -28,11 +29,7 @@ def _document(path: Path, dpi: float | None, color: bool):
         doc, file_dpi = read_document(path, color=color)
     except ImageError as err:
         _fail(str(err))
-    use = dpi or file_dpi
-    if use is None:
-        _fail(f"{path}: the file carries no resolution; give --dpi")
-    if not 50 <= use <= 20000:
-        _fail(f"--dpi: must lie in [50, 20000] (got {use:g})")
+    use = _resolution(path, file_dpi, dpi, 50.0)
     if use < 600:
         typer.echo(
             f"warning: {path} is sampled at {use:g} dpi; at least 600 dpi is recommended "

@@ -33,6 +33,11 @@ def _check_dask(address: str | None) -> None:
         _fail(f"--dask: expected tcp://HOST:PORT (got {address!r})")
 
 
+def _check_output(out: Path | None) -> None:
+    if out is not None and out.suffix != ".nc":
+        _fail(f"-o: results are written as netCDF, .nc (got {out.name!r})")
+
+
 def _journal(out: Path | None) -> Path | None:
     return None if out is None else out.with_name(out.name + ".journal.jsonl")
 
@@ -87,8 +92,7 @@ def search(
         _fail("--budget-mm must lie in [0.2, 20] and --near-mm be >= 0")
     if not 4 <= population <= 1000 or not 1 <= generations <= 1000:
         _fail("--population must lie in [4, 1000] and --generations in [1, 1000]")
-    if output is not None and output.suffix != ".nc":
-        _fail(f"-o: results are written as netCDF, .nc (got {output.name!r})")
+    _check_output(output)
     merged = d.sensor.row_pitch_um / d.sensor.rows
     # 300 dpi is 84.67 um; the paper's sensor is 84.6 um (600-dpi pixels of 42.3): within
     # 1 % counts as the same resolution
@@ -193,8 +197,7 @@ def tolerance(
         _fail("sigmas (--misregistration-um, --hole-um, --thickness-um, --tilt-deg) must be >= 0")
     if not 1 <= samples <= 10**6:
         _fail(f"--samples: must lie in [1, 1e6] (got {samples})")
-    if output is not None and output.suffix != ".nc":
-        _fail(f"-o: results are written as netCDF, .nc (got {output.name!r})")
+    _check_output(output)
     try:
         parse_spec(spec)
     except ValueError as err:

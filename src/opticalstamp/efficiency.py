@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .design import Design, design_from_dict
-from .ghosts import DISTANCE_BIN_UM, analyse_ghosts
+from .ghosts import DISTANCE_BIN_UM, GhostResult, analyse_ghosts
 
 
 def disk_projected_solid_angle(rho_um, h_um: float, radius_um: float) -> np.ndarray:
@@ -126,6 +126,7 @@ def efficiency(
     rse_ghost: float = 1e-2,
     area_scales=(1.0, 2.0),
     reference: dict | None = None,
+    ghosts: GhostResult | None = None,
     progress: bool = False,
 ) -> EfficiencyResult:
     """Light efficiency of one used pixel (paper Fig. 13), with and without ghost light.
@@ -134,12 +135,13 @@ def efficiency(
     disk of the given radius around the pixel's axis, the etendue collected at each Z
     (own-path light is Z-independent; ghost light arrives from far away and leaves a
     finite object as Z grows). ``area_scales`` scales the sensitive area's sides (2:
-    four times the area, the paper's custom-sensor claim).
+    four times the area, the paper's custom-sensor claim). ``ghosts``: the design's
+    ghost analysis if the caller has one already (its Z values are used).
     """
     ref = reference or {}
     g_ref = reference_etendue(**ref)
     f_ref = reference_f_number(ref.get("focal_mm", 10.0), ref.get("pupil_mm", 2.0))
-    g = analyse_ghosts(
+    g = ghosts or analyse_ghosts(
         design,
         z_mm=tuple(z_mm),
         seed=seed,

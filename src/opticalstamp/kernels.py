@@ -23,7 +23,6 @@ import numpy as np
 from .design import Design
 from .responsivity import (
     TracedMaps,
-    _own_half_width,
     paraxial_cumulative,
     paraxial_support,
     traced_maps,
@@ -171,7 +170,6 @@ def scan_kernels(
                 n_rays=rays,
                 seed=seed,
                 fresnel=fresnel,
-                half_um=_own_half_width(design, zs.max()),
                 progress=progress,
             )
         if source == "trace":

@@ -55,7 +55,7 @@ def build_report(
                 "nearest_ghost_um_z0": c.landing["0"]["nearest_um"],
             }
         )
-    quality = _quality(design, seed=seed, fresnel=fresnel, progress=progress)
+    quality = _quality(design, g, seed=seed, fresnel=fresnel, progress=progress)
     scans = _scans(design, seed=seed)
     study = _search_and_tolerance(design, seed=seed)
     figs = {
@@ -110,7 +110,7 @@ def build_report(
     return data
 
 
-def _quality(design: Design, *, seed: int, fresnel: bool, progress: bool) -> dict:
+def _quality(design: Design, g, *, seed: int, fresnel: bool, progress: bool) -> dict:
     """RMTF and depth of field, chart profiles, efficiency, diffraction, parameter study."""
     import numpy as np
 
@@ -165,7 +165,7 @@ def _quality(design: Design, *, seed: int, fresnel: bool, progress: bool) -> dic
         "rmtf_own": own,
         "rmtf_paraxial": par,
         "profiles": profiles,
-        "efficiency_result": efficiency(design, seed=seed, fresnel=fresnel, progress=progress),
+        "efficiency_result": efficiency(design, seed=seed, fresnel=fresnel, ghosts=g),
         "slit_result": slit_case(),
         "budget": diffraction_budget(design),
         "study_result": parameter_study(design, seed=seed, progress=progress),
