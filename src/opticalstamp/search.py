@@ -160,7 +160,6 @@ def search(
     pinned: dict | None = None,
     space: SearchSpace | None = None,
     ghost_rays: int = 1 << 17,
-    sampler_name: str = "nsga2",
     warm_start: bool = True,
     workers: int | None = None,
     dask_address: str | None = None,
@@ -200,14 +199,7 @@ def search(
             "options": options | {"seed": seed},
         }
 
-    if sampler_name == "nsga2":
-        sampler = optuna.samplers.NSGAIISampler(population_size=population, seed=seed)
-    elif sampler_name == "tpe":
-        sampler = optuna.samplers.TPESampler(
-            seed=seed, multivariate=True, constant_liar=True, n_startup_trials=population
-        )
-    else:
-        raise ValueError(f"sampler must be nsga2 or tpe (got {sampler_name!r})")
+    sampler = optuna.samplers.NSGAIISampler(population_size=population, seed=seed)
     study = optuna.create_study(directions=["maximize", "maximize"], sampler=sampler)
     dists = {}
     for j in range(n_h):
