@@ -23,6 +23,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .materials import CATALOGUE, WAVELENGTH_RANGE_UM, refractive_index
+from .validate import InputError
 
 A4_WIDTH_UM = 210_000.0
 
@@ -30,7 +31,7 @@ PositiveUm = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 FiniteUm = Annotated[float, Field(allow_inf_nan=False)]
 
 
-class DesignError(ValueError):
+class DesignError(InputError):
     """A design that cannot be used, with a message naming the field and the rule."""
 
 

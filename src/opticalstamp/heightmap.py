@@ -21,12 +21,14 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
+from .validate import InputError
+
 #: Heights the scan model covers (mm).
 Z_RANGE_MM = (0.0, 10.0)
 SHAPES = ("flat", "tilt", "gutter", "crumple")
 
 
-class HeightMapError(ValueError):
+class HeightMapError(InputError):
     pass
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .validate import InputError
 
 
 def _default(obj):
@@ -77,7 +78,7 @@ def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
     return write_atomic(path, buf.getvalue())
 
 
-class ImageError(ValueError):
+class ImageError(InputError):
     """An image file that cannot be used (unreadable, truncated, wrong kind)."""
 
 
