@@ -20,15 +20,48 @@ from importlib import resources
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    model_validator,
+)
 
 from .materials import CATALOGUE, WAVELENGTH_RANGE_UM, refractive_index
 from .validate import InputError
 
 A4_WIDTH_UM = 210_000.0
 
-PositiveUm = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-FiniteUm = Annotated[float, Field(allow_inf_nan=False)]
+#: Physically sensible ranges of a design's numbers (um unless named), stated in
+#: docs/design-files.md. Wider values are refused at validation: they are typing errors,
+#: not designs (a 1e9 um gap would make a scan allocate petabytes).
+MAX_LENGTH_UM = 100_000.0  # slab, gap, pitch: 100 mm
+MIN_PITCH_UM = 1.0  # pixel pitch (25,400 dpi)
+MAX_OFFSET_UM = 10_000.0  # misregistration and row offsets: 10 mm
+INDEX_RANGE = (1.0, 4.0)
+MAX_LINES = 64
+MAX_PIXELS_PER_ROW = 1_000_000
+MAX_DESIGN_FILE_BYTES = 1 << 20
+
+
+def _number(value: object) -> object:
+    """Accept int or float, refuse booleans and strings (TOML's `true`, `"42.0"`)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"expected a number (got {type(value).__name__} {value!r})")
+    return value
+
+
+def _integer(value: object) -> object:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"expected an integer (got {type(value).__name__} {value!r})")
+    return value
+
+
+Number = Annotated[float, BeforeValidator(_number), Field(allow_inf_nan=False)]
+PositiveUm = Annotated[Number, Field(gt=0, le=MAX_LENGTH_UM)]
+OffsetUm = Annotated[Number, Field(ge=-MAX_OFFSET_UM, le=MAX_OFFSET_UM)]
 
 
 class DesignError(InputError):
@@ -39,7 +72,8 @@ class _Frozen(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
 
-def _check_medium(value: float | str) -> float | str:
+def _check_medium(value: object) -> float | str:
+    """A refractive index in INDEX_RANGE or the name of a catalogued material."""
     if isinstance(value, str):
         names = {k.lower() for k in CATALOGUE}
         if value.lower() not in names:
@@ -48,9 +82,17 @@ def _check_medium(value: float | str) -> float | str:
                 f"{', '.join(sorted(CATALOGUE))}"
             )
         return value
-    if not math.isfinite(value) or value < 1.0:
-        raise ValueError(f"refractive index must be a finite number >= 1 (got {value})")
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(
+            f"expected a refractive index or a material name (got {type(value).__name__})"
+        )
+    lo, hi = INDEX_RANGE
+    if not math.isfinite(value) or not lo <= value <= hi:
+        raise ValueError(f"refractive index must be a finite number in [{lo:g}, {hi:g}]")
     return float(value)
+
+
+Medium = Annotated[float | str, BeforeValidator(_check_medium)]
 
 
 class Mask(_Frozen):
@@ -61,8 +103,8 @@ class Mask(_Frozen):
     size_um: PositiveUm | None = Field(None, description="side (square) or diameter (circle)")
     width_um: PositiveUm | None = Field(None, description="x size of a rectangular hole")
     height_um: PositiveUm | None = Field(None, description="y size of a rectangular hole")
-    offset_x_um: FiniteUm = 0.0
-    offset_y_um: FiniteUm = 0.0
+    offset_x_um: OffsetUm = 0.0
+    offset_y_um: OffsetUm = 0.0
 
     @model_validator(mode="after")
     def _sizes(self) -> Mask:
@@ -96,20 +138,16 @@ class Mask(_Frozen):
 class Slab(_Frozen):
     """A homogeneous layer of the stack, optionally masked on its top face."""
 
-    medium: float | str
+    medium: Medium
     thickness_um: PositiveUm
     mask_top: Mask | None = None
-
-    _medium = field_validator("medium")(_check_medium)
 
 
 class Gap(_Frozen):
     """The reference gap between the top mask and the reference plane (Z = 0)."""
 
-    medium: float | str = "air"
-    thickness_um: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 1000.0
-
-    _medium = field_validator("medium")(_check_medium)
+    medium: Medium = "air"
+    thickness_um: Annotated[Number, Field(ge=0, le=MAX_LENGTH_UM)] = 1000.0
 
 
 class Sensor(_Frozen):
@@ -120,16 +158,18 @@ class Sensor(_Frozen):
     unstated default).
     """
 
-    pixel_pitch_um: PositiveUm = 42.3
+    pixel_pitch_um: Annotated[Number, Field(ge=MIN_PITCH_UM, le=MAX_LENGTH_UM)] = 42.3
     sensitive_width_um: PositiveUm = 42.3
     sensitive_height_um: PositiveUm = 42.3
-    lines: Annotated[int, Field(ge=1, le=64)] = 3
-    rows: Literal[1, 2] = 2
+    lines: Annotated[int, BeforeValidator(_integer), Field(ge=1, le=MAX_LINES)] = 3
+    rows: Annotated[Literal[1, 2], BeforeValidator(_integer)] = 2
     row_pitch_um: PositiveUm = 169.2
-    row_b_offset_x_um: FiniteUm = 84.6
-    row_b_offset_y_um: FiniteUm = 84.6
-    pixels_per_row: Annotated[int, Field(ge=1, le=1_000_000)] | None = None
-    acceptance_half_angle_deg: Annotated[float, Field(gt=0, le=90)] = 90.0
+    row_b_offset_x_um: OffsetUm = 84.6
+    row_b_offset_y_um: OffsetUm = 84.6
+    pixels_per_row: (
+        Annotated[int, BeforeValidator(_integer), Field(ge=1, le=MAX_PIXELS_PER_ROW)] | None
+    ) = None
+    acceptance_half_angle_deg: Annotated[Number, Field(gt=0, le=90)] = 90.0
 
     @model_validator(mode="after")
     def _rules(self) -> Sensor:
@@ -163,19 +203,22 @@ class Design(_Frozen):
 
     name: str = "unnamed"
     description: str = ""
-    wavelength_um: Annotated[float, Field(ge=WAVELENGTH_RANGE_UM[0], le=WAVELENGTH_RANGE_UM[1])] = (
-        0.55
-    )
+    wavelength_um: Annotated[
+        Number, Field(ge=WAVELENGTH_RANGE_UM[0], le=WAVELENGTH_RANGE_UM[1])
+    ] = 0.55
     sensor: Sensor = Sensor()
     slabs: Annotated[list[Slab], Field(min_length=1)]
     reference_gap: Gap = Gap()
-    object_medium: float | str = "air"
-
-    _medium = field_validator("object_medium")(_check_medium)
+    object_medium: Medium = "air"
 
     @model_validator(mode="after")
     def _holes(self) -> Design:
         s = self.sensor
+        if self.reference_plane_um > MAX_LENGTH_UM:
+            raise ValueError(
+                f"slabs + reference_gap: the stack is {self.reference_plane_um:g} um thick, "
+                f"more than {MAX_LENGTH_UM:g} um"
+            )
         masks = [(i, sl.mask_top) for i, sl in enumerate(self.slabs) if sl.mask_top is not None]
         if not masks:
             raise ValueError("slabs: at least one slab needs a mask_top")
@@ -252,6 +295,8 @@ def design_from_dict(data: dict, source: str = "<dict>") -> Design:
         return Design.model_validate(data)
     except ValidationError as err:
         raise DesignError(format_validation_error(err, source)) from None
+    except RecursionError:
+        raise DesignError(f"invalid design {source}: nested too deeply") from None
 
 
 def preset_names() -> list[str]:
@@ -260,7 +305,11 @@ def preset_names() -> list[str]:
 
 
 def load_design(spec: str | Path) -> Design:
-    """Load a built-in preset by name or a design TOML file by path."""
+    """Load a built-in preset by name or a design TOML file by path.
+
+    A UTF-8 byte-order mark is accepted; files over MAX_DESIGN_FILE_BYTES and TOML nested
+    too deeply for the parser are refused with a :class:`DesignError`.
+    """
     spec_s = str(spec)
     if spec_s in preset_names():
         text = (resources.files("opticalstamp") / "presets" / f"{spec_s}.toml").read_text()
@@ -273,7 +322,12 @@ def load_design(spec: str | Path) -> Design:
                 "nor a readable file"
             )
         try:
-            text = path.read_text(encoding="utf-8")
+            if path.stat().st_size > MAX_DESIGN_FILE_BYTES:
+                raise DesignError(
+                    f"design file {spec_s}: larger than {MAX_DESIGN_FILE_BYTES >> 10} KiB; "
+                    "a design is a short TOML file"
+                )
+            text = path.read_text(encoding="utf-8-sig")
         except (OSError, UnicodeDecodeError) as err:
             raise DesignError(f"cannot read design file {spec_s}: {err}") from None
         source = f"file {spec_s}"
@@ -281,4 +335,8 @@ def load_design(spec: str | Path) -> Design:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise DesignError(f"malformed TOML in {source}: {err}") from None
+    except RecursionError:
+        raise DesignError(
+            f"malformed TOML in {source}: tables or arrays nested too deeply"
+        ) from None
     return design_from_dict(data, source)
