@@ -17,13 +17,13 @@ from .design import Design
 from .geometry import pixel_center, reverse_path
 from .sources import DEFENSIVE_SHARE, Source, hole_targets, site_index
 from .tally import (
+    OWN_PATH,
     Estimate,
     KeyedSums,
-    decode_path,
+    PathRegistry,
     estimate,
+    is_own_path,
     object_plane,
-    own_code,
-    path_codes,
     ratio_estimate,
 )
 from .trace import STATUS_NAMES, launch
@@ -111,7 +111,6 @@ def allocate_holes(
     E'[w'^2] = sum_j (q_j / q'_j) S_j / N.
     """
     m0 = int(path.slabs[path.first_mask_slab, 2])
-    own = own_code(path.n_masks)
     n_sites = path.lattice.n_rows * (path.lattice.k_hi - path.lattice.k_lo + 1)
     s1 = np.zeros((2, n_sites))
     s2 = np.zeros((2, n_sites))
@@ -119,7 +118,7 @@ def allocate_holes(
     for b in launch(path, src, PILOT_RAYS, seed, stream=1, fresnel=fresnel):
         w = b.w * acceptance(design, n0, b.sx, b.sy)
         site = site_index(path, b.hole_row[:, m0], b.hole_k[:, m0])
-        g = (path_codes(b, row, k) != own).astype(np.int64)
+        g = (~is_own_path(b, row, k)).astype(np.int64)
         np.add.at(s1, (g, site), w)
         np.add.at(s2, (g, site), w * w)
     q = hole_targets(path, src).q_per_area * path.hole_area(m0)
@@ -185,8 +184,8 @@ def analyse_ghosts(
     weights = allocate_holes(design, path, src, row, k, seed, fresnel, rse_own, rse_ghost)
     n_obj = design.index(design.object_medium)
     n0 = path.slabs[0, 1]
-    nm = path.n_masks
-    own = own_code(nm)
+    registry = PathRegistry(path.n_masks, row, k)
+    own = OWN_PATH
     sums = KeyedSums()
     zs = [float(z) for z in z_mm]
     nbins = 400
@@ -209,7 +208,7 @@ def analyse_ghosts(
             hole_weights=weights,
         ):
             ledger += b.ledger
-            codes = path_codes(b, row, k)
+            codes = registry.ids(b)
             theta = np.degrees(np.arcsin(np.sqrt(b.sx**2 + b.sy**2) / n0))
             w = b.w * acceptance(design, n0, b.sx, b.sy)
             slot = sums.add(codes, w, theta)
@@ -247,7 +246,7 @@ def analyse_ghosts(
         e = estimate(sums.s1[sl], sums.s2[sl], n)
         holes = [
             {"mask": names[m], "row": "other" if o else "own", "dk": int(dk)}
-            for m, (o, dk) in enumerate(decode_path(code, nm))
+            for m, (o, dk) in enumerate(registry.decode(code))
         ][::-1]
         paths.append(
             GhostPath(

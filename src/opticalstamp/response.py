@@ -18,7 +18,7 @@ from .design import Design
 from .geometry import forward_path, lattice_of, reverse_path
 from .ghosts import acceptance, allocate_holes, pixel_source
 from .sources import Source
-from .tally import object_plane, own_code, path_codes
+from .tally import is_own_path, object_plane
 from .trace import launch
 
 CELL_UM = 84.6  # the 300-dpi grid of paper Fig. 5
@@ -107,13 +107,12 @@ def spots(
     src = pixel_source(design, row, k)
     n_obj = design.index(design.object_medium)
     n0 = path.slabs[0, 1]
-    own = own_code(path.n_masks)
     weights = allocate_holes(design, path, src, row, k, seed, fresnel, 1e-3, 1e-2)
     zs = [float(z) for z in z_mm]
     # map half-widths from the own-path support of a pilot (its own random stream)
     half = np.zeros(len(zs))
     for b in launch(path, src, 1 << 18, seed, stream=2, fresnel=fresnel, hole_weights=weights):
-        o = path_codes(b, row, k) == own
+        o = is_own_path(b, row, k)
         for iz, z in enumerate(zs):
             xo, yo = object_plane(b, z * 1000, n_obj)
             half[iz] = max(
@@ -137,7 +136,7 @@ def spots(
         progress=progress,
     ):
         w = b.w * acceptance(design, n0, b.sx, b.sy)
-        o = path_codes(b, row, k) == own
+        o = is_own_path(b, row, k)
         if not ghosts:
             w = w * o
         np.add.at(total, np.zeros(w.size, np.int64), w)

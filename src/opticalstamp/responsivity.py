@@ -28,7 +28,7 @@ import numpy as np
 from .design import Design
 from .geometry import lattice_of, reverse_path
 from .ghosts import acceptance, allocate_holes, pixel_source
-from .tally import own_code, path_codes
+from .tally import is_own_path
 from .trace import launch
 
 #: Target width of the bins of a folded LSF (um); each period gets round(P / this) bins.
@@ -116,7 +116,6 @@ def traced_folded_lsf(
     path = reverse_path(design)
     n_obj = design.index(design.object_medium)
     n0 = path.slabs[0, 1]
-    own = own_code(path.n_masks)
     h = [np.zeros((design.sensor.rows, n_batches, zs.size, int(n))) for n in nb]
     rows = []
     for row, k in row_pixels(design):
@@ -136,7 +135,7 @@ def traced_folded_lsf(
         ):
             w = b.w * acceptance(design, n0, b.sx, b.sy)
             if not ghosts:
-                w = w * (path_codes(b, row, k) == own)
+                w = w * is_own_path(b, row, k)
             batch = (b.ids % n_batches).astype(np.int64)
             _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, n_obj, per, nb, out)
         for p in range(per.size):
@@ -355,7 +354,6 @@ def traced_maps(
     path = reverse_path(design)
     n_obj = design.index(design.object_medium)
     n0 = path.slabs[0, 1]
-    own_c = own_code(path.n_masks)
     src = pixel_source(design, row, 0)
     if half_um is None:
         half_um = _own_half_width(design, float(zs.max()))
@@ -371,7 +369,7 @@ def traced_maps(
         path, src, n_rays, seed, fresnel=fresnel, hole_weights=weights, progress=progress
     ):
         w = b.w * acceptance(design, n0, b.sx, b.sy)
-        own = path_codes(b, row, 0) == own_c
+        own = is_own_path(b, row, 0)
         _maps(
             b.x,
             b.y,

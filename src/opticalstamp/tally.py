@@ -46,37 +46,125 @@ def ratio_estimate(a: Estimate, b: Estimate, n: int) -> Estimate:
     return Estimate(f, float(np.sqrt(max(var, 0.0))))
 
 
-PATH_BITS = 14
-_DK_OFFSET = 1 << (PATH_BITS - 2)
+#: Id of the own path in every :class:`PathRegistry` (registered first).
+OWN_PATH = 0
+
+
+def is_own_path(batch: RayBatch, row: int, k: int) -> np.ndarray:
+    """Whether each ray passed the own holes (row, k) of pixel (row, k) in every mask.
+
+    Parameters
+    ----------
+    batch : RayBatch, rays with ``hole_row``, ``hole_k`` of shape (n, n_masks)
+    row, k : the pixel's row (0 = A, 1 = B) and index
+
+    Returns
+    -------
+    (n,) bool
+    """
+    return np.all((batch.hole_row == row) & (batch.hole_k == k), axis=1)
+
+
+def _lex_key(cols: np.ndarray) -> np.ndarray:
+    """Int64 keys of the rows of ``cols`` (n, m), ordered lexicographically, last column
+    most significant: equal rows share a key. Mixed-radix over each column's range in
+    this array; where the radices would overflow, the key so far is replaced by its rank.
+    """
+    key = np.zeros(cols.shape[0], np.int64)
+    span = 1
+    for m in range(cols.shape[1] - 1, -1, -1):
+        v = cols[:, m]
+        lo = int(v.min())
+        r = int(v.max()) - lo + 1
+        if span * r >= 1 << 62:
+            key = np.unique(key, return_inverse=True)[1].reshape(-1).astype(np.int64)
+            span = int(key.max()) + 1
+        key = key * r + (v - lo)
+        span *= r
+    return key
+
+
+class PathRegistry:
+    """Compact int64 ids of hole sequences relative to pixel (row, k), any number of masks.
+
+    A ray's hole sequence is, per mask from the sensor upward, ``(other_row, dk)``:
+    whether its hole is in the other row of the lattice and its index offset
+    dk = k_hole - k. The own path, ``((0, 0), ...)``, is registered first and has id
+    :data:`OWN_PATH`; other sequences get ids 1, 2, ... in the order they are first met
+    (within one batch, in lexicographic order of (dk, other_row) from the top mask down).
+    Keep one registry per analysis so that ids are comparable across batches.
+
+    Parameters
+    ----------
+    n_masks : int, masks of the path
+    row, k : the pixel's row (0 = A, 1 = B) and index
+    """
+
+    def __init__(self, n_masks: int, row: int, k: int) -> None:
+        self.n_masks = int(n_masks)
+        self.row = int(row)
+        self.k = int(k)
+        self.sequences: list[tuple[tuple[int, int], ...]] = []
+        self._ids: dict[tuple[tuple[int, int], ...], int] = {}
+        self._id(((0, 0),) * self.n_masks)
+
+    def __len__(self) -> int:
+        return len(self.sequences)
+
+    def _id(self, seq: tuple[tuple[int, int], ...]) -> int:
+        i = self._ids.get(seq)
+        if i is None:
+            i = self._ids[seq] = len(self.sequences)
+            self.sequences.append(seq)
+        return i
+
+    def ids(self, batch: RayBatch) -> np.ndarray:
+        """Id of each ray's hole sequence, registering new sequences.
+
+        Parameters
+        ----------
+        batch : RayBatch, rays with ``hole_row``, ``hole_k`` of shape (n, n_masks)
+
+        Returns
+        -------
+        (n,) int64
+        """
+        if batch.hole_k.shape[1] != self.n_masks:
+            raise ValueError(
+                f"registry for {self.n_masks} masks, rays cross {batch.hole_k.shape[1]}"
+            )
+        if batch.hole_k.shape[0] == 0:
+            return np.zeros(0, np.int64)
+        dk = batch.hole_k.astype(np.int64) - self.k
+        other = (batch.hole_row != self.row).astype(np.int64)
+        key = _lex_key(2 * dk + other)
+        _, first, inv = np.unique(key, return_index=True, return_inverse=True)
+        lut = np.array(
+            [
+                self._id(tuple(zip(o, d, strict=True)))
+                for o, d in zip(other[first].tolist(), dk[first].tolist(), strict=True)
+            ],
+            dtype=np.int64,
+        )
+        return lut[inv.reshape(-1)]
+
+    def decode(self, path_id: int) -> list[tuple[int, int]]:
+        """[(other_row, dk), ...] per mask (from the sensor upward) of a path id."""
+        return list(self.sequences[path_id])
 
 
 def path_codes(batch: RayBatch, row: int, k: int) -> np.ndarray:
-    """Integer code of each ray's hole sequence relative to pixel (row, k).
+    """Ids of each ray's hole sequence in a fresh :class:`PathRegistry` (own path: 0).
 
-    Per mask: hole index offset dk = k_hole - k and whether the hole is in the other row.
-    Up to four masks with |dk| < 2048 (codes are unique); own path has code
-    :func:`own_code`.
+    The ids are comparable only within this one call; to tell the own path from the
+    rest use :func:`is_own_path`, to follow paths across batches keep a registry.
     """
-    dk = batch.hole_k.astype(np.int64) - k
-    other = (batch.hole_row != row).astype(np.int64)
-    if batch.hole_k.shape[1] > 4 or np.any(np.abs(dk) >= _DK_OFFSET):
-        raise ValueError("path coding supports up to 4 masks and |dk| < 2048")
-    per = (dk + _DK_OFFSET) * 2 + other
-    shifts = np.arange(per.shape[1], dtype=np.int64) * PATH_BITS
-    return (per << shifts).sum(axis=1)
+    return PathRegistry(batch.hole_k.shape[1], row, k).ids(batch)
 
 
 def own_code(n_masks: int) -> int:
-    return int(sum((_DK_OFFSET * 2) << (PATH_BITS * m) for m in range(n_masks)))
-
-
-def decode_path(code: int, n_masks: int) -> list[tuple[int, int]]:
-    """[(other_row, dk), ...] per mask (from the sensor upward) for a path code."""
-    out = []
-    for m in range(n_masks):
-        per = (code >> (PATH_BITS * m)) & ((1 << PATH_BITS) - 1)
-        out.append((per & 1, (per >> 1) - _DK_OFFSET))
-    return out
+    """The own path's id, :data:`OWN_PATH` (for comparison with :func:`path_codes`)."""
+    return OWN_PATH
 
 
 class KeyedSums:

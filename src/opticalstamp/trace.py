@@ -29,6 +29,7 @@ from tqdm.auto import tqdm
 
 from .geometry import Path
 from .sources import Source, hole_targets
+from .validate import check_seed
 
 TRANSMITTED, ABSORBED, TIR, ESCAPED = 0, 1, 2, 3
 STATUS_NAMES = ("transmitted", "absorbed", "tir", "escaped")
@@ -60,7 +61,8 @@ def _uniform_pair(key, gid, draw):
 
 
 def seed_key(seed: int, stream: int = 0) -> np.uint64:
-    """The generator key for ``seed`` and an analysis ``stream``."""
+    """The generator key for ``seed`` (an integer in [0, 2^63 - 1]) and a ``stream``."""
+    check_seed(seed)
     z = (int(seed) * 0x9E3779B97F4A7C15 + int(stream) * 0xD1B54A32D192ED03 + 1) % 2**64
     for _ in range(2):
         z ^= z >> 30
@@ -97,24 +99,41 @@ def _hole(x, y, masks, m, lat):
 
 
 @nb.njit(inline="always", **_JIT)
-def _fresnel_t(n1, n2, c1, c2):
-    """Unpolarised Fresnel power transmittance; c1, c2 = cos of the angles."""
+def _fresnel_sp(n1, n2, c1, c2):
+    """Fresnel power transmittances (Ts, Tp) of one interface; c1, c2 = cos of the angles.
+
+    Parameters
+    ----------
+    n1, n2 : float, refractive indices before and after the interface
+    c1, c2 : float, cosines of the angles of incidence and refraction
+
+    Returns
+    -------
+    ts, tp : float, 1 - r^2 for s and p polarisation (energy conservation)
+    """
     a = n1 * c1
     b = n2 * c2
     rs = (a - b) / (a + b)
     a2 = n2 * c1
     b2 = n1 * c2
     rp = (a2 - b2) / (a2 + b2)
-    return 1.0 - 0.5 * (rs * rs + rp * rp)
+    return 1.0 - rs * rs, 1.0 - rp * rp
 
 
 @nb.njit(inline="always", **_JIT)
 def _trace_one(x, y, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, hrow, hk, slot):
     """Trace one ray through ``slabs``; write hole (row, k) per mask into hrow/hk[slot].
 
+    With ``fresnel`` the returned weight carries the unpolarised transmittance of the
+    whole stack, (prod Ts + prod Tp) / 2: planar parallel interfaces keep the plane of
+    incidence, so s and p never mix and each polarisation's transmittances multiply.
+    Rays that stop early return their weight with the losses of the interfaces crossed.
+
     Returns status, plane (exit plane index where it stopped), x, y, weight.
     """
     s2 = sx * sx + sy * sy
+    ps = 1.0
+    pp = 1.0
     n_sl = slabs.shape[0]
     for i in range(n_sl):
         d = slabs[i, 0]
@@ -123,22 +142,24 @@ def _trace_one(x, y, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, hrow, hk
         x += d * sx / c
         y += d * sy / c
         if abs(x) > lim[0] or abs(y) > lim[1]:
-            return ESCAPED, i, x, y, w
+            return ESCAPED, i, x, y, w * 0.5 * (ps + pp)
         m = int(slabs[i, 2])
         if m >= 0:
             r, k = _hole(x, y, masks, m, lat)
             if r < 0:
-                return ABSORBED, i, x, y, w
+                return ABSORBED, i, x, y, w * 0.5 * (ps + pp)
             hrow[slot, m] = r
             hk[slot, m] = k
         n2 = slabs[i + 1, 1] if i + 1 < n_sl else n_out
         if n2 != n:
             c2sq = n2 * n2 - s2
             if c2sq <= 0.0:
-                return TIR, i, x, y, w
+                return TIR, i, x, y, w * 0.5 * (ps + pp)
             if fresnel:
-                w *= _fresnel_t(n, n2, c / n, math.sqrt(c2sq) / n2)
-    return TRANSMITTED, n_sl - 1, x, y, w
+                ts, tp = _fresnel_sp(n, n2, c / n, math.sqrt(c2sq) / n2)
+                ps *= ts
+                pp *= tp
+    return TRANSMITTED, n_sl - 1, x, y, w * 0.5 * (ps + pp)
 
 
 @nb.njit(**_JIT)
@@ -531,7 +552,8 @@ def trace_rays(path: Path, x, y, sx, sy, w=None, *, fresnel: bool = False) -> Tr
     x, y : (n,) array, start positions (um)
     sx, sy : (n,) array, invariant direction components (|s| < index of the first slab)
     w : (n,) array, optional initial weights (default 1)
-    fresnel : bool, apply unpolarised Fresnel transmission at index steps
+    fresnel : bool, apply unpolarised Fresnel transmission at index steps, exactly:
+        (prod Ts + prod Tp) / 2 over the interfaces the ray crosses
     """
     x = np.array(x, dtype=np.float64, ndmin=1)
     n = x.size
