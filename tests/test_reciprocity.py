@@ -19,7 +19,7 @@ from opticalstamp.geometry import forward_path, pixel_center, reverse_path
 from opticalstamp.ghosts import analyse_ghosts, pixel_source
 from opticalstamp.response import spots
 from opticalstamp.sources import Source
-from opticalstamp.tally import object_plane, own_code, path_codes
+from opticalstamp.tally import is_own_path, object_plane
 from opticalstamp.trace import launch
 
 Z_UM = 1000.0
@@ -30,13 +30,12 @@ def reverse_estimate(design, pixel, x0, y0, z_um=Z_UM, n_rays=1 << 23, seed=21):
     """(all paths, own path) etendue from pixel to the square, by reverse tracing."""
     path = reverse_path(design)
     row, k = pixel
-    own = own_code(path.n_masks)
     every, own_t = Tally(), Tally()
     for b in launch(path, pixel_source(design, row, k), n_rays, seed):
         xo, yo = object_plane(b, z_um, design.index(design.object_medium))
         inside = (np.abs(xo - x0) <= SIDE_UM / 2) & (np.abs(yo - y0) <= SIDE_UM / 2)
         every.add(b.w[inside], b.n_samples)
-        own_t.add(b.w[inside & (path_codes(b, row, k) == own)], b.n_samples)
+        own_t.add(b.w[inside & (is_own_path(b, row, k))], b.n_samples)
     return every, own_t
 
 

@@ -11,17 +11,16 @@ from opticalstamp.design import design_from_dict, load_design
 from opticalstamp.geometry import forward_path, reverse_path
 from opticalstamp.ghosts import allocate_holes, analyse_ghosts, pixel_source
 from opticalstamp.sources import Source
-from opticalstamp.tally import own_code, path_codes
+from opticalstamp.tally import is_own_path
 from opticalstamp.trace import ESCAPED, TIR, launch
 
 
 def _etendues(path, src, n_rays, seed, **kw):
     """(total, own path of pixel A0) etendue tallies over all rays reaching the end."""
-    own = own_code(path.n_masks)
     total, own_t = Tally(), Tally()
     for b in launch(path, src, n_rays, seed, **kw):
         total.add(b.w, b.n_samples)
-        own_t.add(b.w[path_codes(b, 0, 0) == own], b.n_samples)
+        own_t.add(b.w[is_own_path(b, 0, 0)], b.n_samples)
     return total, own_t
 
 

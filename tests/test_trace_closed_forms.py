@@ -20,7 +20,7 @@ from opticalstamp.design import design_from_dict, load_design
 from opticalstamp.geometry import Lattice, Path, forward_path, reverse_path
 from opticalstamp.ghosts import analyse_ghosts, pixel_source
 from opticalstamp.sources import Source, site_index
-from opticalstamp.tally import object_plane, own_code, path_codes
+from opticalstamp.tally import is_own_path, object_plane
 from opticalstamp.trace import ABSORBED, ESCAPED, TIR, TRANSMITTED, launch, trace_rays
 
 SETTINGS = settings(deadline=None, max_examples=60)
@@ -368,10 +368,9 @@ def test_own_path_spot_is_centred():
     # first moment of the own-path responsivity over the object plane at Z = 1 mm is zero in x
     design = load_design("paper2016")
     path = reverse_path(design)
-    own = own_code(path.n_masks)
     m0, m1 = Tally(), Tally()
     for b in launch(path, pixel_source(design, 0, 0), 1 << 20, 8):
-        o = path_codes(b, 0, 0) == own
+        o = is_own_path(b, 0, 0)
         xo, _ = object_plane(b, 1000.0)
         m0.add(b.w[o], b.n_samples)
         m1.add((b.w * xo)[o], b.n_samples)

@@ -153,20 +153,6 @@ class PathRegistry:
         return list(self.sequences[path_id])
 
 
-def path_codes(batch: RayBatch, row: int, k: int) -> np.ndarray:
-    """Ids of each ray's hole sequence in a fresh :class:`PathRegistry` (own path: 0).
-
-    The ids are comparable only within this one call; to tell the own path from the
-    rest use :func:`is_own_path`, to follow paths across batches keep a registry.
-    """
-    return PathRegistry(batch.hole_k.shape[1], row, k).ids(batch)
-
-
-def own_code(n_masks: int) -> int:
-    """The own path's id, :data:`OWN_PATH` (for comparison with :func:`path_codes`)."""
-    return OWN_PATH
-
-
 class KeyedSums:
     """Running per-key sums of w, w^2, counts, min/max of a ray attribute (ray order)."""
 
