@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
+from .atomic import replace_folder, verify_set, write_atomic, write_set  # noqa: F401
 from .validate import InputError
 
 
@@ -51,24 +51,6 @@ def provenance(design, seed: int | None) -> dict:
     }
 
 
-def write_atomic(path: str | Path, data: str | bytes) -> Path:
-    """Write a file so that readers never see it half-written."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data.encode() if isinstance(data, str) else data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual mode
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
 def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
     """Save a matplotlib figure atomically as PNG."""
     import io
@@ -88,55 +70,209 @@ def srgb_to_linear(v: np.ndarray) -> np.ndarray:
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
-def read_image(path: str | Path, *, linear: bool = False) -> tuple[np.ndarray, float | None]:
-    """Read a PNG, TIFF or JPEG as a grey float image in [0, 1] and its dpi (or None).
-
-    RGB is reduced to luminance (Rec. 709 weights); 16-bit files keep their precision;
-    ``linear`` decodes sRGB to linear values.
-    """
-    from PIL import Image, UnidentifiedImageError
-
-    path = Path(path)
-    if not path.is_file():
-        raise ImageError(f"image {path}: no such file")
-    dpi = None
-    try:
-        if path.suffix.lower() in (".tif", ".tiff"):
-            import tifffile
-
-            with tifffile.TiffFile(path) as tf:
-                arr = tf.asarray()
-                tags = tf.pages[0].tags
-                if "XResolution" in tags:
-                    num, den = tags["XResolution"].value
-                    unit = tags["ResolutionUnit"].value if "ResolutionUnit" in tags else 2
-                    dpi = num / den * (2.54 if int(unit) == 3 else 1.0)
-        else:
-            with Image.open(path) as im:
-                im.load()
-                if "dpi" in im.info:
-                    dpi = float(im.info["dpi"][0])
-                keep = ("L", "RGB", "I;16", "I;16B", "I;16L", "I", "F")
-                arr = np.asarray(im if im.mode in keep else im.convert("RGB"))
-    except (OSError, UnidentifiedImageError, ValueError, KeyError) as err:
-        raise ImageError(f"image {path}: cannot read it ({err})") from None
-    if np.issubdtype(arr.dtype, np.integer):
-        scale = float(np.iinfo(arr.dtype).max) if arr.dtype != np.int32 else 65535.0
-        arr = arr.astype(np.float64) / scale
-    else:
-        arr = arr.astype(np.float64)
-    if arr.ndim == 3:
-        arr = arr[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
-    if arr.ndim != 2 or min(arr.shape) < 2:
-        raise ImageError(f"image {path}: expected a 2-D image (got shape {arr.shape})")
-    if linear:
-        arr = srgb_to_linear(np.clip(arr, 0, 1))
-    return arr, _round_dpi(dpi)  # PNG stores pixels per metre: 600 dpi reads as 599.9988
-
+#: Bytes per image pixel and channel while reading and measuring an image (the float64
+#: image, a working copy, decoding buffers).
+IMAGE_BYTES_PER_SAMPLE = 24
 
 #: Bytes per document pixel and channel while scanning (float32 reflectance, the y pass,
 #: decoding buffers).
 SCAN_BYTES_PER_SAMPLE = 10
+
+_TIFF_MAGIC = (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+")
+_GREY_MODES = ("L", "I;16", "I;16B", "I;16L", "I", "F")
+
+
+@contextlib.contextmanager
+def _guarded(path: Path, what: str):
+    """Turn any failure of the decoders into an ImageError naming the file.
+
+    Pillow's decompression-bomb limit is lifted inside (the header checks of
+    :func:`_checked_header` replace it with a memory estimate) and restored on leaving.
+    """
+    from PIL import Image
+
+    old = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None
+    try:
+        yield
+    except InputError:
+        raise
+    except Exception as err:  # truncated, corrupt or unsupported files fail in many ways
+        detail = str(err) or type(err).__name__
+        raise ImageError(f"{what} {path}: cannot read it ({detail})") from None
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+
+
+def _ratio(value) -> float:
+    """A TIFF RATIONAL (numerator, denominator) as a float; NaN for a zero denominator."""
+    num, den = value
+    return num / den if den else float("nan")
+
+
+def _header(path: Path, what: str) -> tuple[int, int, int, tuple[float, float] | None, bool]:
+    """Width, height, samples per pixel, the stored (x, y) resolution in dpi (None when
+    absent) and whether the file is a TIFF, from the header alone (first TIFF page)."""
+    with open(path, "rb") as fh:
+        tiff = fh.read(4) in _TIFF_MAGIC
+    if tiff:
+        import tifffile
+
+        with tifffile.TiffFile(path) as tf:
+            if not tf.pages:
+                raise ImageError(f"{what} {path}: a TIFF header with no readable image after it")
+            page = tf.pages[0]
+            tags, res = page.tags, None
+            if "XResolution" in tags:
+                cm = "ResolutionUnit" in tags and tags["ResolutionUnit"].value == 3
+                scale = 2.54 if cm else 1.0
+                x = _ratio(tags["XResolution"].value)
+                y = _ratio(tags["YResolution"].value) if "YResolution" in tags else x
+                res = (x * scale, y * scale)
+            return page.imagewidth, page.imagelength, page.samplesperpixel, res, True
+    from PIL import Image
+
+    with Image.open(path) as im:
+        dpi = im.info.get("dpi")
+        res = (float(dpi[0]), float(dpi[1])) if dpi else None
+        return im.size[0], im.size[1], len(im.getbands()), res, False
+
+
+def _checked_header(
+    path: Path,
+    what: str,
+    *,
+    dpi: float | None,
+    min_px: int,
+    channels: int | None,
+    bytes_per_sample: int,
+    memory_limit_bytes: int | None,
+) -> tuple[float | None, bool]:
+    """Check an image from its header before decoding it: at least ``min_px`` pixels each
+    way, memory for ``bytes_per_sample`` per pixel and channel (``channels``, default:
+    the file's) within ``memory_limit_bytes`` (default: 80 % of the available memory),
+    and, unless ``dpi`` is given, a usable resolution with square pixels.
+
+    Returns the resolution to use (``dpi`` if given, else the file's; None if it stores
+    none) and whether the file is a TIFF.
+    """
+    w, h, bands, res, tiff = _header(path, what)
+    if min(w, h) < min_px:
+        raise ImageError(
+            f"{what} {path}: {w} x {h} pixels is too small (this command needs at least "
+            f"{min_px} x {min_px})"
+        )
+    n_ch = channels or bands
+    need = w * h * n_ch * bytes_per_sample
+    limit = memory_limit_bytes or int(0.8 * available_memory_bytes())
+    if need > limit:
+        raise ImageError(
+            f"{what} {path}: {w} x {h} pixels x {n_ch} channel(s) needs about "
+            f"{need / 2**30:.1f} GiB to {'scan' if what == 'document' else 'measure'}, more "
+            f"than the {limit / 2**30:.1f} GiB available; crop it or lower its resolution"
+        )
+    if dpi is not None or res is None:
+        return dpi, tiff
+    x, y = res
+    if not (np.isfinite(x) and np.isfinite(y)):
+        raise ImageError(
+            f"{what} {path}: its stored resolution is not a number (a zero denominator); give --dpi"
+        )
+    if max(x, y) > 1 and abs(x - y) > 1e-3 * max(x, y):
+        raise ImageError(
+            f"{what} {path}: its pixels are not square ({round(x, 2):g} dpi along x, "
+            f"{round(y, 2):g} dpi along y) and the analyses assume square pixels; resample "
+            "it, or give --dpi to override the file's resolution"
+        )
+    return _round_dpi(x), tiff
+
+
+def _finite(arr: np.ndarray, path: Path, what: str) -> None:
+    if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+        raise ImageError(f"{what} {path}: holds NaN or infinite pixel values; replace them")
+
+
+def read_image(
+    path: str | Path,
+    *,
+    linear: bool = False,
+    dpi: float | None = None,
+    min_px: int = 2,
+    memory_limit_bytes: int | None = None,
+) -> tuple[np.ndarray, float | None]:
+    """Read a PNG, TIFF or JPEG as a grey float image in [0, 1] and its dpi (or None).
+
+    Parameters
+    ----------
+    path : str or Path
+        The image file. TIFFs are read with tifffile (first page), others with Pillow.
+    linear : bool
+        Decode sRGB values to linear ones.
+    dpi : float, optional
+        The resolution to use instead of the file's (which is then not checked).
+    min_px : int
+        The fewest pixels the image may have along each side.
+    memory_limit_bytes : int, optional
+        Refuse, from the header, an image that needs more memory (default: 80 % of the
+        available memory).
+
+    Returns
+    -------
+    image : ndarray
+        [y, x] float64; RGB is reduced to luminance (Rec. 709 weights), grey + alpha to
+        grey; 16-bit files keep their precision.
+    dpi : float or None
+
+    Raises
+    ------
+    ImageError
+        Whatever makes the file unusable, naming it: unreadable, too small or too large,
+        non-square pixels or a broken resolution (unless ``dpi`` is given), NaN or
+        infinite values in a float image.
+    """
+    from PIL import Image
+
+    path = Path(path)
+    if not path.is_file():
+        raise ImageError(f"image {path}: no such file")
+    with _guarded(path, "image"):
+        use, tiff = _checked_header(
+            path,
+            "image",
+            dpi=dpi,
+            min_px=min_px,
+            channels=None,
+            bytes_per_sample=IMAGE_BYTES_PER_SAMPLE,
+            memory_limit_bytes=memory_limit_bytes,
+        )
+        if tiff:
+            import tifffile
+
+            with tifffile.TiffFile(path) as tf:
+                page = tf.pages[0]
+                arr = page.asarray()
+                if arr.ndim == 3 and page.planarconfig == 2:  # separate planes: [c, y, x]
+                    arr = np.moveaxis(arr, 0, -1)
+        else:
+            with Image.open(path) as im:
+                im.load()
+                keep = ("L", "RGB", "I;16", "I;16B", "I;16L", "I", "F")
+                arr = np.asarray(im if im.mode in keep else im.convert("RGB"))
+    if arr.dtype.kind not in "biuf":
+        raise ImageError(f"image {path}: pixel type {arr.dtype} is not supported")
+    _finite(arr, path, "image")
+    if arr.dtype.kind in "iu":
+        scale = float(np.iinfo(arr.dtype).max) if arr.dtype != np.int32 else 65535.0
+        arr = arr.astype(np.float64) / scale
+    else:
+        arr = arr.astype(np.float64)
+    if arr.ndim == 3:  # grey (+ alpha): the first channel; colour: luminance
+        arr = arr[..., 0] if arr.shape[2] < 3 else arr[..., :3] @ [0.2126, 0.7152, 0.0722]
+    if arr.ndim != 2 or min(arr.shape) < min_px:
+        raise ImageError(f"image {path}: expected a 2-D image (got shape {arr.shape})")
+    if linear:
+        arr = srgb_to_linear(np.clip(arr, 0, 1))
+    return arr, use  # PNG stores pixels per metre: 600 dpi reads as 599.9988 (rounded)
 
 
 def available_memory_bytes() -> int:
@@ -152,34 +288,42 @@ def available_memory_bytes() -> int:
 
 
 def read_document(
-    path: str | Path, *, color: bool = False, memory_limit_bytes: int | None = None
+    path: str | Path,
+    *,
+    color: bool = False,
+    memory_limit_bytes: int | None = None,
+    dpi: float | None = None,
+    min_px: int = 2,
 ) -> tuple[np.ndarray, float | None]:
     """A document image as linear reflectance (float32, [y, x] or [y, x, 3]) and its dpi.
 
-    8- and 16-bit sRGB values are decoded through a lookup table. The memory the scan
-    will need is estimated from the header first, and a file that would not fit in
-    ``memory_limit_bytes`` (default: 80 % of the available memory) is refused with the
-    numbers, before it is decoded.
+    8- and 16-bit sRGB values are decoded through a lookup table. The file is checked
+    from its header before it is decoded, as in :func:`read_image` (``dpi``, ``min_px``),
+    and a file whose scan would not fit in ``memory_limit_bytes`` (default: 80 % of the
+    available memory) is refused with the numbers.
+
+    Raises
+    ------
+    ImageError
+        Whatever makes the file unusable, naming it (see :func:`read_image`).
     """
-    from PIL import Image, UnidentifiedImageError
+    from PIL import Image
 
     path = Path(path)
     if not path.is_file():
         raise ImageError(f"document {path}: no such file")
-    Image.MAX_IMAGE_PIXELS = None  # the memory check below replaces Pillow's bomb guard
-    try:
+    with _guarded(path, "document"):
         with Image.open(path) as im:
-            w, h = im.size
-            n_ch = 3 if color and im.mode not in ("L", "I;16", "I;16B", "I;16L", "I", "F") else 1
-            need = w * h * n_ch * SCAN_BYTES_PER_SAMPLE
-            limit = memory_limit_bytes or int(0.8 * available_memory_bytes())
-            if need > limit:
-                raise ImageError(
-                    f"document {path}: {w} x {h} pixels x {n_ch} channel(s) needs about "
-                    f"{need / 2**30:.1f} GiB to scan, more than the {limit / 2**30:.1f} GiB "
-                    "available; crop it or lower its resolution"
-                )
-            dpi = float(im.info["dpi"][0]) if "dpi" in im.info else None
+            n_ch = 3 if color and im.mode not in _GREY_MODES else 1
+            use, _ = _checked_header(
+                path,
+                "document",
+                dpi=dpi,
+                min_px=min_px,
+                channels=n_ch,
+                bytes_per_sample=SCAN_BYTES_PER_SAMPLE,
+                memory_limit_bytes=memory_limit_bytes,
+            )
             im.load()
             if im.mode in ("I;16", "I;16B", "I;16L", "I"):
                 arr = (
@@ -188,17 +332,14 @@ def read_document(
                     else np.clip(np.asarray(im), 0, 65535).astype(np.uint16)
                 )
                 lut = srgb_to_linear(np.arange(65536) / 65535.0).astype(np.float32)
-                return _apply_lut(lut, arr), _round_dpi(dpi)
+                return _apply_lut(lut, arr), use
             if im.mode == "F":
-                return np.clip(np.asarray(im, np.float32), 0, 1), _round_dpi(dpi)
-            im = im.convert("RGB" if n_ch == 3 else "L")
-            arr = np.asarray(im)
-    except (OSError, UnidentifiedImageError, ValueError, SyntaxError) as err:
-        if isinstance(err, ImageError):
-            raise
-        raise ImageError(f"document {path}: cannot read it ({err})") from None
+                arr = np.asarray(im, np.float32)
+                _finite(arr, path, "document")
+                return np.clip(arr, 0, 1), use
+            arr = np.asarray(im.convert("RGB" if n_ch == 3 else "L"))
     lut = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)
-    return _apply_lut(lut, arr), _round_dpi(dpi)
+    return _apply_lut(lut, arr), use
 
 
 def _apply_lut(lut: np.ndarray, arr: np.ndarray, rows: int = 512) -> np.ndarray:
@@ -219,8 +360,8 @@ def linear_to_srgb(v: np.ndarray) -> np.ndarray:
     return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
 
 
-def write_png(path: str | Path, linear: np.ndarray, dpi: float, *, srgb: bool = True) -> Path:
-    """8-bit PNG (sRGB-encoded unless ``srgb`` is False) with its resolution, atomically."""
+def encode_png(linear: np.ndarray, dpi: float, *, srgb: bool = True) -> bytes:
+    """8-bit PNG bytes (sRGB-encoded unless ``srgb`` is False) with the resolution."""
     import io as _io
 
     from PIL import Image
@@ -229,11 +370,16 @@ def write_png(path: str | Path, linear: np.ndarray, dpi: float, *, srgb: bool = 
     im = Image.fromarray(np.round(v * 255).astype(np.uint8))
     buf = _io.BytesIO()
     im.save(buf, format="PNG", dpi=(dpi, dpi))
-    return write_atomic(path, buf.getvalue())
+    return buf.getvalue()
 
 
-def write_tiff16(path: str | Path, linear: np.ndarray, dpi: float, description: str = ""):
-    """16-bit TIFF of linear values (0..65535) with its resolution in dpi, atomically."""
+def write_png(path: str | Path, linear: np.ndarray, dpi: float, *, srgb: bool = True) -> Path:
+    """8-bit PNG (sRGB-encoded unless ``srgb`` is False) with its resolution, atomically."""
+    return write_atomic(path, encode_png(linear, dpi, srgb=srgb))
+
+
+def encode_tiff16(linear: np.ndarray, dpi: float, description: str = "") -> bytes:
+    """16-bit TIFF bytes of linear values (0..65535) with the resolution in dpi."""
     import io as _io
 
     import tifffile
@@ -248,7 +394,12 @@ def write_tiff16(path: str | Path, linear: np.ndarray, dpi: float, description: 
         description=description or None,
         photometric="rgb" if data.ndim == 3 else "minisblack",
     )
-    return write_atomic(path, buf.getvalue())
+    return buf.getvalue()
+
+
+def write_tiff16(path: str | Path, linear: np.ndarray, dpi: float, description: str = ""):
+    """16-bit TIFF of linear values (0..65535) with its resolution in dpi, atomically."""
+    return write_atomic(path, encode_tiff16(linear, dpi, description))
 
 
 def save_dataset(ds, path: str | Path) -> Path:

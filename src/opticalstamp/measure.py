@@ -116,6 +116,23 @@ def _centroids(img: np.ndarray, window: np.ndarray | None) -> np.ndarray:
     return np.where(s > 0, (d * x).sum(axis=1) / np.where(s > 0, s, 1), np.nan)
 
 
+def _transitions(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Dark/light transitions in each row and in each column. Hysteresis at 25 % and 75 %
+    of the 2-98 % percentile range keeps noise from counting: a row across one edge holds
+    1, across a dark square or bar 2."""
+    lo, hi = np.percentile(img, [2, 98])
+    lab = np.where(img < lo + 0.25 * (hi - lo), -1, 0) + np.where(img > lo + 0.75 * (hi - lo), 1, 0)
+    if not hi > lo:
+        lab[:] = 0
+    out = []
+    for a in (lab, lab.T):
+        idx = np.where(a != 0, np.arange(a.shape[1]), 0)
+        np.maximum.accumulate(idx, axis=1, out=idx)
+        f = np.take_along_axis(a, idx, axis=1)  # the last level reached, carried forward
+        out.append(((f[:, 1:] != f[:, :-1]) & (f[:, :-1] != 0)).sum(axis=1))
+    return out[0], out[1]
+
+
 def sfr(
     image: np.ndarray,
     dpi: float,
@@ -132,22 +149,55 @@ def sfr(
     divided by the central difference's response sin(2 pi f d)/(2 pi f d) (capped at 10).
 
     ``direction``: "x" for a near-vertical edge (SFR along x), "y" for a near-horizontal
-    edge (SFR along y), "auto" to choose by the stronger gradient.
+    edge (SFR along y), "auto" to choose by the stronger gradient; in "auto", an image
+    whose rows and columns both cross two edges (a dark square, ``chart edge``) is
+    measured on the square's left edge (:func:`square_edge_rois`; its region is returned
+    as "roi", x0, y0, x1, y1).
 
     Returns freq_cy_per_mm, sfr, mtf50_cy_per_mm, sfr_at_dpi ({"100": ., "200": .}, at
     the fundamental of the paper's bar charts: 1/period), edge_angle_deg, direction.
+
+    Raises
+    ------
+    ValueError
+        No usable edge: none, more than one along ``direction``, too close to the grid
+        or the border, or a profile without a single step (an SFR that would not be 1 at
+        low frequency).
     """
     img = np.asarray(image, dtype=np.float64)
     if img.ndim != 2 or min(img.shape) < 8:
         raise ValueError(f"image must be 2-D grey, at least 8 x 8 (got shape {img.shape})")
     if not dpi or dpi <= 0:
         raise ValueError(f"dpi must be > 0 (got {dpi})")
+    if direction not in ("x", "y", "auto"):
+        raise ValueError(f"direction must be x, y or auto (got {direction!r})")
+    if not np.isfinite(img).all():
+        raise ValueError("the image holds NaN or infinite values")
+    n_tr = dict(zip("xy", _transitions(img), strict=True))
+    per_line = {k: float(np.median(n[n > 0])) if n.any() else 0.0 for k, n in n_tr.items()}
+    if direction == "auto" and min(per_line.values()) > 1:  # a dark square: its left edge
+        x0, y0, x1, y1 = square_edge_rois(img)["x"]
+        r = sfr(img[y0:y1, x0:x1], dpi, direction="auto", oversample=oversample)
+        if r["direction"] != "x":
+            raise ValueError("the dark square's left edge is not usable for an SFR")
+        return r | {"roi": [x0, y0, x1, y1]}
     if direction == "auto":
         gx = np.abs(np.diff(img, axis=1)).sum()
         gy = np.abs(np.diff(img, axis=0)).sum()
         direction = "x" if gx >= gy else "y"
-    if direction not in ("x", "y"):
-        raise ValueError(f"direction must be x, y or auto (got {direction!r})")
+    if per_line[direction] > 1:
+        raise ValueError(
+            f"the region holds more than one edge along {direction} ({per_line[direction]:g} "
+            "per line): give a region around one edge, or use --direction both for a "
+            "slanted dark square"
+        )
+    once = float(np.mean(n_tr[direction] == 1))
+    if per_line[direction] and once < 0.95:
+        raise ValueError(
+            f"the edge does not cross the region from side to side ({once:.0%} of the lines "
+            f"along {direction} cross it once, not 95 %): a corner or a second edge? give a "
+            "region around one straight edge"
+        )
     if direction == "y":
         img = img.T
     n_rows, n_cols = img.shape
@@ -194,6 +244,11 @@ def sfr(
     esf = np.interp(centres, centres[full], sums[full] / counts[full])
     lsf = np.zeros_like(esf)
     lsf[1:-1] = (esf[2:] - esf[:-2]) / 2
+    lo, hi = np.percentile(img, [2, 98])
+    if not abs(lsf.sum()) > 0.25 * (hi - lo):  # the step across the edge (0: none, or two)
+        raise ValueError(
+            "the profile across the edge has no single step (no edge, or two opposite ones)"
+        )
     if lsf.sum() < 0:
         lsf = -lsf
     c0 = (lsf * np.arange(nb)).sum() / lsf.sum()
@@ -207,6 +262,11 @@ def sfr(
     nz = arg > 0
     corr[nz] = np.minimum(arg[nz] / np.sin(np.minimum(arg[nz], np.pi - 1e-9)), 10.0)
     s = spec * corr
+    if not np.isfinite(s).all() or s[1] > 1.2:
+        raise ValueError(
+            f"the SFR is {s[1]:.3g} at its lowest frequency, not about 1: the region does not "
+            "hold one clean edge"
+        )
     keep = f_px <= 1.0  # up to the sampling frequency
     f_mm = f_px[keep] * dpi / 25.4
     s = s[keep]

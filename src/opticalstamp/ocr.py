@@ -17,10 +17,15 @@ def tesseract_available() -> bool:
     return shutil.which("tesseract") is not None
 
 
-def recognise(image: np.ndarray, dpi: float, psm: int = 6) -> str:
-    """Text in an 8-bit-ready grey image in [0, 1] (display-encoded), via Tesseract."""
+def require_tesseract() -> None:
+    """Raise :class:`OCRUnavailable` (with how to install it) if Tesseract is missing."""
     if not tesseract_available():
         raise OCRUnavailable("tesseract is not installed (Debian: apt-get install tesseract-ocr)")
+
+
+def recognise(image: np.ndarray, dpi: float, psm: int = 6) -> str:
+    """Text in an 8-bit-ready grey image in [0, 1] (display-encoded), via Tesseract."""
+    require_tesseract()
     import pytesseract
     from PIL import Image
 
