@@ -3,26 +3,121 @@ measure-rmtf | sfr | report`."""
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from .design import Design, DesignError, load_design
+from .design import Design, load_design
+from .validate import (
+    InputError,
+    check_number,
+    check_output_path,
+    check_seed,
+    parse_grid,
+    parse_numbers,
+)
 
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
+    rich_markup_mode=None,
     help="Design and analyse lensless contact image scanners (optical stamps).",
 )
 
+
+def command(*args, **kwargs):
+    """``app.command`` whose body turns any :class:`InputError` into ``error: ...``, exit 2.
+
+    Options are checked by their callbacks while the command line is parsed (click reports
+    ``Invalid value for '--option'`` with exit 2); what only the library can check (a
+    design file, an image, a height map) raises InputError before any work is done. An
+    OSError while writing (disk full) is reported in one line with exit code 1.
+    """
+
+    def deco(fn):
+        @functools.wraps(fn)
+        def run(*a, **kw):
+            try:
+                return fn(*a, **kw)
+            except InputError as err:
+                _fail(str(err))
+            except OSError as err:  # the disk failed us mid-run: no traceback, exit 1
+                typer.echo(f"error: {err}", err=True)
+                raise typer.Exit(1) from None
+
+        return app.command(*args, **kwargs)(run)
+
+    return deco
+
+
+def number(lo=None, hi=None, *, lo_open=False, hi_open=False, integer=False):
+    """Option callback: a finite number in the interval (None passes: option not given)."""
+
+    def check(ctx: typer.Context, param: typer.CallbackParam, value):
+        if value is None or ctx.resilient_parsing:
+            return value
+        try:
+            check_number(value, "value", lo, hi, lo_open=lo_open, hi_open=hi_open, integer=integer)
+        except InputError as err:
+            raise typer.BadParameter(str(err).removeprefix("value: ")) from None
+        return value
+
+    return check
+
+
+def writable(*suffixes: str, directory: bool = False, marker: str | None = None):
+    """Option callback: a writable output path with one of ``suffixes`` (see
+    :func:`check_output_path`)."""
+
+    def check(ctx: typer.Context, param: typer.CallbackParam, value):
+        if value is None or ctx.resilient_parsing:
+            return value
+        try:
+            check_output_path(value, "path", suffixes=suffixes, directory=directory, marker=marker)
+        except InputError as err:
+            raise typer.BadParameter(str(err).removeprefix("path: ")) from None
+        return value
+
+    return check
+
+
 DesignOpt = Annotated[str, typer.Option("--design", "-d", help="preset name or design TOML file")]
-SeedOpt = Annotated[int, typer.Option("--seed", help="random seed (results are reproducible)")]
-RaysOpt = Annotated[int | None, typer.Option("--rays", help="number of rays (default: automatic)")]
+
+
+def _seed(ctx: typer.Context, param: typer.CallbackParam, value):
+    try:
+        return check_seed(value, "--seed")
+    except InputError as err:
+        raise typer.BadParameter(str(err).removeprefix("--seed: ")) from None
+
+
+SeedOpt = Annotated[
+    int,
+    typer.Option(
+        "--seed", help="random seed, 0 to 2^63-1 (results are reproducible)", callback=_seed
+    ),
+]
+RaysOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--rays",
+        help="number of rays, 1000 to 1e10 (default: automatic)",
+        callback=number(1000, 1e10, integer=True),
+    ),
+]
 JsonOpt = Annotated[bool, typer.Option("--json", help="print machine-readable JSON on stdout")]
-PlotOpt = Annotated[Path | None, typer.Option("--plot", help="write a PNG figure")]
+PlotOpt = Annotated[
+    Path | None, typer.Option("--plot", help="write a PNG figure", callback=writable(".png"))
+]
 FresnelOpt = Annotated[bool, typer.Option("--fresnel", help="apply Fresnel transmission losses")]
+
+
+_fraction = number(0, 1, lo_open=True, hi_open=True)
+_z_mm = number(0, 100)
+_coordinate = number(-1e5, 1e5)
 
 
 def _fail(msg: str) -> None:
@@ -31,28 +126,25 @@ def _fail(msg: str) -> None:
 
 
 def _design(spec: str) -> Design:
-    try:
-        return load_design(spec)
-    except DesignError as err:
-        _fail(str(err))
+    """Load a design (InputError: exit 2); print its geometric-optics warnings."""
+    from .diffraction import geometric_optics_warnings
+
+    d = load_design(spec)
+    for w in geometric_optics_warnings(d):
+        typer.echo(f"warning: {w}", err=True)
+    return d
 
 
 def _floats(text: str, name: str, lo: float = 0.0, hi: float = 1000.0) -> tuple[float, ...]:
-    try:
-        vals = tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        _fail(f"{name}: expected comma-separated numbers (got {text!r})")
-    if not vals or any(not lo <= v <= hi for v in vals):
-        _fail(f"{name}: values must lie in [{lo:g}, {hi:g}] (got {text!r})")
-    return vals
+    return parse_numbers(text, name, lo, hi)
+
+
+def _z_grid(text: str, hi: float = 100.0) -> tuple[float, ...]:
+    return parse_grid(text, "--z", 0.0, hi)
 
 
 def _rays(n: int | None, default: int) -> int:
-    if n is None:
-        return default
-    if not 1_000 <= n <= 10**10:
-        _fail(f"--rays: must be between 1000 and 1e10 (got {n})")
-    return n
+    return default if n is None else n
 
 
 def _resolution(path: Path, file_dpi: float | None, dpi: float | None, lo: float) -> float:
@@ -60,8 +152,7 @@ def _resolution(path: Path, file_dpi: float | None, dpi: float | None, lo: float
     use = dpi or file_dpi
     if use is None:
         _fail(f"{path}: the file carries no resolution; give --dpi")
-    if not lo <= use <= 20000:
-        _fail(f"--dpi: must lie in [{lo:g}, 20000] (got {use:g})")
+    check_number(use, "--dpi" if dpi else f"{path}: resolution", lo, 20000)
     return use
 
 
@@ -82,17 +173,25 @@ def _plot(fig, path: Path | None) -> None:
         typer.echo(f"wrote {path}", err=True)
 
 
-@app.command()
+@command()
 def ghosts(
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
     rays: RaysOpt = None,
     z: Annotated[str, typer.Option(help="object distances (mm), comma-separated")] = "0",
-    rse_own: Annotated[float, typer.Option(help="target relative SE, own path")] = 1e-3,
-    rse_ghost: Annotated[float, typer.Option(help="target relative SE, ghosts")] = 1e-2,
+    rse_own: Annotated[
+        float, typer.Option(help="target relative SE, own path", callback=_fraction)
+    ] = 1e-3,
+    rse_ghost: Annotated[
+        float, typer.Option(help="target relative SE, ghosts", callback=_fraction)
+    ] = 1e-2,
     row: Annotated[str, typer.Option(help="pixel row, A or B")] = "A",
     detector_um: Annotated[
-        float, typer.Option(help="half width of the virtual detector on the object plane (um)")
+        float,
+        typer.Option(
+            help="half width of the virtual detector on the object plane (um), (0, 1e6]",
+            callback=number(0, 1e6, lo_open=True),
+        ),
     ] = 500.0,
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
@@ -105,8 +204,6 @@ def ghosts(
     d = _design(design)
     if row not in ("A", "B") or (row == "B" and d.sensor.rows == 1):
         _fail("--row: must be A, or B for a two-row design")
-    if not 0 < rse_own < 1 or not 0 < rse_ghost < 1:
-        _fail("--rse-own/--rse-ghost: must lie in (0, 1)")
     zs = _floats(z, "--z", 0.0, 100.0)
     r = analyse_ghosts(
         d,
@@ -145,13 +242,13 @@ def ghosts(
         _plot(plot_ghosts(r), plot)
 
 
-@app.command()
+@command()
 def spots(
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
     rays: RaysOpt = None,
     z: Annotated[str, typer.Option(help="object distances (mm)")] = "0,1,2,3,4",
-    no_ghosts: Annotated[bool, typer.Option("--no-ghosts")] = False,
+    no_ghosts: Annotated[bool, typer.Option("--no-ghosts", help="leave ghost light out")] = False,
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
@@ -187,14 +284,20 @@ def spots(
         _plot(plot_spots(r), plot)
 
 
-@app.command()
+@command()
 def psf(
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
     rays: RaysOpt = None,
-    z: Annotated[float, typer.Option(help="object distance Z (mm)")] = 1.0,
-    x_obj: Annotated[float, typer.Option(help="object point x (um)")] = 0.0,
-    y_obj: Annotated[float, typer.Option(help="object point y (um)")] = 0.0,
+    z: Annotated[
+        float, typer.Option(help="object distance Z (mm), 0 to 100", callback=_z_mm)
+    ] = 1.0,
+    x_obj: Annotated[
+        float, typer.Option(help="object point x (um), |x| <= 1e5", callback=_coordinate)
+    ] = 0.0,
+    y_obj: Annotated[
+        float, typer.Option(help="object point y (um), |y| <= 1e5", callback=_coordinate)
+    ] = 0.0,
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
@@ -204,8 +307,6 @@ def psf(
     from .response import psf as run
 
     d = _design(design)
-    if not 0 <= z <= 100:
-        _fail(f"--z: must lie in [0, 100] mm (got {z})")
     r = run(
         d,
         x_obj_um=x_obj,
@@ -232,12 +333,20 @@ def psf(
         _plot(plot_psf(r), plot)
 
 
-@app.command()
+@command()
 def report(
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
     rays: RaysOpt = None,
-    out: Annotated[Path, typer.Option("--out", "-o", help="output folder")] = Path("report"),
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            help="output folder (replaced as a whole)",
+            callback=writable(directory=True, marker="report.json"),
+        ),
+    ] = Path("report"),
     fresnel: FresnelOpt = False,
 ) -> None:
     """Run every analysis and write JSON, PNG figures and one HTML page."""

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
 from .cli import (
@@ -22,7 +21,9 @@ from .cli import (
     _plot,
     _rays,
     _resolution,
-    app,
+    _z_grid,
+    command,
+    number,
 )
 
 
@@ -30,7 +31,7 @@ def _dpi_list(text: str) -> tuple[float, ...]:
     return _floats(text, "--dpi", 1.0, 5000.0)
 
 
-@app.command()
+@command()
 def rmtf(
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
@@ -43,10 +44,29 @@ def rmtf(
     ),
     ghosts: Annotated[bool, typer.Option("--ghosts/--no-ghosts", help="count ghost light")] = True,
     method: Annotated[str, typer.Option(help="trace (exact) or paraxial (closed form)")] = "trace",
-    window_um: Annotated[float, typer.Option(help="chart window for Imax/Imin (um)")] = 5000.0,
-    shift_um: Annotated[float, typer.Option(help="chart shift step (um)")] = 1.0,
-    threshold: Annotated[float, typer.Option(help="RMTF threshold of the depth of field")] = 0.3,
-    dof_dpi: Annotated[float, typer.Option(help="chart dpi of the depth of field")] = 200.0,
+    window_um: Annotated[
+        float,
+        typer.Option(
+            help="chart window for Imax/Imin (um), (0, 1e6]", callback=number(0, 1e6, lo_open=True)
+        ),
+    ] = 5000.0,
+    shift_um: Annotated[
+        float,
+        typer.Option(
+            help="chart shift step (um), (0, 1000]", callback=number(0, 1000, lo_open=True)
+        ),
+    ] = 1.0,
+    threshold: Annotated[
+        float,
+        typer.Option(
+            help="RMTF threshold of the depth of field, (0, 1)",
+            callback=number(0, 1, lo_open=True, hi_open=True),
+        ),
+    ] = 0.3,
+    dof_dpi: Annotated[
+        float,
+        typer.Option(help="chart dpi of the depth of field, 1 to 5000", callback=number(1, 5000)),
+    ] = 200.0,
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
@@ -60,10 +80,6 @@ def rmtf(
         _fail(f"--method: must be trace or paraxial (got {method!r})")
     if method == "paraxial" and any(m.shape == "circle" for m in d.masks):
         _fail("--method paraxial: needs rectangular holes (this design has circular ones)")
-    if not 0 < threshold < 1:
-        _fail(f"--threshold: must lie in (0, 1) (got {threshold})")
-    if not 0 < window_um <= 1e6 or not 0 < shift_um <= 1000:
-        _fail("--window-um must lie in (0, 1e6] and --shift-um in (0, 1000]")
     zs = _z_grid(z)
     r = run(
         d,
@@ -98,20 +114,7 @@ def rmtf(
         _plot(plot_rmtf(r), plot)
 
 
-def _z_grid(text: str) -> tuple[float, ...]:
-    if ":" in text:
-        parts = text.split(":")
-        try:
-            a, b, c = (float(v) for v in parts)
-        except ValueError:
-            _fail(f"--z: expected START:STOP:STEP (got {text!r})")
-        if not (0 <= a <= b <= 100 and c > 0) or (b - a) / c > 1000:
-            _fail(f"--z: need 0 <= START <= STOP <= 100 and 0 < STEP, <= 1000 steps (got {text!r})")
-        return tuple(float(v) for v in np.round(np.arange(a, b + c / 2, c), 6))
-    return _floats(text, "--z", 0.0, 100.0)
-
-
-@app.command()
+@command()
 def efficiency(
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
@@ -163,19 +166,31 @@ def efficiency(
         _plot(plot_efficiency(r), plot)
 
 
-@app.command()
+@command()
 def diffraction(
     design: DesignOpt = "paper2016",
-    slit_um: Annotated[float, typer.Option(help="slit width (um)")] = 48.0,
+    slit_um: Annotated[
+        float,
+        typer.Option(help="slit width (um), (0, 10000]", callback=number(0, 1e4, lo_open=True)),
+    ] = 48.0,
     wavelength_um: Annotated[str, typer.Option(help="wavelengths (um), comma-separated")] = (
         "0.4,0.7"
     ),
-    z: Annotated[float, typer.Option(help="point source distance Z (mm)")] = 1.0,
-    gap_um: Annotated[float, typer.Option(help="air-equivalent source gap above Z=0 (um)")] = (
-        1000.0
-    ),
+    z: Annotated[
+        float, typer.Option(help="point source distance Z (mm), 0 to 100", callback=number(0, 100))
+    ] = 1.0,
+    gap_um: Annotated[
+        float,
+        typer.Option(
+            help="air-equivalent source gap above Z=0 (um), 0 to 1e6", callback=number(0, 1e6)
+        ),
+    ] = 1000.0,
     next_um: Annotated[
-        float, typer.Option(help="air-equivalent distance to the next layer (um)")
+        float,
+        typer.Option(
+            help="air-equivalent distance to the next layer (um), (0, 1e6]",
+            callback=number(0, 1e6, lo_open=True),
+        ),
     ] = 1000.0 / 1.52,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
@@ -185,8 +200,6 @@ def diffraction(
 
     d = _design(design)
     waves = _floats(wavelength_um, "--wavelength-um", 0.2, 2.0)
-    if not 0 < slit_um <= 10000 or not 0 <= z <= 100 or gap_um < 0 or next_um <= 0:
-        _fail("--slit-um must be > 0, --z in [0, 100] mm, --gap-um >= 0, --next-um > 0")
     r = slit_case(slit_um=slit_um, z_mm=z, gap_um=gap_um, r2_um=next_um, wavelengths_um=waves)
     b = diffraction_budget(d, z_mm=z, wavelengths_um=waves)
     data = r.to_dict() | {"budget": b}
@@ -216,22 +229,29 @@ def diffraction(
         _plot(plot_diffraction(r), plot)
 
 
-def _image(path: Path, dpi: float | None, linear: bool):
+def _image(path: Path, dpi: float | None, linear: bool, min_px: int = 8):
+    """An image checked from its header (``min_px`` pixels a side at least) and read."""
     from .io import ImageError, read_image
 
     try:
-        img, file_dpi = read_image(path, linear=linear)
+        img, file_dpi = read_image(path, linear=linear, dpi=dpi, min_px=min_px)
     except ImageError as err:
         _fail(str(err))
     return img, _resolution(path, file_dpi, dpi, 10.0)
 
 
 ImageArg = Annotated[Path, typer.Argument(help="image file (PNG, TIFF, JPEG)")]
-DpiOpt = Annotated[float | None, typer.Option(help="image resolution (default: from the file)")]
+DpiOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="image resolution, 10 to 20000 dpi (default: from the file)",
+        callback=number(10, 20000),
+    ),
+]
 LinearOpt = Annotated[bool, typer.Option("--linear", help="decode sRGB values to linear first")]
 
 
-@app.command("measure-rmtf")
+@command("measure-rmtf")
 def measure_rmtf(
     image: ImageArg,
     dpi: DpiOpt = None,
@@ -258,7 +278,7 @@ def measure_rmtf(
     _emit(data, as_json, lines)
 
 
-@app.command()
+@command()
 def sfr(
     image: ImageArg,
     dpi: DpiOpt = None,
@@ -273,7 +293,7 @@ def sfr(
     """Slanted-edge SFR (ISO 12233 e-SFR) of an image: curve, MTF50, 100/200-dpi values."""
     from .measure import sfr as run
 
-    img, use = _image(image, dpi, linear)
+    img, use = _image(image, dpi, linear, min_px=16)
     if roi:
         box = _floats(roi, "--roi", 0, 1e6)
         if len(box) != 4:
@@ -308,12 +328,16 @@ def sfr(
         r = run(img, use, direction=direction)
     except ValueError as err:
         _fail(f"{image}: {err}")
+    if "roi" in r and roi:  # the square's edge found inside --roi: image coordinates
+        r["roi"] = [v + (x0, y0)[i % 2] for i, v in enumerate(r["roi"])]
     data = {"image": str(image), "dpi": use} | r
     lines = [
         f"{image} at {use:g} dpi: edge along {r['direction']}, angle {r['edge_angle_deg']:.2f} deg",
         f"MTF50 {r['mtf50_cy_per_mm']:.3f} cycles/mm; SFR at 100 dpi {r['sfr_at_dpi']['100']:.3f}"
         f", at 200 dpi {r['sfr_at_dpi']['200']:.3f}",
     ]
+    if "roi" in r:
+        lines.insert(1, "the left edge of the dark square, region {},{},{},{}".format(*r["roi"]))
     _emit(data, as_json, lines)
     if plot:
         from .plotting import plot_sfr

@@ -17,16 +17,20 @@ from .cli import (
     _fail,
     _floats,
     _resolution,
-    app,
+    command,
+    number,
+    writable,
 )
 from .cli_metrics import DpiOpt, ImageArg
+from .validate import check_output_path
 
 
-def _document(path: Path, dpi: float | None, color: bool):
+def _document(path: Path, dpi: float | None, color: bool, min_px: int = 2):
+    """A document checked from its header (``min_px`` pixels a side at least) and read."""
     from .io import ImageError, read_document
 
     try:
-        doc, file_dpi = read_document(path, color=color)
+        doc, file_dpi = read_document(path, color=color, dpi=dpi, min_px=min_px)
     except ImageError as err:
         _fail(str(err))
     use = _resolution(path, file_dpi, dpi, 50.0)
@@ -102,11 +106,31 @@ def _settings(
         _fail(f"--{name}: {e['msg']} (got {e.get('input')!r})")
 
 
-@app.command()
+def _scan_outputs(output: Path) -> tuple[Path, Path, Path]:
+    """The PNG, TIFF and JSON of a scan set; the name given with -o keeps its spelling."""
+    png = output if output.suffix.lower() == ".png" else output.with_suffix(".png")
+    tif = output if output.suffix.lower() != ".png" else output.with_suffix(".tif")
+    sidecar = output.with_suffix(".json")
+    for p in (png, tif, sidecar):
+        check_output_path(p, "-o")
+    return png, tif, sidecar
+
+
+@command()
 def scan(
     image: ImageArg,
-    output: Annotated[Path, typer.Option("-o", "--output", help="output .png or .tif")],
-    z: Annotated[float | None, typer.Option(help="float height (mm)")] = None,
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o",
+            "--output",
+            help="output .png or .tif (the .png, .tif and .json beside it are written as a set)",
+            callback=writable(".png", ".tif", ".tiff"),
+        ),
+    ],
+    z: Annotated[
+        float | None, typer.Option(help="float height (mm), 0 to 10", callback=number(0, 10))
+    ] = None,
     height_map: Annotated[
         str | None, typer.Option(help="height map: .npy/.tif in mm, or tilt/gutter/crumple")
     ] = None,
@@ -119,23 +143,37 @@ def scan(
     illumination: Annotated[
         str, typer.Option(help="uniform, ripple, or a CSV file of x_mm,relative")
     ] = "uniform",
-    illuminance_lux: Annotated[float, typer.Option(help="illuminance on the page (lux)")] = (
-        10_000.0
-    ),
-    exposure_ms: Annotated[float, typer.Option(help="exposure per line (ms)")] = 1.0,
+    illuminance_lux: Annotated[
+        float,
+        typer.Option(
+            help="illuminance on the page (lux), (0, 1e7]", callback=number(0, 1e7, lo_open=True)
+        ),
+    ] = 10_000.0,
+    exposure_ms: Annotated[
+        float,
+        typer.Option(
+            help="exposure per line (ms), (0, 10000]", callback=number(0, 1e4, lo_open=True)
+        ),
+    ] = 1.0,
     kernel: Annotated[str, typer.Option(help="auto, paraxial or trace")] = "auto",
-    speed_error: Annotated[float, typer.Option(help="relative scan-speed error")] = 0.0,
-    surround: Annotated[float, typer.Option(help="reflectance outside the page")] = 0.0,
+    speed_error: Annotated[
+        float,
+        typer.Option(
+            help="relative scan-speed error, (-0.5, 0.5)",
+            callback=number(-0.5, 0.5, lo_open=True, hi_open=True),
+        ),
+    ] = 0.0,
+    surround: Annotated[
+        float, typer.Option(help="reflectance outside the page, 0 to 1", callback=number(0, 1))
+    ] = 0.0,
 ) -> None:
     """Simulate the scanner's output for a document at a float height (paper Figs. 8, 9)."""
     import json
 
-    from .io import provenance, to_json, write_atomic, write_png, write_tiff16
+    from .io import encode_png, encode_tiff16, provenance, to_json, write_set
     from .scan import simulate_scan
 
-    suffix = output.suffix.lower()
-    if suffix not in (".png", ".tif", ".tiff"):
-        _fail(f"-o: the output must end in .png, .tif or .tiff (got {output.name!r})")
+    png, tif, sidecar = _scan_outputs(output)
     d = _design(design)
     st = _settings(illumination, kernel, speed_error, surround, illuminance_lux, exposure_ms)
     doc, use = _document(image, dpi, color)
@@ -163,23 +201,30 @@ def scan(
         "settings": r.meta["settings"],
         "height_map_spec": height_map,
     }
-    png = output.with_suffix(".png")
-    tif = output.with_suffix(".tif") if suffix == ".png" else output
-    write_png(png, r.image, r.dpi)
-    write_tiff16(tif, r.image, r.dpi, description=json.dumps(meta))
-    write_atomic(output.with_suffix(".json"), to_json(meta))
+    write_set(
+        {
+            png: encode_png(r.image, r.dpi),
+            tif: encode_tiff16(r.image, r.dpi, description=json.dumps(meta)),
+        },
+        sidecar,
+        json.loads(to_json(meta)),
+    )
     typer.echo(
-        f"wrote {png} (8-bit sRGB), {tif} (16-bit linear) and {output.with_suffix('.json')}: "
+        f"wrote {png} (8-bit sRGB), {tif} (16-bit linear) and {sidecar}: "
         f"{r.image.shape[1]} x {r.image.shape[0]} pixels at {r.dpi:.1f} dpi",
         err=True,
     )
 
 
-@app.command()
+@command()
 def chart(
     kind: Annotated[str, typer.Argument(help="bars, edge, text or lines")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="output .png")],
-    dpi: Annotated[float, typer.Option(help="resolution of the chart")] = 1200.0,
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="output .png", callback=writable(".png"))
+    ],
+    dpi: Annotated[
+        float, typer.Option(help="resolution of the chart, 100 to 4800", callback=number(100, 4800))
+    ] = 1200.0,
 ) -> None:
     """Write a built-in test chart (bar charts, slanted edge, 8-pt text, fine lines)."""
     from .charts import KINDS, make_chart
@@ -187,10 +232,6 @@ def chart(
 
     if kind not in KINDS:
         _fail(f"KIND: must be one of {', '.join(KINDS)} (got {kind!r})")
-    if not 100 <= dpi <= 4800:
-        _fail(f"--dpi: must lie in [100, 4800] (got {dpi:g})")
-    if output.suffix.lower() != ".png":
-        _fail(f"-o: charts are written as .png (got {output.name!r})")
     img, text = make_chart(kind, dpi)
     write_png(output, img, dpi)
     if text is not None:
@@ -198,7 +239,7 @@ def chart(
     typer.echo(f"wrote {output} ({img.shape[1]} x {img.shape[0]} at {dpi:g} dpi)", err=True)
 
 
-@app.command("ocr-eval")
+@command("ocr-eval")
 def ocr_eval(
     image: ImageArg,
     text: Annotated[Path, typer.Option("--text", help="ground-truth text file")],
@@ -206,12 +247,12 @@ def ocr_eval(
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
     dpi: DpiOpt = None,
-    noiseless: Annotated[bool, typer.Option("--noiseless")] = False,
+    noiseless: Annotated[bool, typer.Option("--noiseless", help="no sensor noise")] = False,
     as_json: JsonOpt = False,
 ) -> None:
     """Scan a text image at each Z, read it with Tesseract, report the character error rate."""
     from .io import linear_to_srgb, provenance
-    from .ocr import OCRUnavailable, character_error_rate, recognise
+    from .ocr import OCRUnavailable, character_error_rate, recognise, require_tesseract
     from .scan import simulate_scan
 
     d = _design(design)
@@ -219,15 +260,19 @@ def ocr_eval(
         truth = text.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
         _fail(f"--text: cannot read {text} ({err})")
-    doc, use = _document(image, dpi, False)
+    doc, use = _document(image, dpi, False, min_px=32)  # one 8-pt line at 600 dpi: ~65 px
     zs = _floats(z, "--z", 0.0, 10.0)
     out = {"z_mm": list(zs), "cer": [], "text": []}
+    try:
+        require_tesseract()  # before the scans, not after the first
+    except OCRUnavailable as err:
+        _fail(str(err))
     for zz in zs:
-        r = simulate_scan(doc, use, d, z_mm=zz, seed=seed, noiseless=noiseless)
         try:
-            got = recognise(linear_to_srgb(r.image), r.dpi)
-        except OCRUnavailable as err:
-            _fail(str(err))
+            r = simulate_scan(doc, use, d, z_mm=zz, seed=seed, noiseless=noiseless)
+        except ValueError as err:
+            _fail(f"{image}: {err}")
+        got = recognise(linear_to_srgb(r.image), r.dpi)
         out["cer"].append(character_error_rate(truth, got))
         out["text"].append(got)
     data = out | {"provenance": provenance(d, seed)}

@@ -254,3 +254,20 @@ def diffraction_budget(
         "layers": layers,
         "warnings": warnings,
     }
+
+
+def geometric_optics_warnings(design: Design, warn_fraction: float = 0.25) -> list[str]:
+    """Warnings for holes so small that diffraction, not geometry, sets the blur.
+
+    The per-layer budget of :func:`diffraction_budget` at the design's wavelength and
+    Z = 0: a layer whose holes diffract more than ``warn_fraction`` of their light outside
+    the geometric shadow is outside the ray model's validity, and its RMTF, spots and
+    ghosts are optimistic.
+    """
+    b = diffraction_budget(
+        design, z_mm=0.0, wavelengths_um=(design.wavelength_um,), warn_fraction=warn_fraction
+    )
+    return [
+        w + " (geometric optics no longer holds: the traced figures are optimistic)"
+        for w in b["warnings"]
+    ]

@@ -16,6 +16,7 @@ each batch at the full estimate's best shift, their spread over sqrt(n_batches).
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -23,6 +24,7 @@ import numpy as np
 from .design import Design
 from .geometry import lattice_of
 from .responsivity import FoldedLSF, paraxial_folded_lsf, traced_folded_lsf
+from .validate import check_memory
 
 #: The paper's chart periods (um) and their names in dpi (one bar = one dot).
 PAPER_DPI = (100.0, 150.0, 200.0, 247.0)
@@ -176,6 +178,20 @@ def _key(dpi: float) -> str:
     return f"{dpi:g}"
 
 
+def check_rmtf_memory(
+    design: Design, period_um: float, n_z: int, window_um: float, shift_step_um: float
+) -> None:
+    """Refuse a chart window and shift step whose signal array (Z x shifts x pixels, float64,
+    in :func:`rmtf_curves`) would not fit in MAX_WORK_BYTES, before any tracing."""
+    n_pix = design.sensor.rows * (window_um / lattice_of(design).pitch + 1)
+    n_shift = math.ceil(period_um / shift_step_um)
+    check_memory(
+        8.0 * n_z * n_shift * n_pix,
+        f"shift_step_um {shift_step_um:g} (--shift-um) with window_um {window_um:g} "
+        f"(--window-um) and {n_z} distances",
+    )
+
+
 def rmtf(
     design: Design,
     *,
@@ -212,6 +228,7 @@ def rmtf(
         raise ValueError("window_um and shift_step_um must be > 0")
     periods = np.array([period_of_dpi(d) for d in dpis])
     zs = np.asarray(z_mm, dtype=np.float64)
+    check_rmtf_memory(design, periods.max(), zs.size, window_um, shift_step_um)
     if method == "trace":
         lsf = traced_folded_lsf(
             design,

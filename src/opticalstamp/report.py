@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .design import Design, load_design
 from .ghosts import analyse_ghosts
-from .io import provenance, save_figure, to_json, write_atomic
+from .io import provenance, replace_folder, save_figure, to_json, write_atomic
 from .report_html import page
 from .response import psf, spots
 
@@ -24,7 +24,12 @@ def build_report(
     fresnel: bool = False,
     progress: bool = False,
 ) -> dict:
-    """Run every analysis and write report.json, PNG figures and index.html to out_dir."""
+    """Run every analysis and write report.json, PNG figures and index.html to out_dir.
+
+    ``out_dir`` is replaced as a whole once everything is computed and written (see
+    :func:`opticalstamp.atomic.replace_folder`): a run that fails or is killed leaves the
+    previous report as it was.
+    """
     from . import plotting
 
     out = Path(out_dir)
@@ -84,8 +89,6 @@ def build_report(
             scans.pop("tilt_panels"), "text on a page tilted from 0 to 4 mm"
         ),
     }
-    for name, fig in figs.items():
-        save_figure(fig, out / name)
     data = {
         "provenance": provenance(design, seed) | {"fresnel": fresnel},
         "design": design.model_dump(mode="json"),
@@ -105,8 +108,11 @@ def build_report(
         "tolerance": study["tolerance"],
         "elapsed_s": time.perf_counter() - t0,
     }
-    write_atomic(out / "report.json", to_json(data))
-    write_atomic(out / "index.html", page(design, data))
+    with replace_folder(out) as tmp:  # the folder is replaced as a whole, or not at all
+        for name, fig in figs.items():
+            save_figure(fig, tmp / name)
+        write_atomic(tmp / "report.json", to_json(data))
+        write_atomic(tmp / "index.html", page(design, data))
     return data
 
 

@@ -36,6 +36,7 @@ from .heightmap import sample as sample_height
 from .kernels import ScanKernel, scan_kernels
 from .sensor import SensorModel, expose, fixed_pattern
 from .separable import box_taps, inside, x_pass, y_pass
+from .validate import check_seed
 
 
 class ScanSettings(BaseModel):
@@ -191,6 +192,7 @@ def simulate_scan(
     z_mm : constant float height (mm above the reference plane), or None with height_map
     height_map : [y, x] heights (mm) covering the page (any resolution, page aspect)
     """
+    check_seed(seed)
     st = settings or ScanSettings()
     doc = np.asarray(doc, dtype=np.float32)
     if doc.ndim == 2:

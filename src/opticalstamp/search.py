@@ -24,7 +24,8 @@ import numpy as np
 
 from .design import Design, design_from_dict
 from .evaluate import evaluate_design, stack_params, with_stack
-from .execute import run_tasks, task_key
+from .execute import journal_lock, run_tasks, task_key
+from .validate import InputError, check_number, check_seed
 
 
 def base_for_dpi(design: Design, dpi: float) -> Design:
@@ -173,6 +174,7 @@ def search(
     ``pinned``: {"hole0": 48, "t2": 1000, ...} fixes variables (holes object side first,
     thicknesses sensor first).
     """
+    check_seed(seed)
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -185,7 +187,19 @@ def search(
     names = sp.names(n_h, n_t)
     unknown = set(pins) - set(names)
     if unknown:
-        raise ValueError(f"pinned: unknown variables {sorted(unknown)} (use {names})")
+        raise InputError(f"pinned: unknown variables {sorted(unknown)} (use {names})")
+    for name, value in pins.items():
+        j = int(name[4:] if name.startswith("hole") else name[1:])
+        lo, hi = sp.hole_bounds_um if name.startswith("hole") else sp.thickness_bounds_um[j]
+        check_number(value, f"pinned {name} (--pin {name}=...)", lo, hi)
+    t_pins = {k: v for k, v in pins.items() if k.startswith("t")}
+    least = sum(t_pins.get(f"t{j}", sp.thickness_bounds_um[j][0]) for j in range(n_t))
+    if t_pins and least > budget_um:
+        raise InputError(
+            f"pinned {', '.join(f'{k}={v:g}' for k, v in t_pins.items())}: the thinnest stack "
+            f"with these pins is {least:g} um, over the budget of {budget_um:g} um "
+            "(--budget-mm): every design would be infeasible"
+        )
     options = {"dpi": dof_dpi, "near_mm": near_mm, "ghost_rays": ghost_rays}
     base_json = design.model_dump(mode="json", exclude_none=True)
 
@@ -219,42 +233,43 @@ def search(
             if k not in pins
         }
         study.enqueue_trial(start, skip_if_exists=True)
-    # the base design itself, for reference on the front
-    ref_payload = payload(base_params)
-    ref_key = task_key(ref_payload)
-    ref_rec = run_tasks(_evaluate_payload, [(ref_key, ref_payload)], workers=1, journal=journal)[
-        ref_key
-    ]
-    for gen in range(generations):
-        trials = []
-        tasks = []
-        for _ in range(population):
-            t = study.ask({k: v for k, v in dists.items() if k not in pins})
-            params = t.params | pins
-            p = payload(params)
-            trials.append((t, params, task_key(p)))
-            tasks.append((task_key(p), p))
-        recs = run_tasks(
-            _evaluate_payload,
-            tasks,
-            workers=workers,
-            dask_address=dask_address,
-            journal=journal,
-            progress=progress,
-            desc=f"generation {gen + 1}/{generations}",
-        )
-        for t, params, key in trials:
-            rec = recs.get(key)
-            if rec is None or not rec["ok"]:
-                study.tell(t, state=optuna.trial.TrialState.FAIL)
-                records.append(_row(params, rec, None, False, n_h, n_t))
-                continue
-            m = rec["result"]
-            cons = _feasible(m, budget_um, max_ghost, max_spill)
-            for name, c in zip(CONSTRAINTS, cons, strict=True):
-                t.set_constraint(name, c)  # <= 0: satisfied (NSGA-II's constrained domination)
-            study.tell(t, [m["efficiency_ratio"], m["dof_mm"]])
-            records.append(_row(params, rec, m, all(c <= 0 for c in cons), n_h, n_t))
+    with journal_lock(journal):  # one lock for every generation of this run
+        # the base design itself, for reference on the front
+        ref_payload = payload(base_params)
+        ref_key = task_key(ref_payload)
+        ref_rec = run_tasks(
+            _evaluate_payload, [(ref_key, ref_payload)], workers=1, journal=journal
+        )[ref_key]
+        for gen in range(generations):
+            trials = []
+            tasks = []
+            for _ in range(population):
+                t = study.ask({k: v for k, v in dists.items() if k not in pins})
+                params = t.params | pins
+                p = payload(params)
+                trials.append((t, params, task_key(p)))
+                tasks.append((task_key(p), p))
+            recs = run_tasks(
+                _evaluate_payload,
+                tasks,
+                workers=workers,
+                dask_address=dask_address,
+                journal=journal,
+                progress=progress,
+                desc=f"generation {gen + 1}/{generations}",
+            )
+            for t, params, key in trials:
+                rec = recs.get(key)
+                if rec is None or not rec["ok"]:
+                    study.tell(t, state=optuna.trial.TrialState.FAIL)
+                    records.append(_row(params, rec, None, False, n_h, n_t))
+                    continue
+                m = rec["result"]
+                cons = _feasible(m, budget_um, max_ghost, max_spill)
+                for name, c in zip(CONSTRAINTS, cons, strict=True):
+                    t.set_constraint(name, c)  # <= 0: satisfied (NSGA-II's constrained domination)
+                study.tell(t, [m["efficiency_ratio"], m["dof_mm"]])
+                records.append(_row(params, rec, m, all(c <= 0 for c in cons), n_h, n_t))
     ok = [r for r in records if r["feasible"]]
     # one entry per distinct design on the front
     uniq = {}

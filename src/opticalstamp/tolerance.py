@@ -27,6 +27,7 @@ from .design import Design, design_from_dict
 from .evaluate import evaluate_design, stack_params, with_stack
 from .execute import run_tasks, task_key
 from .geometry import lattice_of
+from .validate import check_seed
 
 DEFAULT_SIGMAS = {"misregistration_um": 3.0, "hole_um": 1.0, "thickness_um": 10.0, "tilt_deg": 0.02}
 SPEC_RE = re.compile(r"^(dof|ghost|efficiency|rmtf@[0-9.]+)(>=|<=)(-?[0-9.]+)$")
@@ -176,6 +177,7 @@ def tolerance(
     progress: bool = False,
 ) -> ToleranceResult:
     """Monte Carlo of assembly errors, sensitivity table and yield (see module doc)."""
+    check_seed(seed)
     sg = DEFAULT_SIGMAS | (sigmas or {})
     if any(v < 0 for v in sg.values()):
         raise ValueError("sigmas must be >= 0")
