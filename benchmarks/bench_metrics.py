@@ -12,9 +12,9 @@ from __future__ import annotations
 import statistics
 import time
 
+from opticalstamp.analysis.diffraction import slit_case
+from opticalstamp.analysis.rmtf import rmtf
 from opticalstamp.design import load_design
-from opticalstamp.diffraction import slit_case
-from opticalstamp.metrics import rmtf
 
 
 def _median_time(fn, repeats: int) -> tuple[float, object]:

@@ -22,9 +22,9 @@ CASE = r"""
 import json, sys, time
 from pathlib import Path
 from opticalstamp.design import load_design
-from opticalstamp.heightmap import load_height_map
-from opticalstamp.io import read_document, write_png, write_tiff16
-from opticalstamp.scan import simulate_scan
+from opticalstamp.imaging.heightmap import load_height_map
+from opticalstamp.io.files import read_document, write_png, write_tiff16
+from opticalstamp.imaging.scan import simulate_scan
 src, out, spec = sys.argv[1], Path(sys.argv[2]), sys.argv[3]
 d = load_design("paper2016")
 t = time.perf_counter()
@@ -44,8 +44,8 @@ print(json.dumps({"s": dt, "rss_gb": int(hwm) / 1e6, "shape": list(r.image.shape
 def make_page(path: Path) -> None:
     import numpy as np
 
-    from opticalstamp.charts import text_chart
-    from opticalstamp.io import write_png
+    from opticalstamp.imaging.charts import text_chart
+    from opticalstamp.io.files import write_png
 
     text, _ = text_chart(1200.0)
     h, w = 14031, 9921  # A4 at 1200 dpi

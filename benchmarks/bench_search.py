@@ -14,8 +14,8 @@ import statistics
 import time
 
 from opticalstamp.design import load_design
-from opticalstamp.search import search
-from opticalstamp.tolerance import tolerance
+from opticalstamp.studies.search import search
+from opticalstamp.studies.tolerance import tolerance
 
 
 def timed(fn, repeats: int = 3):

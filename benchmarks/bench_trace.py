@@ -12,10 +12,10 @@ import time
 
 import numba
 
+from opticalstamp.analysis.ghosts import analyse_ghosts, pixel_source
 from opticalstamp.design import load_design
-from opticalstamp.geometry import reverse_path
-from opticalstamp.ghosts import analyse_ghosts, pixel_source
-from opticalstamp.trace import launch
+from opticalstamp.raytrace.kernel import launch
+from opticalstamp.raytrace.stack import reverse_path
 
 
 def rays_per_second(n_rays: int = 1 << 27, repeats: int = 5) -> float:

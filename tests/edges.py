@@ -7,7 +7,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from opticalstamp.cli import app
+from opticalstamp.cli.common import app
 
 runner = CliRunner()
 

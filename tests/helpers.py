@@ -1,4 +1,4 @@
-"""Small Monte Carlo helpers shared by the tests (kept independent of opticalstamp.tally)."""
+"""Small Monte Carlo helpers shared by the tests (independent of opticalstamp.raytrace.tally)."""
 
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ def assert_agree(a: float, sa: float, b: float, sb: float, k: float = 4.0) -> No
 
 def preset_dict(name: str) -> dict:
     """A fresh, mutable copy of a preset as read from its TOML file."""
-    text = (resources.files("opticalstamp") / "presets" / f"{name}.toml").read_text()
+    text = (resources.files("opticalstamp.design") / "presets" / f"{name}.toml").read_text()
     return copy.deepcopy(tomllib.loads(text))
 
 

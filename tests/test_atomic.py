@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from opticalstamp.atomic import recover, replace_folder, verify_set, write_atomic, write_set
-from opticalstamp.io import write_png
+from opticalstamp.io.atomic import recover, replace_folder, verify_set, write_atomic, write_set
+from opticalstamp.io.files import write_png
 
 
 def _digest(p: Path) -> str:
@@ -55,7 +55,7 @@ _CHILD = textwrap.dedent(
     """
     import os, sys
     from pathlib import Path
-    import opticalstamp.atomic as at
+    import opticalstamp.io.atomic as at
     mode, k, folder, content = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3]), sys.argv[4]
     steps = {"n": 0}
     def step(real):

@@ -14,9 +14,9 @@ import tifffile
 from PIL import Image
 from typer.testing import CliRunner
 
-from opticalstamp.cli import app
-from opticalstamp.heightmap import HeightMapError, shape_map
-from opticalstamp.io import ImageError, read_image
+from opticalstamp.cli.common import app
+from opticalstamp.imaging.heightmap import HeightMapError, shape_map
+from opticalstamp.io.files import ImageError, read_image
 
 runner = CliRunner()
 
@@ -133,7 +133,7 @@ def test_huge_declared_images_are_refused_from_the_header(tmp_path, monkeypatch)
     bomb.write_bytes(_png_header_only(20_000, 20_000))
     before = Image.MAX_IMAGE_PIXELS
     _refused(_run("measure-rmtf", bomb), "bomb.png")
-    monkeypatch.setattr("opticalstamp.io.available_memory_bytes", lambda: 1 << 30)
+    monkeypatch.setattr("opticalstamp.io.files.available_memory_bytes", lambda: 1 << 30)
     _refused(_run("sfr", bomb), "bomb.png", "needs about")
     assert Image.MAX_IMAGE_PIXELS == before
 
@@ -309,8 +309,8 @@ def test_sfr_refuses_regions_with_more_than_one_edge(tmp_path):
 def test_sfr_normalisation_guard_refuses_two_edges(monkeypatch):
     """Were the edge count fooled, the fit across two opposite edges (LSF integral about 0:
     an SFR of 1e14 before) must still end in a ValueError, not in numbers."""
-    from opticalstamp import measure
-    from opticalstamp.charts import edge_chart
+    from opticalstamp.imaging import measure
+    from opticalstamp.imaging.charts import edge_chart
 
     img = edge_chart(1200.0)
     ones = (np.ones(img.shape[0], int), np.ones(img.shape[1], int))

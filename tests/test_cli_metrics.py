@@ -11,8 +11,8 @@ from PIL import Image
 from scipy.special import ndtr
 from typer.testing import CliRunner
 
-from opticalstamp.cli import app
-from opticalstamp.io import ImageError, read_image
+from opticalstamp.cli.common import app
+from opticalstamp.io.files import ImageError, read_image
 
 runner = CliRunner()
 

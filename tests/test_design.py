@@ -9,7 +9,7 @@ from pydantic import ValidationError
 
 from helpers import preset_dict
 from opticalstamp.design import DesignError, design_from_dict, load_design, preset_names
-from opticalstamp.materials import refractive_index
+from opticalstamp.design.materials import refractive_index
 
 PRESETS = ["paper2016", "fig1b", "fig1c", "fig1d", "three-layer-single-row"]
 
@@ -37,7 +37,9 @@ def test_paper2016_geometry():
 
 def test_preset_file_path_round_trip(tmp_path):
     path = tmp_path / "mine.toml"
-    path.write_text((resources.files("opticalstamp") / "presets" / "paper2016.toml").read_text())
+    path.write_text(
+        (resources.files("opticalstamp.design") / "presets" / "paper2016.toml").read_text()
+    )
     d = load_design(path)
     assert d == load_design("paper2016")
     assert d.fingerprint() == load_design("paper2016").fingerprint()

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from opticalstamp.design import load_design
-from opticalstamp.diffraction import (
+from opticalstamp.analysis.diffraction import (
     circle_field,
     diffraction_budget,
     fraction_outside,
@@ -19,7 +18,8 @@ from opticalstamp.diffraction import (
     slit_field,
     slit_intensity,
 )
-from opticalstamp.efficiency import with_changes
+from opticalstamp.analysis.efficiency import with_changes
+from opticalstamp.design import load_design
 
 
 def _direct_slit(x, w, r1, r2, lam):

@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from opticalstamp.design import load_design
-from opticalstamp.efficiency import (
+from opticalstamp.analysis.efficiency import (
     disk_projected_solid_angle,
     efficiency,
     reference_etendue,
     reference_f_number,
     sensor_with_area,
 )
-from opticalstamp.responsivity import paraxial_etendue
+from opticalstamp.analysis.lsf import paraxial_etendue
+from opticalstamp.design import load_design
 
 
 def test_disk_projected_solid_angle_by_quadrature():

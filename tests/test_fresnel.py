@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from opticalstamp.geometry import Lattice, Path
-from opticalstamp.trace import TRANSMITTED, trace_rays
+from opticalstamp.raytrace.kernel import TRANSMITTED, trace_rays
+from opticalstamp.raytrace.stack import Lattice, Path
 
 N_GLASS = 1.52
 

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from edges import assert_clean_refusal, run, to_toml
 from helpers import preset_dict
 from opticalstamp.design import DesignError, design_from_dict
-from opticalstamp.io import write_png
+from opticalstamp.io.files import write_png
 
 #: examples per class; raise it for a longer census (OPTICALSTAMP_FUZZ_EXAMPLES=2000)
 FUZZ = settings(

@@ -6,7 +6,7 @@ import warnings
 
 import pytest
 
-from opticalstamp.execute import (
+from opticalstamp.studies.runner import (
     JournalLocked,
     JournalWarning,
     journal_lock,
@@ -95,7 +95,7 @@ def test_a_clean_journal_does_not_warn(tmp_path):
 HOLDER = """
 import sys
 from pathlib import Path
-from opticalstamp.execute import journal_lock
+from opticalstamp.studies.runner import journal_lock
 with journal_lock(Path(sys.argv[1])):
     print("locked", flush=True)
     sys.stdin.read()

@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 
 from helpers import assert_agree, preset_dict
+from opticalstamp.analysis.ghosts import analyse_ghosts, pixel_source
+from opticalstamp.analysis.rmtf import rmtf
+from opticalstamp.analysis.spots import spots
 from opticalstamp.design import design_from_dict, load_design
-from opticalstamp.geometry import reverse_path
-from opticalstamp.ghosts import analyse_ghosts, pixel_source
-from opticalstamp.metrics import rmtf
-from opticalstamp.response import spots
-from opticalstamp.tally import OWN_PATH, PathRegistry, is_own_path
-from opticalstamp.trace import RayBatch, launch
+from opticalstamp.raytrace.kernel import RayBatch, launch
+from opticalstamp.raytrace.stack import reverse_path
+from opticalstamp.raytrace.tally import OWN_PATH, PathRegistry, is_own_path
 
 
 def _slab(medium, thickness_um: float, name: str, size_um: float) -> dict:

@@ -7,7 +7,7 @@ import pytest
 from scipy.ndimage import gaussian_filter1d
 from scipy.special import ndtr
 
-from opticalstamp.measure import measure_rmtf, sfr
+from opticalstamp.imaging.measure import measure_rmtf, sfr
 
 
 def _edge(kernel: str, size: float, angle_deg: float = 5.0, shape=(200, 120)):
@@ -104,7 +104,7 @@ def test_measure_rmtf_bars_along_y_and_errors():
 def test_sfr_along_x_and_y_of_a_slanted_square():
     """A dark square tilted by 5 degrees, blurred by a Gaussian of sigma px: both edges
     give exp(-2 pi^2 sigma^2 f^2)."""
-    from opticalstamp.measure import sfr_xy
+    from opticalstamp.imaging.measure import sfr_xy
 
     n, sig, a = 240, 1.3, np.radians(5.0)
     yy, xx = np.mgrid[0:n, 0:n].astype(float) - n / 2

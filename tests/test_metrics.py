@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opticalstamp.design import load_design
-from opticalstamp.metrics import (
+from opticalstamp.analysis.lsf import FoldedLSF
+from opticalstamp.analysis.rmtf import (
     chart_correlation,
     depth_of_field,
     period_of_dpi,
     rmtf,
     rmtf_curves,
 )
-from opticalstamp.responsivity import FoldedLSF
+from opticalstamp.design import load_design
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +95,7 @@ def test_traced_own_path_rmtf_agrees_with_paraxial(paper):
 def test_ghost_light_lowers_contrast_by_the_ghost_fraction(paper):
     """Ghost light from far away is a uniform background B: at Z = 0 with 100 dpi bars a
     pixel sees white (G + B/2) or black (B/2): RMTF = G / (G + B) = 1 - ghost fraction."""
-    from opticalstamp.ghosts import analyse_ghosts
+    from opticalstamp.analysis.ghosts import analyse_ghosts
 
     r = rmtf(paper, dpi=(100.0,), z_mm=(0.0,), n_rays=1 << 21)
     g = analyse_ghosts(paper, n_rays=1 << 21)

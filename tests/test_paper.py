@@ -11,9 +11,9 @@ import functools
 import numpy as np
 import pytest
 
+from opticalstamp.analysis.ghosts import analyse_ghosts
+from opticalstamp.analysis.spots import CELL_UM, fwhm, psf, spots
 from opticalstamp.design import load_design
-from opticalstamp.ghosts import analyse_ghosts
-from opticalstamp.response import CELL_UM, fwhm, psf, spots
 
 N_RAYS = 1 << 20
 Z_MM = (0.0, 1.0, 2.0, 3.0, 4.0)
@@ -168,8 +168,8 @@ def test_efficiency_ratio_points_to_circular_holes():
     """Paper §5, Fig. 13: light efficiency 1/36 of the F10 reference lens (working F 60).
     With the stated square holes the model gives 1/23 (own + ghost); circular holes of the
     same 'size' with Fresnel losses give the paper's 1/36 within 5 % (docs/metrics.md)."""
-    from opticalstamp.efficiency import reference_etendue
-    from opticalstamp.study import study_variant
+    from opticalstamp.analysis.efficiency import reference_etendue
+    from opticalstamp.analysis.paper_study import study_variant
 
     base = load_design("paper2016")
     g_ref = reference_etendue()

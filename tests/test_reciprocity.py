@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 
 from helpers import Tally, assert_agree, preset_dict
+from opticalstamp.analysis.ghosts import analyse_ghosts, pixel_source
+from opticalstamp.analysis.spots import spots
 from opticalstamp.design import design_from_dict, load_design
-from opticalstamp.geometry import forward_path, pixel_center, reverse_path
-from opticalstamp.ghosts import analyse_ghosts, pixel_source
-from opticalstamp.response import spots
-from opticalstamp.sources import Source
-from opticalstamp.tally import is_own_path, object_plane
-from opticalstamp.trace import launch
+from opticalstamp.raytrace.kernel import launch
+from opticalstamp.raytrace.sampling import Source
+from opticalstamp.raytrace.stack import forward_path, pixel_center, reverse_path
+from opticalstamp.raytrace.tally import is_own_path, object_plane
 
 Z_UM = 1000.0
 SIDE_UM = 20.0

@@ -7,7 +7,7 @@ import json
 from PIL import Image
 from typer.testing import CliRunner
 
-from opticalstamp.cli import app
+from opticalstamp.cli.common import app
 
 
 def test_report_writes_every_section(tmp_path):

@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 
 from helpers import assert_agree
-from opticalstamp.design import load_design
-from opticalstamp.ghosts import analyse_ghosts
-from opticalstamp.responsivity import (
+from opticalstamp.analysis.ghosts import analyse_ghosts
+from opticalstamp.analysis.lsf import (
     paraxial_cumulative,
     paraxial_etendue,
     paraxial_folded_lsf,
@@ -17,6 +16,7 @@ from opticalstamp.responsivity import (
     paraxial_support,
     traced_folded_lsf,
 )
+from opticalstamp.design import load_design
 
 
 @pytest.fixture(scope="module")

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from helpers import Tally, assert_agree
+from opticalstamp.analysis.ghosts import allocate_holes, analyse_ghosts, pixel_source
 from opticalstamp.design import design_from_dict, load_design
-from opticalstamp.geometry import forward_path, reverse_path
-from opticalstamp.ghosts import allocate_holes, analyse_ghosts, pixel_source
-from opticalstamp.sources import Source
-from opticalstamp.tally import is_own_path
-from opticalstamp.trace import ESCAPED, TIR, launch
+from opticalstamp.raytrace.kernel import ESCAPED, TIR, launch
+from opticalstamp.raytrace.sampling import Source
+from opticalstamp.raytrace.stack import forward_path, reverse_path
+from opticalstamp.raytrace.tally import is_own_path
 
 
 def _etendues(path, src, n_rays, seed, **kw):

@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opticalstamp.charts import bar_chart
+from opticalstamp.analysis.lsf import paraxial_etendue
+from opticalstamp.analysis.rmtf import rmtf
 from opticalstamp.design import design_from_dict, load_design
-from opticalstamp.heightmap import HeightMapError, load_height_map, shape_map
-from opticalstamp.kernels import paraxial_kernel, scan_kernels, separable_terms
-from opticalstamp.measure import measure_rmtf
-from opticalstamp.metrics import rmtf
-from opticalstamp.responsivity import paraxial_etendue
-from opticalstamp.scan import ScanSettings, simulate_scan
-from opticalstamp.sensor import SensorModel
+from opticalstamp.imaging.charts import bar_chart
+from opticalstamp.imaging.heightmap import HeightMapError, load_height_map, shape_map
+from opticalstamp.imaging.kernels import paraxial_kernel, scan_kernels, separable_terms
+from opticalstamp.imaging.measure import measure_rmtf
+from opticalstamp.imaging.scan import ScanSettings, simulate_scan
+from opticalstamp.imaging.sensor import SensorModel
 
 PITCH = 84.6
 
@@ -251,7 +251,7 @@ def test_motion_smear_adds_a_box_of_one_line(paper):
     """The pixel integrates while the page moves one line: the y weights are the kernel
     convolved with a box of width duty x L, which adds (duty L)^2 / 12 to their variance
     (the box is sampled by the midpoint rule at n = 9 points: (n^2 - 1) / (12 n^2) L^2)."""
-    from opticalstamp.scan import _taps
+    from opticalstamp.imaging.scan import _taps
 
     k = paraxial_kernel(paper, 2.0)
     p = 0.5

@@ -10,12 +10,17 @@ import tifffile
 from PIL import Image
 from typer.testing import CliRunner
 
-from opticalstamp.charts import text_chart
-from opticalstamp.cli import app
+from opticalstamp.cli.common import app
 from opticalstamp.design import load_design
-from opticalstamp.io import ImageError, linear_to_srgb, read_document
-from opticalstamp.ocr import character_error_rate, edit_distance, recognise, tesseract_available
-from opticalstamp.scan import simulate_scan
+from opticalstamp.imaging.charts import text_chart
+from opticalstamp.imaging.ocr import (
+    character_error_rate,
+    edit_distance,
+    recognise,
+    tesseract_available,
+)
+from opticalstamp.imaging.scan import simulate_scan
+from opticalstamp.io.files import ImageError, linear_to_srgb, read_document
 
 runner = CliRunner()
 needs_tesseract = pytest.mark.skipif(

@@ -10,14 +10,14 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from opticalstamp.cli import app
+from opticalstamp.analysis.ghosts import analyse_ghosts
+from opticalstamp.analysis.rmtf import rmtf
+from opticalstamp.cli.common import app
 from opticalstamp.design import load_design
-from opticalstamp.evaluate import evaluate_design, rmtf_with_background, with_stack
-from opticalstamp.execute import JournalWarning, read_journal, run_tasks, task_key
-from opticalstamp.ghosts import analyse_ghosts
-from opticalstamp.metrics import rmtf
-from opticalstamp.search import base_for_dpi, pareto_front, search
-from opticalstamp.tolerance import apply_errors, draw_errors, parse_spec, tolerance
+from opticalstamp.studies.evaluate import evaluate_design, rmtf_with_background, with_stack
+from opticalstamp.studies.runner import JournalWarning, read_journal, run_tasks, task_key
+from opticalstamp.studies.search import base_for_dpi, pareto_front, search
+from opticalstamp.studies.tolerance import apply_errors, draw_errors, parse_spec, tolerance
 
 runner = CliRunner()
 
@@ -276,8 +276,8 @@ def test_cli_bad_options(args, text):
 
 
 def test_structural_variants_and_merged_front(paper):
-    from opticalstamp.responsivity import paraxial_etendue
-    from opticalstamp.search import merged_front, structural_variants
+    from opticalstamp.analysis.lsf import paraxial_etendue
+    from opticalstamp.studies.search import merged_front, structural_variants
 
     v = structural_variants(paper, layers=(2, 3), stagger=("yes", "no"))
     assert len(v) == 4

@@ -16,12 +16,12 @@ from helpers import (
     preset_dict,
     quadrature_etendue,
 )
+from opticalstamp.analysis.ghosts import analyse_ghosts, pixel_source
 from opticalstamp.design import design_from_dict, load_design
-from opticalstamp.geometry import Lattice, Path, forward_path, reverse_path
-from opticalstamp.ghosts import analyse_ghosts, pixel_source
-from opticalstamp.sources import Source, site_index
-from opticalstamp.tally import is_own_path, object_plane
-from opticalstamp.trace import ABSORBED, ESCAPED, TIR, TRANSMITTED, launch, trace_rays
+from opticalstamp.raytrace.kernel import ABSORBED, ESCAPED, TIR, TRANSMITTED, launch, trace_rays
+from opticalstamp.raytrace.sampling import Source, site_index
+from opticalstamp.raytrace.stack import Lattice, Path, forward_path, reverse_path
+from opticalstamp.raytrace.tally import is_own_path, object_plane
 
 SETTINGS = settings(deadline=None, max_examples=60)
 

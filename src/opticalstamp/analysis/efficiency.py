@@ -1,0 +1,211 @@
+"""Light efficiency against the paper's reference lens (paper Fig. 13, §5).
+
+The power a used pixel receives from a uniform Lambertian object of radiance L is L G,
+with G the pixel's etendue (um^2 sr) through the stack (own path, plus ghost paths if
+counted). The reference is a 1:1 lens (f = 10 mm, 2 mm pupil, object and image 20 mm
+away, working F-number 2 f / D = 10) in front of an 84.6 um pixel: G_ref = integral over
+the pixel of the projected solid angle of the pupil disk. The ratio G / G_ref is the
+light efficiency and F_w = 10 / sqrt(ratio) its equivalent working F-number (paper:
+1/36, F 60).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..design import Design, design_from_dict
+from .ghosts import DISTANCE_BIN_UM, GhostResult, analyse_ghosts
+
+
+def disk_projected_solid_angle(rho_um, h_um: float, radius_um: float) -> np.ndarray:
+    """Projected solid angle (sr) of a disk seen from a point on a parallel plane.
+
+    The point is ``h_um`` below the disk plane and ``rho_um`` off its axis (view factor
+    of a disk from a parallel differential area, times pi).
+    """
+    rho = np.asarray(rho_um, dtype=np.float64)
+    a2, h2, r2 = radius_um**2, h_um**2, rho**2
+    return np.pi / 2 * (1 - (h2 + r2 - a2) / np.sqrt((h2 + r2 + a2) ** 2 - 4 * a2 * r2))
+
+
+def reference_etendue(
+    pixel_um: float = 84.6,
+    focal_mm: float = 10.0,
+    pupil_mm: float = 2.0,
+    conjugate_mm: float = 20.0,
+    order: int = 16,
+) -> float:
+    """Etendue (um^2 sr) of a square pixel behind the paper's reference lens (Fig. 13).
+
+    Gauss-Legendre quadrature over the pixel of the pupil's projected solid angle seen
+    from the image plane ``conjugate_mm`` behind the lens.
+    """
+    if min(pixel_um, focal_mm, pupil_mm, conjugate_mm) <= 0:
+        raise ValueError("reference lens: pixel, focal length, pupil and conjugate must be > 0")
+    t, wt = np.polynomial.legendre.leggauss(order)
+    x = t * pixel_um / 2
+    rho = np.hypot(x[:, None], x[None, :])
+    omega = disk_projected_solid_angle(rho, conjugate_mm * 1000.0, pupil_mm * 500.0)
+    return float((wt[:, None] * wt[None, :] * omega).sum() * (pixel_um / 2) ** 2)
+
+
+def reference_f_number(focal_mm: float = 10.0, pupil_mm: float = 2.0) -> float:
+    """Working F-number of a 1:1 lens: 2 f / D (paper: 10)."""
+    return 2 * focal_mm / pupil_mm
+
+
+@dataclass(frozen=True)
+class EfficiencyResult:
+    design: str
+    fingerprint: str
+    seed: int
+    fresnel: bool
+    etendue_um2sr: float  # own + ghost (what a uniform object gives)
+    etendue_se: float
+    etendue_own_um2sr: float
+    etendue_own_se: float
+    etendue_ghost_um2sr: float
+    reference_etendue_um2sr: float
+    reference_f_number: float
+    ratio: float
+    ratio_own: float
+    working_f_number: float
+    working_f_number_own: float
+    by_object_radius: dict  # Z (mm) -> {radius mm -> etendue from object within it}
+    sensitive_area: list[dict]
+    meta: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def with_changes(design: Design, changes: dict, name: str | None = None) -> Design:
+    """A validated copy of ``design`` with nested fields replaced (dict merge)."""
+
+    def merge(a, b):
+        if isinstance(a, dict) and isinstance(b, dict):
+            return {k: merge(a.get(k), v) if k in a else v for k, v in b.items()} | {
+                k: v for k, v in a.items() if k not in b
+            }
+        return b
+
+    data = merge(design.model_dump(mode="json", exclude_none=True), changes)
+    if name:
+        data["name"] = name
+    return design_from_dict(data, f"variant of {design.name}")
+
+
+def sensor_with_area(design: Design, width_um: float, height_um: float) -> Design:
+    """The design with a sensitive area of width x height (pixel pitch grown if needed)."""
+    s = design.sensor
+    pitch = max(s.pixel_pitch_um, width_um, height_um)
+    return with_changes(
+        design,
+        {
+            "sensor": {
+                "pixel_pitch_um": pitch,
+                "sensitive_width_um": width_um,
+                "sensitive_height_um": height_um,
+            }
+        },
+        name=f"{design.name} (sensitive {width_um:g} x {height_um:g} um)",
+    )
+
+
+def efficiency(
+    design: Design,
+    *,
+    z_mm=(0.0, 1.0, 2.0, 3.0, 4.0),
+    object_radii_mm=(1.0, 5.0, 10.0),
+    seed: int = 0,
+    fresnel: bool = False,
+    rse_own: float = 1e-3,
+    rse_ghost: float = 1e-2,
+    area_scales=(1.0, 2.0),
+    reference: dict | None = None,
+    ghosts: GhostResult | None = None,
+    progress: bool = False,
+) -> EfficiencyResult:
+    """Light efficiency of one used pixel (paper Fig. 13), with and without ghost light.
+
+    ``by_object_radius`` shows the dependence on Z: for a uniform object covering only a
+    disk of the given radius around the pixel's axis, the etendue collected at each Z
+    (own-path light is Z-independent; ghost light arrives from far away and leaves a
+    finite object as Z grows). ``area_scales`` scales the sensitive area's sides (2:
+    four times the area, the paper's custom-sensor claim). ``ghosts``: the design's
+    ghost analysis if the caller has one already (its Z values are used).
+    """
+    ref = reference or {}
+    g_ref = reference_etendue(**ref)
+    f_ref = reference_f_number(ref.get("focal_mm", 10.0), ref.get("pupil_mm", 2.0))
+    g = ghosts or analyse_ghosts(
+        design,
+        z_mm=tuple(z_mm),
+        seed=seed,
+        fresnel=fresnel,
+        rse_own=rse_own,
+        rse_ghost=rse_ghost,
+        progress=progress,
+    )
+    tot = g.etendue_own_um2sr + g.etendue_ghost_um2sr
+    se = math.hypot(g.etendue_own_se, g.etendue_ghost_se)
+    by_r = {}
+    for zkey, land in g.landing.items():
+        h = np.asarray(land["etendue_by_distance_um2sr"])
+        edges = (np.arange(h.size) + 1) * DISTANCE_BIN_UM  # upper edge of each bin
+        by_r[zkey] = {
+            f"{r:g}": g.etendue_own_um2sr + float(h[edges <= r * 1000.0].sum())
+            for r in object_radii_mm
+        } | {"inf": tot}
+    areas = []
+    s = design.sensor
+    for k in area_scales:
+        d = (
+            design
+            if k == 1.0
+            else sensor_with_area(design, s.sensitive_width_um * k, s.sensitive_height_um * k)
+        )
+        gk = g if k == 1.0 else analyse_ghosts(d, seed=seed, fresnel=fresnel)
+        areas.append(
+            {
+                "area_scale": k * k,
+                "sensitive_um": [s.sensitive_width_um * k, s.sensitive_height_um * k],
+                "etendue_own_um2sr": gk.etendue_own_um2sr,
+                "etendue_um2sr": gk.etendue_own_um2sr + gk.etendue_ghost_um2sr,
+                "ghost_fraction": gk.ghost_fraction,
+                "gain_vs_design": (gk.etendue_own_um2sr + gk.etendue_ghost_um2sr) / tot,
+                "gain_own_vs_design": gk.etendue_own_um2sr / g.etendue_own_um2sr,
+            }
+        )
+    ratio, ratio_own = tot / g_ref, g.etendue_own_um2sr / g_ref
+    return EfficiencyResult(
+        design=design.name,
+        fingerprint=design.fingerprint(),
+        seed=seed,
+        fresnel=fresnel,
+        etendue_um2sr=tot,
+        etendue_se=se,
+        etendue_own_um2sr=g.etendue_own_um2sr,
+        etendue_own_se=g.etendue_own_se,
+        etendue_ghost_um2sr=g.etendue_ghost_um2sr,
+        reference_etendue_um2sr=g_ref,
+        reference_f_number=f_ref,
+        ratio=ratio,
+        ratio_own=ratio_own,
+        working_f_number=f_ref / math.sqrt(ratio),
+        working_f_number_own=f_ref / math.sqrt(ratio_own),
+        by_object_radius=by_r,
+        sensitive_area=areas,
+        meta={
+            "reference_lens": {
+                "pixel_um": 84.6,
+                "focal_mm": 10.0,
+                "pupil_mm": 2.0,
+                "conjugate_mm": 20.0,
+            }
+            | ref
+        },
+    )

@@ -1,0 +1,418 @@
+"""Line-spread functions of the used pixels on the object plane, folded onto chart periods.
+
+A bar chart that varies along x only (paper Eq. 1, Fig. 11) sees a pixel through the
+x-marginal of its responsivity map, the *line-spread function* LSF(X) = integral of
+R(X, Y) dY (um sr per um of X). For a chart of period P only the LSF folded modulo P
+matters: h_P(phi) = sum_m LSF(phi + m P). Both ways to get it are here:
+
+* :func:`traced_folded_lsf` reverse-traces each pixel row once (exact 3-D tracer,
+  importance sampling, own and ghost paths, optional Fresnel losses) and folds every ray
+  onto every period at every object distance in one compiled pass. Rays are dealt into
+  ``n_batches`` interleaved batches (ray id modulo n_batches), which gives the standard
+  errors of anything computed from the folded LSF.
+* :func:`paraxial_lsf` is the closed form of the own path for rectangular holes in the
+  paraxial limit (displacement t s / n in a slab of thickness t and index n for the
+  invariant direction s = n sin(theta)): the phase-space region of rays that pass the
+  pixel and every hole is an intersection of strips, so R is separable,
+  R(X, Y) = r_x(X) r_y(Y), with r_x(X) the length of an intersection of intervals in s,
+  piecewise linear in X. Its total, G_x G_y, does not depend on Z.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from ..design import Design
+from ..raytrace.kernel import launch
+from ..raytrace.stack import lattice_of, reverse_path
+from ..raytrace.tally import is_own_path
+from .ghosts import acceptance, allocate_holes, pixel_source
+
+#: Target width of the bins of a folded LSF (um); each period gets round(P / this) bins.
+FOLD_BIN_UM = 0.5
+
+
+@dataclass(frozen=True)
+class FoldedLSF:
+    """LSFs of the used pixels folded onto chart periods.
+
+    Attributes
+    ----------
+    z_mm : (nz,) object distances above the reference plane (mm)
+    periods_um : (np,) chart periods (um)
+    rows : list of (x_um, y_um) of the traced pixel of each row (k = 0)
+    h : list over periods of arrays (n_rows, n_batches, nz, n_bins_p): etendue
+        (um^2 sr) per bin of phase phi = (X - x_pixel) mod P, summed over batches it is
+        the full estimate
+    method : "trace" or "paraxial"
+    n_rays : rays per row (trace) or 0
+    ghosts, fresnel : what light is included
+    """
+
+    z_mm: np.ndarray
+    periods_um: np.ndarray
+    rows: list[tuple[float, float]]
+    h: list[np.ndarray]
+    method: str
+    n_rays: int
+    ghosts: bool
+    fresnel: bool
+
+    @property
+    def n_batches(self) -> int:
+        return self.h[0].shape[1]
+
+
+@numba.njit(parallel=True, cache=True)
+def _fold(x, sx, sy, w, batch, x0, z_um, n_obj, periods, n_bins, out):  # pragma: no cover
+    """out[p, b, iz, bin] += w for each ray; prange over z (no write conflicts)."""
+    for iz in numba.prange(z_um.size):
+        z = z_um[iz]
+        for i in range(x.size):
+            wi = w[i]
+            if wi == 0.0:
+                continue
+            c = np.sqrt(n_obj * n_obj - sx[i] * sx[i] - sy[i] * sy[i])
+            xo = x[i] + z * sx[i] / c - x0
+            for p in range(periods.size):
+                per = periods[p]
+                phi = xo - np.floor(xo / per) * per
+                j = int(phi / per * n_bins[p])
+                if j >= n_bins[p]:
+                    j = n_bins[p] - 1
+                out[p, batch[i], iz, j] += wi
+
+
+def _bins(periods_um: np.ndarray) -> np.ndarray:
+    return np.maximum(8, np.round(periods_um / FOLD_BIN_UM)).astype(np.int64)
+
+
+def row_pixels(design: Design) -> list[tuple[int, int]]:
+    """(row, k = 0) of the traced pixel of each row of used pixels."""
+    return [(r, 0) for r in range(design.sensor.rows)]
+
+
+def traced_folded_lsf(
+    design: Design,
+    *,
+    z_mm,
+    periods_um,
+    n_rays: int = 1 << 21,
+    seed: int = 0,
+    ghosts: bool = True,
+    fresnel: bool = False,
+    n_batches: int = 16,
+    chunk: int = 1 << 20,
+    progress: bool = False,
+) -> FoldedLSF:
+    """Fold each row's traced LSF onto every period at every Z (one trace per row)."""
+    zs = np.asarray(z_mm, dtype=np.float64)
+    per = np.asarray(periods_um, dtype=np.float64)
+    nb = _bins(per)
+    n_rays = int(np.ceil(n_rays / n_batches)) * n_batches
+    path = reverse_path(design)
+    n_obj = design.index(design.object_medium)
+    n0 = path.slabs[0, 1]
+    h = [np.zeros((design.sensor.rows, n_batches, zs.size, int(n))) for n in nb]
+    rows = []
+    for row, k in row_pixels(design):
+        src = pixel_source(design, row, k)
+        rows.append((src.x, src.y))
+        weights = allocate_holes(design, path, src, row, k, seed, fresnel, 1e-3, 1e-2)
+        out = np.zeros((per.size, n_batches, zs.size, int(nb.max())))
+        for b in launch(
+            path,
+            src,
+            n_rays,
+            seed,
+            fresnel=fresnel,
+            hole_weights=weights,
+            chunk=chunk,
+            progress=progress,
+        ):
+            w = b.w * acceptance(design, n0, b.sx, b.sy)
+            if not ghosts:
+                w = w * is_own_path(b, row, k)
+            batch = (b.ids % n_batches).astype(np.int64)
+            _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, n_obj, per, nb, out)
+        for p in range(per.size):
+            # each batch holds n_rays / n_batches samples: scale so batches sum to the mean
+            h[p][row] = out[p, :, :, : nb[p]] / n_rays
+    return FoldedLSF(zs, per, rows, h, "trace", n_rays, ghosts, fresnel)
+
+
+# -- paraxial closed form ------------------------------------------------------------------
+def _planes(design: Design, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Reduced heights d (um), half widths and offsets of the pixel and the masks; D_top."""
+    if any(m.shape == "circle" for m in design.masks):
+        raise ValueError("paraxial closed form needs rectangular holes (shape square/rectangle)")
+    s = design.sensor
+    d, half, off = [0.0], [(s.sensitive_width_um, s.sensitive_height_um)[axis] / 2], [0.0]
+    red = 0.0
+    for sl in design.slabs:
+        red += sl.thickness_um / design.index(sl.medium)
+        m = sl.mask_top
+        if m is not None:
+            d.append(red)
+            half.append((m.hole_width_um, m.hole_height_um)[axis] / 2)
+            off.append((m.offset_x_um, m.offset_y_um)[axis])
+    gap = design.reference_gap
+    red += gap.thickness_um / design.index(gap.medium)
+    return np.array(d), np.array(half), np.array(off), red
+
+
+def paraxial_profile(design: Design, z_mm: float, u_um: np.ndarray, axis: int = 0) -> np.ndarray:
+    """r(U): phase-space length in s of own-path rays meeting the object plane at U.
+
+    ``u_um`` is measured from the pixel's axis along x (axis 0) or y (axis 1).
+    The integral of r over U is the own path's 1-D etendue G (um), the same at every Z.
+    """
+    d, half, off, top = _planes(design, axis)
+    big_d = top + z_mm * 1000.0 / design.index(design.object_medium)
+    lev = big_d - d  # > 0: distance from each plane up to the object plane
+    u = np.asarray(u_um, dtype=np.float64)[..., None]
+    lo = ((u - off - half) / lev).max(axis=-1)
+    hi = ((u - off + half) / lev).min(axis=-1)
+    return np.maximum(hi - lo, 0.0)
+
+
+def _levers(design: Design, z_mm: float, axis: int):
+    d, half, off, top = _planes(design, axis)
+    big_d = top + z_mm * 1000.0 / design.index(design.object_medium)
+    return big_d - d, half, off  # lever > 0: from each plane up to the object plane
+
+
+def paraxial_support(design: Design, z_mm: float, axis: int = 0) -> tuple[float, float]:
+    """Edges of the paraxial own-path profile (um from the pixel's axis).
+
+    r(U) > 0 where every lower limit (U - o_i - h_i) / L_i stays below every upper
+    limit (U - o_j + h_j) / L_j; each pair is a linear inequality in U.
+    """
+    lev, half, off = _levers(design, z_mm, axis)
+    lo, hi = -np.inf, np.inf
+    for i in range(lev.size):
+        for j in range(lev.size):
+            a = 1 / lev[i] - 1 / lev[j]
+            rhs = (off[i] + half[i]) / lev[i] - (off[j] - half[j]) / lev[j]
+            if abs(a) < 1e-15:
+                continue
+            if a > 0:
+                hi = min(hi, rhs / a)
+            else:
+                lo = max(lo, rhs / a)
+    return (float(lo), float(hi)) if lo < hi else (0.0, 0.0)
+
+
+def _kinks(design: Design, z_mm: float, axis: int) -> np.ndarray:
+    """Every U where the piecewise-linear profile can bend, within its support."""
+    lev, half, off = _levers(design, z_mm, axis)
+    lo, hi = paraxial_support(design, z_mm, axis)
+    pts = [lo, hi]
+    for i in range(lev.size):
+        for j in range(lev.size):
+            a = 1 / lev[i] - 1 / lev[j]
+            if i == j or abs(a) < 1e-15:
+                continue
+            for si in (-1, 1):
+                for sj in (-1, 1):
+                    u = ((off[i] + si * half[i]) / lev[i] - (off[j] + sj * half[j]) / lev[j]) / a
+                    if lo <= u <= hi:
+                        pts.append(u)
+    return np.unique(np.array(pts))
+
+
+def paraxial_cumulative(design: Design, z_mm: float, u_um: np.ndarray, axis: int = 0):
+    """Exact integral of r from -inf to U (r is linear between kinks)."""
+    k = _kinks(design, z_mm, axis)
+    rk = paraxial_profile(design, z_mm, k, axis)
+    cum = np.concatenate([[0.0], np.cumsum(np.diff(k) * (rk[1:] + rk[:-1]) / 2)])
+    u = np.clip(np.asarray(u_um, dtype=np.float64), k[0], k[-1])
+    i = np.clip(np.searchsorted(k, u, side="right") - 1, 0, k.size - 1)
+    return cum[i] + (u - k[i]) * (rk[i] + paraxial_profile(design, z_mm, u, axis)) / 2
+
+
+def paraxial_etendue_1d(design: Design, axis: int = 0) -> float:
+    """G along one axis (um): the integral of :func:`paraxial_profile`, Z-independent."""
+    return float(paraxial_cumulative(design, 0.0, np.array([np.inf]), axis)[0])
+
+
+def paraxial_etendue(design: Design) -> float:
+    """Own-path etendue (um^2 sr) in the paraxial limit: G_x G_y."""
+    return paraxial_etendue_1d(design, 0) * paraxial_etendue_1d(design, 1)
+
+
+def paraxial_lsf(design: Design, z_mm: float, x_um: np.ndarray) -> np.ndarray:
+    """Own-path LSF (um sr per um) at X = x_um from the pixel's axis: r_x(X) G_y."""
+    return paraxial_profile(design, z_mm, x_um, 0) * paraxial_etendue_1d(design, 1)
+
+
+def paraxial_folded_lsf(design: Design, *, z_mm, periods_um) -> FoldedLSF:
+    """Fold the paraxial own-path LSF onto each period (exact bin integrals)."""
+    zs = np.asarray(z_mm, dtype=np.float64)
+    per = np.asarray(periods_um, dtype=np.float64)
+    nb = _bins(per)
+    g_y = paraxial_etendue_1d(design, 1)
+    lat = lattice_of(design)
+    rows = [(float(lat.row_x[r]), float(lat.row_y[r])) for r in range(design.sensor.rows)]
+    h = []
+    for p, n in zip(per, nb, strict=True):
+        du = p / n
+        arr = np.zeros((len(rows), 1, zs.size, int(n)))
+        for iz, z in enumerate(zs):
+            lo, hi = paraxial_support(design, float(z), 0)
+            m0, m1 = int(np.floor(lo / p)) - 1, int(np.ceil(hi / p)) + 1
+            edges = np.arange(m0, m1)[:, None] * p + np.arange(n + 1)[None, :] * du
+            cum = paraxial_cumulative(design, float(z), edges, 0)
+            folded = (np.diff(cum, axis=1) * g_y).sum(axis=0)
+            arr[:, 0, iz] = folded
+        h.append(arr)
+    return FoldedLSF(zs, per, rows, h, "paraxial", 0, False, False)
+
+
+# -- 2-D responsivity maps for the scan simulation ----------------------------------------
+@numba.njit(parallel=True, cache=True)
+def _maps(
+    x,
+    y,
+    sx,
+    sy,
+    w,
+    own,
+    x0,
+    y0,
+    z_um,
+    n_obj,
+    fine_lo,
+    fine_bin,
+    coarse_lo,
+    coarse_bin,
+    fine,
+    coarse,
+):  # pragma: no cover
+    """fine[iz, iy, ix] += own-path w; coarse[iz, iy, ix] += ghost w (prange over z)."""
+    nfy, nfx = fine.shape[1], fine.shape[2]
+    ncy, ncx = coarse.shape[1], coarse.shape[2]
+    for iz in numba.prange(z_um.size):
+        z = z_um[iz]
+        for i in range(x.size):
+            wi = w[i]
+            if wi == 0.0:
+                continue
+            c = np.sqrt(n_obj * n_obj - sx[i] * sx[i] - sy[i] * sy[i])
+            xo = x[i] + z * sx[i] / c - x0
+            yo = y[i] + z * sy[i] / c - y0
+            if own[i]:
+                jx = int(np.floor((xo - fine_lo) / fine_bin))
+                jy = int(np.floor((yo - fine_lo) / fine_bin))
+                if 0 <= jx < nfx and 0 <= jy < nfy:
+                    fine[iz, jy, jx] += wi
+            else:
+                jx = int(np.floor((xo - coarse_lo[1]) / coarse_bin))
+                jy = int(np.floor((yo - coarse_lo[0]) / coarse_bin))
+                if 0 <= jx < ncx and 0 <= jy < ncy:
+                    coarse[iz, jy, jx] += wi
+
+
+@dataclass(frozen=True)
+class TracedMaps:
+    """Responsivity maps of one pixel (etendue per bin, um^2 sr) at several Z.
+
+    ``own`` (nz, n, n) on a fine grid of ``fine_bin_um`` starting at ``fine_lo_um`` in x and
+    y from the pixel's axis; ``ghost`` (nz, ny, nx) on a coarse grid of
+    ``coarse_bin_um`` starting at ``coarse_lo_um`` (y, x).
+    """
+
+    z_mm: np.ndarray
+    own: np.ndarray
+    fine_lo_um: float
+    fine_bin_um: float
+    ghost: np.ndarray
+    coarse_lo_um: tuple[float, float]
+    coarse_bin_um: float
+    n_rays: int
+
+
+def traced_maps(
+    design: Design,
+    *,
+    z_mm,
+    row: int = 0,
+    n_rays: int = 1 << 22,
+    seed: int = 0,
+    fresnel: bool = False,
+    fine_bin_um: float = 4.0,
+    half_um: float | None = None,
+    coarse_bin_um: float = 500.0,
+    coarse_half_um: tuple[float, float] = (10_000.0, 45_000.0),
+    progress: bool = False,
+) -> TracedMaps:
+    """Own-path maps (fine) and ghost maps (coarse) of pixel (row, 0) at every Z."""
+    zs = np.asarray(z_mm, dtype=np.float64)
+    path = reverse_path(design)
+    n_obj = design.index(design.object_medium)
+    n0 = path.slabs[0, 1]
+    src = pixel_source(design, row, 0)
+    if half_um is None:
+        half_um = _own_half_width(design, float(zs.max()))
+    nf = int(np.ceil(2 * half_um / fine_bin_um))
+    fine_lo = -nf * fine_bin_um / 2
+    ncy = int(np.ceil(2 * coarse_half_um[0] / coarse_bin_um))
+    ncx = int(np.ceil(2 * coarse_half_um[1] / coarse_bin_um))
+    coarse_lo = np.array([-ncy * coarse_bin_um / 2, -ncx * coarse_bin_um / 2])
+    fine = np.zeros((zs.size, nf, nf))
+    coarse = np.zeros((zs.size, ncy, ncx))
+    weights = allocate_holes(design, path, src, row, 0, seed, fresnel, 1e-3, 1e-2)
+    for b in launch(
+        path, src, n_rays, seed, fresnel=fresnel, hole_weights=weights, progress=progress
+    ):
+        w = b.w * acceptance(design, n0, b.sx, b.sy)
+        own = is_own_path(b, row, 0)
+        _maps(
+            b.x,
+            b.y,
+            b.sx,
+            b.sy,
+            w,
+            own,
+            src.x,
+            src.y,
+            zs * 1000.0,
+            n_obj,
+            fine_lo,
+            fine_bin_um,
+            coarse_lo,
+            coarse_bin_um,
+            fine,
+            coarse,
+        )
+    return TracedMaps(
+        zs,
+        fine / n_rays,
+        fine_lo,
+        fine_bin_um,
+        coarse / n_rays,
+        (float(coarse_lo[0]), float(coarse_lo[1])),
+        coarse_bin_um,
+        n_rays,
+    )
+
+
+def _own_half_width(design: Design, z_mm: float) -> float:
+    """Half width (um) enclosing the own-path spot at z_mm (paraxial bound + 20 % margin).
+
+    For circular holes the bound of the circumscribed squares is used."""
+    sq = design
+    if any(m.shape == "circle" for m in design.masks):
+        slabs = design.model_dump(mode="json", exclude_none=True)["slabs"]
+        for sl in slabs:
+            if "mask_top" in sl:
+                sl["mask_top"]["shape"] = "square"
+        from ..design import design_from_dict
+
+        sq = design_from_dict(design.model_dump(mode="json", exclude_none=True) | {"slabs": slabs})
+    lo, hi = paraxial_support(sq, z_mm, 0)
+    lo_y, hi_y = paraxial_support(sq, z_mm, 1)
+    return 1.2 * max(abs(lo), abs(hi), abs(lo_y), abs(hi_y)) + 10.0

@@ -1,0 +1,134 @@
+"""Study of the paper's unstated parameters (hole shape, sensitive area, reference gap
+medium, Fresnel losses, glass index): efficiency, depth of field and ghost fraction for
+each combination, and which combinations agree with the paper's light-efficiency ratio
+1/36 (working F 60, §5) and its measured 3.5 mm depth of field (§5, Fig. 11).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..design import Design
+from .efficiency import reference_etendue, reference_f_number, with_changes
+from .ghosts import analyse_ghosts
+from .rmtf import rmtf
+
+#: What the paper states (§5): efficiency ratio, working F-number, depth of field.
+PAPER_RATIO = 1 / 36
+PAPER_F_NUMBER = 60.0
+PAPER_DOF_MM = 3.5
+
+DEFAULT_FACTORS = {
+    "hole_shape": ("square", "circle"),
+    "sensitive_um": (42.3, 32.0),
+    "gap_medium": ("air", 1.49),
+    "fresnel": (False, True),
+    "glass_index": (1.52, 1.46),
+}
+
+
+def study_variant(design: Design, combo: dict) -> Design:
+    """The design with one combination of the study's factors applied."""
+    slabs = []
+    for sl in design.model_dump(mode="json", exclude_none=True)["slabs"]:
+        if sl["medium"] != "air" and sl["medium"] != 1.0:
+            sl["medium"] = combo["glass_index"]
+        if "mask_top" in sl:
+            m = sl["mask_top"]
+            size = m.get("size_um", m.get("width_um"))
+            m.pop("width_um", None)
+            m.pop("height_um", None)
+            m["shape"], m["size_um"] = combo["hole_shape"], size
+        slabs.append(sl)
+    a = combo["sensitive_um"]
+    return with_changes(
+        design,
+        {
+            "slabs": slabs,
+            "reference_gap": {"medium": combo["gap_medium"]},
+            "sensor": {"sensitive_width_um": a, "sensitive_height_um": a},
+        },
+    )
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    design: str
+    seed: int
+    factors: dict
+    rows: list[dict]
+    paper: dict
+    meta: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @property
+    def consistent(self) -> list[dict]:
+        return [r for r in self.rows if r["consistent_efficiency"] and r["consistent_dof"]]
+
+
+def parameter_study(
+    design: Design,
+    *,
+    factors: dict | None = None,
+    seed: int = 0,
+    n_rays: int = 1 << 19,
+    f_tolerance: float = 5.0,
+    dof_tolerance_mm: float = 0.25,
+    progress: bool = False,
+) -> StudyResult:
+    """Every combination of ``factors`` (default :data:`DEFAULT_FACTORS`).
+
+    A combination is consistent with the paper's efficiency when its working F-number
+    (ghost light included) is within ``f_tolerance`` of 60, and with its depth of field
+    when RMTF(200 dpi) >= 0.3 reaches at least 3.5 mm - ``dof_tolerance_mm`` (the
+    measured RMTF, which misalignment can only lower, stayed above 0.3 at 3.5 mm).
+    """
+    fac = dict(DEFAULT_FACTORS if factors is None else factors)
+    names = list(fac)
+    g_ref = reference_etendue()
+    f_ref = reference_f_number()
+    rows = []
+    combos = list(itertools.product(*(fac[n] for n in names)))
+    it = combos
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(combos, desc="parameter study", unit="design")
+    for values in it:
+        combo = dict(zip(names, values, strict=True))
+        d = study_variant(design, combo)
+        g = analyse_ghosts(d, seed=seed, n_rays=n_rays, fresnel=combo["fresnel"])
+        r = rmtf(d, dpi=(200.0,), seed=seed, n_rays=n_rays, fresnel=combo["fresnel"])
+        tot = g.etendue_own_um2sr + g.etendue_ghost_um2sr
+        ratio = tot / g_ref
+        f_w = f_ref / math.sqrt(ratio)
+        dof = r.dof_mm["200"]
+        z = np.asarray(r.z_mm)
+        rows.append(
+            combo
+            | {
+                "etendue_um2sr": tot,
+                "ratio": ratio,
+                "inverse_ratio": 1 / ratio,
+                "working_f_number": f_w,
+                "ghost_fraction": g.ghost_fraction,
+                "dof_mm": dof,
+                "rmtf200_at_3_5mm": float(np.interp(3.5, z, r.rmtf_max["200"])),
+                "consistent_efficiency": abs(f_w - PAPER_F_NUMBER) <= f_tolerance,
+                "consistent_dof": dof >= PAPER_DOF_MM - dof_tolerance_mm,
+            }
+        )
+    return StudyResult(
+        design=design.name,
+        seed=seed,
+        factors={k: list(v) for k, v in fac.items()},
+        rows=rows,
+        paper={"ratio": PAPER_RATIO, "working_f_number": PAPER_F_NUMBER, "dof_mm": PAPER_DOF_MM},
+        meta={"n_rays": n_rays, "f_tolerance": f_tolerance, "dof_tolerance_mm": dof_tolerance_mm},
+    )

@@ -1,0 +1,298 @@
+"""Figures of merit: RMTF and depth of field (paper Eq. 1, Fig. 11), light efficiency
+(paper Fig. 13).
+
+RMTF. A bar chart of period P (black = 0, white = 1, equal widths) varying along x lies
+on the object plane; the pixels of the merged line (row A at k p, row B at b_x + k p)
+read I_j = integral LSF_row(X - x_j) f(X - s) dX for a chart shift s. With the LSF
+folded modulo P (:mod:`opticalstamp.responsivity`) this is a circular correlation
+C_row(v) of the folded LSF with the chart, sampled at the phases v = (x_j - s) mod P.
+For each shift, RMTF(s) = (max_j I_j - min_j I_j) / (max_j I_j + min_j I_j) over the
+pixels under a chart window; the paper's RMTF is the maximum over shifts (Moiré
+suppression); the mean and minimum over shifts are reported too.
+
+Standard errors come from the interleaved ray batches of a traced LSF: the RMTF of
+each batch at the full estimate's best shift, their spread over sqrt(n_batches).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..design import Design
+from ..raytrace.stack import lattice_of
+from ..validate import check_memory
+from .lsf import FoldedLSF, paraxial_folded_lsf, traced_folded_lsf
+
+#: The paper's chart periods (um) and their names in dpi (one bar = one dot).
+PAPER_DPI = (100.0, 150.0, 200.0, 247.0)
+DEFAULT_Z_MM = tuple(np.round(np.arange(0.0, 4.5001, 0.25), 2))
+
+
+def period_of_dpi(dpi: float) -> float:
+    """Chart period (um) of a 'dpi' chart: one black and one white bar of 25400/dpi um."""
+    return 2 * 25400.0 / dpi
+
+
+# -- RMTF ----------------------------------------------------------------------------------
+def chart_correlation(h: np.ndarray) -> np.ndarray:
+    """C[..., v] = sum_phi h[..., phi] f[(phi + v) mod n] for the 50 % square wave f.
+
+    ``h`` (..., n) is a folded LSF over one period in n equal bins; f is averaged over
+    each bin (white on the first half period). v in bins.
+    """
+    n = h.shape[-1]
+    edges = np.arange(n + 1) / n
+    white = np.clip(np.minimum(edges[1:], 0.5) - np.minimum(edges[:-1], 0.5), 0, None) * n
+    c = np.fft.irfft(np.conj(np.fft.rfft(h, axis=-1)) * np.fft.rfft(white), n=n, axis=-1)
+    return c
+
+
+def _sample(c: np.ndarray, v_bins: np.ndarray) -> np.ndarray:
+    """Periodic linear interpolation of c[..., n] at fractional bin positions v."""
+    n = c.shape[-1]
+    i0 = np.floor(v_bins).astype(np.int64)
+    t = v_bins - i0
+    return c[..., i0 % n] * (1 - t) + c[..., (i0 + 1) % n] * t
+
+
+def merged_pixels(design: Design, window_um: float) -> list[np.ndarray]:
+    """x (um) of the used pixels of each row under a chart window [0, window_um)."""
+    lat = lattice_of(design)
+    out = []
+    for r in range(design.sensor.rows):
+        out.append(np.arange(lat.row_x[r] % lat.pitch, window_um, lat.pitch))
+    return out
+
+
+def rmtf_curves(
+    lsf: FoldedLSF, design: Design, *, window_um: float = 5000.0, shift_step_um: float = 1.0
+) -> dict:
+    """RMTF max / mean / min over chart shifts, per period and Z, with standard errors.
+
+    Returns arrays of shape (n_periods, nz) under keys ``max``, ``mean``, ``min``,
+    ``max_se``, ``best_shift_um``.
+    """
+    pix = merged_pixels(design, window_um)
+    shape = (lsf.periods_um.size, lsf.z_mm.size)
+    out = {k: np.zeros(shape) for k in ("max", "mean", "min", "max_se", "best_shift_um")}
+    for ip, per in enumerate(lsf.periods_um):
+        h = lsf.h[ip]  # (rows, batches, nz, n)
+        n = h.shape[-1]
+        shifts = np.arange(0.0, per, shift_step_um)
+        c_full = chart_correlation(h.sum(axis=1))  # (rows, nz, n)
+        phases = [((x[None, :] - shifts[:, None]) % per) / per * n for x in pix]
+        sig = np.concatenate([_sample(c_full[r], v) for r, v in enumerate(phases)], axis=-1)
+        imax, imin = sig.max(axis=-1), sig.min(axis=-1)  # (nz, shifts)
+        rm = np.where(imax + imin > 0, (imax - imin) / np.where(imax + imin > 0, imax + imin, 1), 0)
+        best = rm.argmax(axis=-1)  # (nz,)
+        out["max"][ip] = rm.max(axis=-1)
+        out["mean"][ip] = rm.mean(axis=-1)
+        out["min"][ip] = rm.min(axis=-1)
+        out["best_shift_um"][ip] = shifts[best]
+        n_b = h.shape[1]
+        if n_b > 1:  # batches only at the full estimate's best shift
+            c_batch = chart_correlation(h * n_b)  # each batch scaled to a full estimate
+            for iz, ib in enumerate(best):
+                sb = np.concatenate(
+                    [_sample(c_batch[r, :, iz], phases[r][ib]) for r in range(h.shape[0])],
+                    axis=-1,
+                )  # (batches, pixels)
+                bmax, bmin = sb.max(axis=-1), sb.min(axis=-1)
+                rb = (bmax - bmin) / np.where(bmax + bmin > 0, bmax + bmin, 1)
+                out["max_se"][ip, iz] = rb.std(ddof=1) / np.sqrt(n_b)
+    return out
+
+
+def chart_waveform(
+    lsf: FoldedLSF,
+    design: Design,
+    period_index: int,
+    z_index: int,
+    shift_um: float,
+    window_um: float = 5000.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel x (um) and signals (um^2 sr; white = the etendue) of the merged line for a
+    chart shifted by ``shift_um`` (paper Fig. 12 c, d), sorted by x."""
+    per = lsf.periods_um[period_index]
+    h = lsf.h[period_index].sum(axis=1)[:, z_index]  # (rows, n)
+    n = h.shape[-1]
+    xs, sig = [], []
+    for r, x in enumerate(merged_pixels(design, window_um)):
+        c = chart_correlation(h[r])
+        xs.append(x)
+        sig.append(_sample(c, ((x - shift_um) % per) / per * n))
+    x, s = np.concatenate(xs), np.concatenate(sig)
+    order = np.argsort(x)
+    return x[order], s[order]
+
+
+def depth_of_field(z_mm: np.ndarray, rmtf: np.ndarray, threshold: float = 0.3) -> float:
+    """Largest Z (mm) up to which RMTF stays >= threshold, interpolated linearly.
+
+    0 if RMTF starts below the threshold; the last Z if it never drops below.
+    """
+    z = np.asarray(z_mm, dtype=np.float64)
+    r = np.asarray(rmtf, dtype=np.float64)
+    if r[0] < threshold:
+        return 0.0
+    below = np.flatnonzero(r < threshold)
+    if below.size == 0:
+        return float(z[-1])
+    i = below[0]
+    return float(z[i - 1] + (r[i - 1] - threshold) / (r[i - 1] - r[i]) * (z[i] - z[i - 1]))
+
+
+@dataclass(frozen=True)
+class RMTFResult:
+    """RMTF versus object distance for several chart periods (paper Fig. 11)."""
+
+    design: str
+    fingerprint: str
+    seed: int
+    method: str
+    ghosts: bool
+    fresnel: bool
+    n_rays: int
+    dpi: list[float]
+    periods_um: list[float]
+    z_mm: list[float]
+    rmtf_max: dict[str, list[float]]
+    rmtf_max_se: dict[str, list[float]]
+    rmtf_mean: dict[str, list[float]]
+    rmtf_min: dict[str, list[float]]
+    dof_mm: dict[str, float]
+    dof_threshold: float
+    dof_dpi: float
+    window_um: float
+    shift_step_um: float
+    meta: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _key(dpi: float) -> str:
+    return f"{dpi:g}"
+
+
+def check_rmtf_memory(
+    design: Design, period_um: float, n_z: int, window_um: float, shift_step_um: float
+) -> None:
+    """Refuse a chart window and shift step whose signal array (Z x shifts x pixels, float64,
+    in :func:`rmtf_curves`) would not fit in MAX_WORK_BYTES, before any tracing."""
+    n_pix = design.sensor.rows * (window_um / lattice_of(design).pitch + 1)
+    n_shift = math.ceil(period_um / shift_step_um)
+    check_memory(
+        8.0 * n_z * n_shift * n_pix,
+        f"shift_step_um {shift_step_um:g} (--shift-um) with window_um {window_um:g} "
+        f"(--window-um) and {n_z} distances",
+    )
+
+
+def rmtf(
+    design: Design,
+    *,
+    dpi=PAPER_DPI,
+    z_mm=DEFAULT_Z_MM,
+    method: str = "trace",
+    ghosts: bool = True,
+    fresnel: bool = False,
+    n_rays: int = 1 << 21,
+    seed: int = 0,
+    window_um: float = 5000.0,
+    shift_step_um: float = 1.0,
+    dof_threshold: float = 0.3,
+    dof_dpi: float = 200.0,
+    progress: bool = False,
+) -> RMTFResult:
+    """RMTF of paper Eq. 1 for bar charts of the given dpi versus Z, and depth of field.
+
+    Parameters
+    ----------
+    dpi : chart resolutions; period = 2 * 25.4 mm / dpi (508, 339, 254, 206 um)
+    method : "trace" (exact tracer, own and ghost light) or "paraxial" (own path,
+        closed form, rectangular holes; no ghosts, no Fresnel)
+    window_um : width of the chart window over which Imax and Imin are taken
+    shift_step_um : step of the chart shifts over one period
+    dof_threshold, dof_dpi : depth of field = largest Z with RMTF(dof_dpi) >= threshold
+    """
+    dpis = [float(d) for d in dpi]
+    if dof_dpi not in dpis:
+        dpis.append(float(dof_dpi))
+    if any(d <= 0 for d in dpis):
+        raise ValueError("dpi: every chart resolution must be > 0")
+    if window_um <= 0 or shift_step_um <= 0:
+        raise ValueError("window_um and shift_step_um must be > 0")
+    periods = np.array([period_of_dpi(d) for d in dpis])
+    zs = np.asarray(z_mm, dtype=np.float64)
+    check_rmtf_memory(design, periods.max(), zs.size, window_um, shift_step_um)
+    if method == "trace":
+        lsf = traced_folded_lsf(
+            design,
+            z_mm=zs,
+            periods_um=periods,
+            n_rays=n_rays,
+            seed=seed,
+            ghosts=ghosts,
+            fresnel=fresnel,
+            progress=progress,
+        )
+    elif method == "paraxial":
+        lsf = paraxial_folded_lsf(design, z_mm=zs, periods_um=periods)
+    else:
+        raise ValueError(f"method must be 'trace' or 'paraxial' (got {method!r})")
+    return rmtf_from_lsf(
+        lsf,
+        design,
+        dpi=dpis,
+        seed=seed,
+        window_um=window_um,
+        shift_step_um=shift_step_um,
+        dof_threshold=dof_threshold,
+        dof_dpi=dof_dpi,
+    )
+
+
+def rmtf_from_lsf(
+    lsf: FoldedLSF,
+    design: Design,
+    *,
+    dpi,
+    seed: int = 0,
+    window_um: float = 5000.0,
+    shift_step_um: float = 1.0,
+    dof_threshold: float = 0.3,
+    dof_dpi: float = 200.0,
+) -> RMTFResult:
+    """RMTF and depth of field from folded LSFs (periods in the order of ``dpi``)."""
+    dpis = [float(d) for d in dpi]
+    zs = lsf.z_mm
+    cur = rmtf_curves(lsf, design, window_um=window_um, shift_step_um=shift_step_um)
+    keys = [_key(d) for d in dpis]
+    pick = {name: {k: cur[name][i].tolist() for i, k in enumerate(keys)} for name in cur}
+    dof = {k: depth_of_field(zs, cur["max"][i], dof_threshold) for i, k in enumerate(keys)}
+    return RMTFResult(
+        design=design.name,
+        fingerprint=design.fingerprint(),
+        seed=seed,
+        method=lsf.method,
+        ghosts=lsf.ghosts,
+        fresnel=lsf.fresnel,
+        n_rays=lsf.n_rays,
+        dpi=dpis,
+        periods_um=lsf.periods_um.tolist(),
+        z_mm=zs.tolist(),
+        rmtf_max=pick["max"],
+        rmtf_max_se=pick["max_se"],
+        rmtf_mean=pick["mean"],
+        rmtf_min=pick["min"],
+        dof_mm=dof,
+        dof_threshold=dof_threshold,
+        dof_dpi=dof_dpi,
+        window_um=window_um,
+        shift_step_um=shift_step_um,
+        meta={"best_shift_um": pick["best_shift_um"]},
+    )

@@ -1,0 +1,343 @@
+"""Spots (responsivity maps, paper Fig. 5) and PSFs on the sensor (paper Fig. 10).
+
+The *spot* of a pixel at object distance Z is its responsivity map R(x, y) (sr): a
+Lambertian object of radiance L(x, y) gives the pixel the power integral L R dA. It is
+found by reverse tracing (the pixel as virtual source) and histogramming where rays meet
+the object plane; the stack is traced once and the rays extrapolated to every Z.
+
+The *PSF* is forward: where light from a Lambertian object point lands on the sensor.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..design import Design
+from ..raytrace.kernel import launch
+from ..raytrace.sampling import Source
+from ..raytrace.stack import forward_path, lattice_of, reverse_path
+from ..raytrace.tally import is_own_path, object_plane
+from .ghosts import acceptance, allocate_holes, pixel_source
+
+CELL_UM = 84.6  # the 300-dpi grid of paper Fig. 5
+
+
+@dataclass(frozen=True)
+class Spot:
+    """Responsivity map of one pixel at one object distance."""
+
+    z_mm: float
+    x_edges_um: np.ndarray  # relative to the pixel's axis
+    y_edges_um: np.ndarray
+    map_sr: np.ndarray  # [y, x] responsivity, etendue per object area (sr)
+    extent_x_um: float  # edge to edge, own path
+    extent_y_um: float
+    fwhm_x_um: float
+    fwhm_y_um: float
+    center_cell_fraction: float  # of all light (own + ghost) reaching the object plane
+
+
+@dataclass(frozen=True)
+class SpotResult:
+    design: str
+    fingerprint: str
+    seed: int
+    n_rays: int
+    pixel: dict
+    spots: list[Spot]
+    meta: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        keys = ("extent_x_um", "extent_y_um", "fwhm_x_um", "fwhm_y_um", "center_cell_fraction")
+        out = {
+            "design": self.design,
+            "fingerprint": self.fingerprint,
+            "seed": self.seed,
+            "n_rays": self.n_rays,
+            "pixel": self.pixel,
+            "z_mm": [s.z_mm for s in self.spots],
+        }
+        for key in keys:
+            out[key] = [float(getattr(s, key)) for s in self.spots]
+        return out | {"meta": self.meta}
+
+
+def fwhm(profile: np.ndarray, centers: np.ndarray) -> float:
+    """Full width at half maximum (outermost half-max crossings, linear interpolation)."""
+    if profile.max() <= 0:
+        return float("nan")
+    half = profile.max() / 2
+    above = np.flatnonzero(profile >= half)
+    i0, i1 = above[0], above[-1]
+
+    def cross(i_in: int, i_out: int) -> float:
+        if i_out < 0 or i_out >= profile.size:
+            return centers[i_in]
+        a, b = profile[i_out], profile[i_in]
+        return centers[i_out] + (half - a) / (b - a) * (centers[i_in] - centers[i_out])
+
+    return float(cross(i1, i1 + 1) - cross(i0, i0 - 1))
+
+
+def spots(
+    design: Design,
+    *,
+    z_mm=(0.0, 1.0, 2.0, 3.0, 4.0),
+    pixel: tuple[int, int] = (0, 0),
+    n_rays: int = 1 << 22,
+    seed: int = 0,
+    fresnel: bool = False,
+    bin_um: float = 2.0,
+    ghosts: bool = True,
+    chunk: int = 1 << 21,
+    progress: bool = False,
+) -> SpotResult:
+    """Responsivity maps of one pixel at each object distance (paper Fig. 5).
+
+    Parameters
+    ----------
+    z_mm : object distances above the reference plane (mm)
+    bin_um : map pixel size (um)
+    ghosts : include ghost paths in the maps and the centre-cell fraction
+    """
+    path = reverse_path(design)
+    row, k = pixel
+    src = pixel_source(design, row, k)
+    n_obj = design.index(design.object_medium)
+    n0 = path.slabs[0, 1]
+    weights = allocate_holes(design, path, src, row, k, seed, fresnel, 1e-3, 1e-2)
+    zs = [float(z) for z in z_mm]
+    # map half-widths from the own-path support of a pilot (its own random stream)
+    half = np.zeros(len(zs))
+    for b in launch(path, src, 1 << 18, seed, stream=2, fresnel=fresnel, hole_weights=weights):
+        o = is_own_path(b, row, k)
+        for iz, z in enumerate(zs):
+            xo, yo = object_plane(b, z * 1000, n_obj)
+            half[iz] = max(
+                half[iz], np.abs(xo[o] - src.x).max(initial=0), np.abs(yo[o] - src.y).max(initial=0)
+            )
+    half = np.ceil((1.25 * half + 3 * bin_um) / CELL_UM * 2 + 1) * CELL_UM / 2
+    edges = [np.arange(-h, h + bin_um / 2, bin_um) for h in half]
+    maps = [np.zeros((e.size - 1, e.size - 1)) for e in edges]
+    lo = np.full((len(zs), 2), np.inf)
+    hi = np.full((len(zs), 2), -np.inf)
+    inside = np.zeros(len(zs))
+    total = np.zeros(1)
+    for b in launch(
+        path,
+        src,
+        n_rays,
+        seed,
+        fresnel=fresnel,
+        hole_weights=weights,
+        chunk=chunk,
+        progress=progress,
+    ):
+        w = b.w * acceptance(design, n0, b.sx, b.sy)
+        o = is_own_path(b, row, k)
+        if not ghosts:
+            w = w * o
+        np.add.at(total, np.zeros(w.size, np.int64), w)
+        for iz, z in enumerate(zs):
+            xo, yo = object_plane(b, z * 1000, n_obj)
+            dx, dy = xo - src.x, yo - src.y
+            lo[iz] = np.minimum(lo[iz], [dx[o].min(initial=np.inf), dy[o].min(initial=np.inf)])
+            hi[iz] = np.maximum(hi[iz], [dx[o].max(initial=-np.inf), dy[o].max(initial=-np.inf)])
+            e = edges[iz]
+            ix = np.floor((dx - e[0]) / bin_um).astype(np.int64)
+            iy = np.floor((dy - e[0]) / bin_um).astype(np.int64)
+            ok = (ix >= 0) & (ix < e.size - 1) & (iy >= 0) & (iy < e.size - 1)
+            np.add.at(maps[iz], (iy[ok], ix[ok]), w[ok])
+            cell = (np.abs(dx) <= CELL_UM / 2) & (np.abs(dy) <= CELL_UM / 2)
+            np.add.at(inside, np.full(int(cell.sum()), iz), w[cell])
+    out = []
+    for iz, z in enumerate(zs):
+        e = edges[iz]
+        m = maps[iz] / (n_rays * bin_um * bin_um)
+        c = 0.5 * (e[1:] + e[:-1])
+        out.append(
+            Spot(
+                z,
+                e,
+                e.copy(),
+                m,
+                float(hi[iz, 0] - lo[iz, 0]),
+                float(hi[iz, 1] - lo[iz, 1]),
+                fwhm(m.sum(axis=0), c),
+                fwhm(m.sum(axis=1), c),
+                float(inside[iz] / total[0]) if total[0] else 0.0,
+            )
+        )
+    return SpotResult(
+        design.name,
+        design.fingerprint(),
+        seed,
+        n_rays,
+        {"row": "AB"[row], "k": k, "x_um": src.x, "y_um": src.y},
+        out,
+        {"ghosts": ghosts, "fresnel": fresnel, "bin_um": bin_um},
+    )
+
+
+# -- PSF --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PSF:
+    """Where the light of a Lambertian object point lands on the sensor (paper Fig. 10)."""
+
+    design: str
+    fingerprint: str
+    seed: int
+    n_rays: int
+    x_obj_um: float
+    y_obj_um: float
+    z_mm: float
+    own_pixel: float  # fractions of the power reaching the sensor plane
+    neighbour_own_path: float
+    neighbour_ghost: float
+    insensitive: float
+    reaching_sensor: float  # fraction of the emitted power
+    own_pixel_id: dict
+    grid_power: np.ndarray  # [line, column] power fraction per 600-dpi pixel
+    grid_x0_um: float  # x of the left edge of column 0
+    grid_pitch_um: float
+    fine_map: np.ndarray  # [y, x] landing power density (fraction per um^2)
+    fine_edges_x_um: np.ndarray
+    fine_edges_y_um: np.ndarray
+    used_pixels: list[tuple[float, float]]  # centres of used pixels in the window
+    sensitive_um: tuple[float, float]
+    meta: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        for key in ("grid_power", "fine_map", "fine_edges_x_um", "fine_edges_y_um"):
+            d.pop(key)
+        d["grid_power"] = self.grid_power.tolist()
+        return d
+
+
+def nearest_pixel(design: Design, x: float, y: float) -> tuple[int, int]:
+    """Used pixel (row, k) whose axis is nearest to (x, y) (ties: row A, lower k)."""
+    lat = lattice_of(design)
+    best = None
+    for r in range(lat.n_rows):
+        kk = int(np.clip(np.floor((x - lat.row_x[r]) / lat.pitch + 0.5), lat.k_lo, lat.k_hi))
+        for k in (kk - 1, kk, kk + 1):
+            if not lat.k_lo <= k <= lat.k_hi:
+                continue
+            px, py = lat.centers(r, k)
+            d = (x - px) ** 2 + (y - py) ** 2
+            if best is None or d < best[0] - 1e-9:
+                best = (d, r, k)
+    return best[1], best[2]
+
+
+def pixel_hit(design: Design, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(row, k) of the used pixel whose sensitive area contains (x, y); row -1 if none."""
+    lat = lattice_of(design)
+    s = design.sensor
+    row = np.full(x.shape, -1, np.int64)
+    kout = np.zeros(x.shape, np.int64)
+    for r in range(lat.n_rows):
+        k = np.floor((x - lat.row_x[r]) / lat.pitch + 0.5)
+        inside = (
+            (np.abs(x - lat.row_x[r] - k * lat.pitch) <= s.sensitive_width_um / 2)
+            & (np.abs(y - lat.row_y[r]) <= s.sensitive_height_um / 2)
+            & (k >= lat.k_lo)
+            & (k <= lat.k_hi)
+        )
+        row[inside] = r
+        kout[inside] = k[inside].astype(np.int64)
+    return row, kout
+
+
+def psf(
+    design: Design,
+    *,
+    x_obj_um: float = 0.0,
+    y_obj_um: float = 0.0,
+    z_mm: float = 1.0,
+    n_rays: int = 1 << 22,
+    seed: int = 0,
+    fresnel: bool = False,
+    window_um: float = 400.0,
+    bin_um: float = 2.0,
+    chunk: int = 1 << 21,
+    progress: bool = False,
+) -> PSF:
+    """Forward-trace a Lambertian object point at (x, y, Z) to the sensor (paper Fig. 10).
+
+    The power reaching the sensor plane is split into: the *own pixel* (the used pixel
+    whose axis is nearest the point) through its own holes; *neighbour pixels by own-path
+    blur* (another used pixel through that pixel's own holes); *ghosts* (a used pixel
+    reached through holes that are not its own); and the *insensitive* area.
+    """
+    path = forward_path(design, z_mm * 1000.0)
+    src = Source(x_obj_um, y_obj_um)
+    own_r, own_k = nearest_pixel(design, x_obj_um, y_obj_um)
+    lat = lattice_of(design)
+    s = design.sensor
+    n_s = path.slabs[-1, 1]
+    pitch = s.pixel_pitch_um
+    cols = int(np.ceil(window_um / pitch))
+    col0 = int(np.floor(x_obj_um / pitch + 0.5)) - cols
+    grid = np.zeros((s.lines, 2 * cols + 1))
+    ex = np.arange(-window_um, window_um + bin_um / 2, bin_um) + x_obj_um
+    ey = np.arange(-pitch, s.lines * pitch + bin_um / 2, bin_um) - pitch / 2
+    fine = np.zeros((ey.size - 1, ex.size - 1))
+    parts = np.zeros(4)
+    reach = np.zeros(1)
+    for b in launch(path, src, n_rays, seed, fresnel=fresnel, chunk=chunk, progress=progress):
+        w = b.w * acceptance(design, n_s, b.sx, b.sy)
+        np.add.at(reach, np.zeros(w.size, np.int64), w)
+        row, k = pixel_hit(design, b.x, b.y)
+        on = row >= 0
+        chain = np.all((b.hole_row == row[:, None]) & (b.hole_k == k[:, None]), axis=1) & on
+        own = chain & (row == own_r) & (k == own_k)
+        cat = np.where(~on, 3, np.where(own, 0, np.where(chain, 1, 2)))
+        np.add.at(parts, cat, w)
+        col = np.floor(b.x / pitch + 0.5).astype(np.int64) - col0
+        line = np.floor(b.y / pitch + 0.5).astype(np.int64)
+        ok = (col >= 0) & (col < grid.shape[1]) & (line >= 0) & (line < s.lines)
+        np.add.at(grid, (line[ok], col[ok]), w[ok])
+        ix = np.floor((b.x - ex[0]) / bin_um).astype(np.int64)
+        iy = np.floor((b.y - ey[0]) / bin_um).astype(np.int64)
+        ok = (ix >= 0) & (ix < ex.size - 1) & (iy >= 0) & (iy < ey.size - 1)
+        np.add.at(fine, (iy[ok], ix[ok]), w[ok])
+    tot = parts.sum()
+    frac = parts / tot if tot > 0 else parts
+    used = []
+    for r in range(lat.n_rows):
+        for kk in range(
+            int(np.floor((ex[0] - lat.row_x[r]) / lat.pitch)),
+            int(np.ceil((ex[-1] - lat.row_x[r]) / lat.pitch)) + 1,
+        ):
+            if lat.k_lo <= kk <= lat.k_hi:
+                px, py = lat.centers(r, kk)
+                used.append((float(px), float(py)))
+    ox, oy = lat.centers(own_r, own_k)
+    return PSF(
+        design.name,
+        design.fingerprint(),
+        seed,
+        n_rays,
+        x_obj_um,
+        y_obj_um,
+        z_mm,
+        float(frac[0]),
+        float(frac[1]),
+        float(frac[2]),
+        float(frac[3]),
+        float(reach[0]) / n_rays,
+        {"row": "AB"[own_r], "k": own_k, "x_um": float(ox), "y_um": float(oy)},
+        grid / n_rays,
+        (col0 - 0.5) * pitch,
+        pitch,
+        fine / (n_rays * bin_um**2),
+        ex,
+        ey,
+        used,
+        (s.sensitive_width_um, s.sensitive_height_um),
+        {"fresnel": fresnel},
+    )

@@ -1,0 +1,361 @@
+"""Command line: `opticalstamp ghosts | spots | psf | rmtf | efficiency | diffraction |
+measure-rmtf | sfr | report`."""
+
+from __future__ import annotations
+
+import functools
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..design import Design, load_design
+from ..validate import (
+    InputError,
+    check_number,
+    check_output_path,
+    check_seed,
+    parse_grid,
+    parse_numbers,
+)
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    rich_markup_mode=None,
+    help="Design and analyse lensless contact image scanners (optical stamps).",
+)
+
+
+def command(*args, **kwargs):
+    """``app.command`` whose body turns any :class:`InputError` into ``error: ...``, exit 2.
+
+    Options are checked by their callbacks while the command line is parsed (click reports
+    ``Invalid value for '--option'`` with exit 2); what only the library can check (a
+    design file, an image, a height map) raises InputError before any work is done. An
+    OSError while writing (disk full) is reported in one line with exit code 1.
+    """
+
+    def deco(fn):
+        @functools.wraps(fn)
+        def run(*a, **kw):
+            try:
+                return fn(*a, **kw)
+            except InputError as err:
+                _fail(str(err))
+            except OSError as err:  # the disk failed us mid-run: no traceback, exit 1
+                typer.echo(f"error: {err}", err=True)
+                raise typer.Exit(1) from None
+
+        return app.command(*args, **kwargs)(run)
+
+    return deco
+
+
+def number(lo=None, hi=None, *, lo_open=False, hi_open=False, integer=False):
+    """Option callback: a finite number in the interval (None passes: option not given)."""
+
+    def check(ctx: typer.Context, param: typer.CallbackParam, value):
+        if value is None or ctx.resilient_parsing:
+            return value
+        try:
+            check_number(value, "value", lo, hi, lo_open=lo_open, hi_open=hi_open, integer=integer)
+        except InputError as err:
+            raise typer.BadParameter(str(err).removeprefix("value: ")) from None
+        return value
+
+    return check
+
+
+def writable(*suffixes: str, directory: bool = False, marker: str | None = None):
+    """Option callback: a writable output path with one of ``suffixes`` (see
+    :func:`check_output_path`)."""
+
+    def check(ctx: typer.Context, param: typer.CallbackParam, value):
+        if value is None or ctx.resilient_parsing:
+            return value
+        try:
+            check_output_path(value, "path", suffixes=suffixes, directory=directory, marker=marker)
+        except InputError as err:
+            raise typer.BadParameter(str(err).removeprefix("path: ")) from None
+        return value
+
+    return check
+
+
+DesignOpt = Annotated[str, typer.Option("--design", "-d", help="preset name or design TOML file")]
+
+
+def _seed(ctx: typer.Context, param: typer.CallbackParam, value):
+    try:
+        return check_seed(value, "--seed")
+    except InputError as err:
+        raise typer.BadParameter(str(err).removeprefix("--seed: ")) from None
+
+
+SeedOpt = Annotated[
+    int,
+    typer.Option(
+        "--seed", help="random seed, 0 to 2^63-1 (results are reproducible)", callback=_seed
+    ),
+]
+RaysOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--rays",
+        help="number of rays, 1000 to 1e10 (default: automatic)",
+        callback=number(1000, 1e10, integer=True),
+    ),
+]
+JsonOpt = Annotated[bool, typer.Option("--json", help="print machine-readable JSON on stdout")]
+PlotOpt = Annotated[
+    Path | None, typer.Option("--plot", help="write a PNG figure", callback=writable(".png"))
+]
+FresnelOpt = Annotated[bool, typer.Option("--fresnel", help="apply Fresnel transmission losses")]
+
+
+_fraction = number(0, 1, lo_open=True, hi_open=True)
+_z_mm = number(0, 100)
+_coordinate = number(-1e5, 1e5)
+
+
+def _fail(msg: str) -> None:
+    typer.echo(f"error: {msg}", err=True)
+    raise typer.Exit(2)
+
+
+def _design(spec: str) -> Design:
+    """Load a design (InputError: exit 2); print its geometric-optics warnings."""
+    from ..analysis.diffraction import geometric_optics_warnings
+
+    d = load_design(spec)
+    for w in geometric_optics_warnings(d):
+        typer.echo(f"warning: {w}", err=True)
+    return d
+
+
+def _floats(text: str, name: str, lo: float = 0.0, hi: float = 1000.0) -> tuple[float, ...]:
+    return parse_numbers(text, name, lo, hi)
+
+
+def _z_grid(text: str, hi: float = 100.0) -> tuple[float, ...]:
+    return parse_grid(text, "--z", 0.0, hi)
+
+
+def _rays(n: int | None, default: int) -> int:
+    return default if n is None else n
+
+
+def _resolution(path: Path, file_dpi: float | None, dpi: float | None, lo: float) -> float:
+    """The image's dpi: --dpi, else the file's; checked to lie in [lo, 20000]."""
+    use = dpi or file_dpi
+    if use is None:
+        _fail(f"{path}: the file carries no resolution; give --dpi")
+    check_number(use, "--dpi" if dpi else f"{path}: resolution", lo, 20000)
+    return use
+
+
+def _emit(data: dict, as_json: bool, lines: list[str]) -> None:
+    from ..io.files import to_json
+
+    if as_json:
+        sys.stdout.write(to_json(data) + "\n")
+    else:
+        typer.echo("\n".join(lines))
+
+
+def _plot(fig, path: Path | None) -> None:
+    if path is not None:
+        from ..io.files import save_figure
+
+        save_figure(fig, path)
+        typer.echo(f"wrote {path}", err=True)
+
+
+@command()
+def ghosts(
+    design: DesignOpt = "paper2016",
+    seed: SeedOpt = 0,
+    rays: RaysOpt = None,
+    z: Annotated[str, typer.Option(help="object distances (mm), comma-separated")] = "0",
+    rse_own: Annotated[
+        float, typer.Option(help="target relative SE, own path", callback=_fraction)
+    ] = 1e-3,
+    rse_ghost: Annotated[
+        float, typer.Option(help="target relative SE, ghosts", callback=_fraction)
+    ] = 1e-2,
+    row: Annotated[str, typer.Option(help="pixel row, A or B")] = "A",
+    detector_um: Annotated[
+        float,
+        typer.Option(
+            help="half width of the virtual detector on the object plane (um), (0, 1e6]",
+            callback=number(0, 1e6, lo_open=True),
+        ),
+    ] = 500.0,
+    fresnel: FresnelOpt = False,
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """Ghost (crosstalk) paths of one pixel: etendue, ghost fraction, where ghosts land."""
+    from ..analysis.ghosts import analyse_ghosts
+    from ..io.files import provenance
+
+    d = _design(design)
+    if row not in ("A", "B") or (row == "B" and d.sensor.rows == 1):
+        _fail("--row: must be A, or B for a two-row design")
+    zs = _floats(z, "--z", 0.0, 100.0)
+    r = analyse_ghosts(
+        d,
+        pixel=("AB".index(row), 0),
+        z_mm=zs,
+        n_rays=None if rays is None else _rays(rays, 0),
+        rse_own=rse_own,
+        rse_ghost=rse_ghost,
+        seed=seed,
+        fresnel=fresnel,
+        detector_half_um=detector_um,
+        progress=not as_json,
+    )
+    data = r.to_dict() | {"provenance": provenance(d, seed)}
+    lines = [
+        f"design {d.name}: pixel {row}0, {r.n_rays:,} rays",
+        f"own-path etendue   {r.etendue_own_um2sr:.5g} +- {r.etendue_own_se:.2g} um^2 sr",
+        f"ghost etendue      {r.etendue_ghost_um2sr:.5g} +- {r.etendue_ghost_se:.2g} um^2 sr",
+        f"ghost fraction     {r.ghost_fraction:.4g} +- {r.ghost_fraction_se:.2g}",
+    ]
+    for zk, v in r.landing.items():
+        lines.append(
+            f"Z = {zk} mm: nearest ghost light {v['nearest_um']} um from the axis, "
+            f"{v['within_detector_um2sr']:.3g} um^2 sr inside +-{detector_um:g} um"
+        )
+    for p in r.paths[:10]:
+        hs = ", ".join(f"{h['mask']} {h['row']} {h['dk']:+d}" for h in p.holes)
+        lines.append(
+            f"  {p.etendue_um2sr:9.4g} um^2 sr  {p.share:6.1%}  [{hs}]  "
+            f"{p.emission_angle_deg[0]:.1f}-{p.emission_angle_deg[1]:.1f} deg"
+        )
+    _emit(data, as_json, lines)
+    if plot:
+        from ..report.plotting import plot_ghosts
+
+        _plot(plot_ghosts(r), plot)
+
+
+@command()
+def spots(
+    design: DesignOpt = "paper2016",
+    seed: SeedOpt = 0,
+    rays: RaysOpt = None,
+    z: Annotated[str, typer.Option(help="object distances (mm)")] = "0,1,2,3,4",
+    no_ghosts: Annotated[bool, typer.Option("--no-ghosts", help="leave ghost light out")] = False,
+    fresnel: FresnelOpt = False,
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """Responsivity map (spot) of one pixel on the object plane at each Z (paper Fig. 5)."""
+    from ..analysis.spots import spots as run
+    from ..io.files import provenance
+
+    d = _design(design)
+    r = run(
+        d,
+        z_mm=_floats(z, "--z", 0.0, 100.0),
+        n_rays=_rays(rays, 1 << 22),
+        seed=seed,
+        fresnel=fresnel,
+        ghosts=not no_ghosts,
+        progress=not as_json,
+    )
+    data = r.to_dict() | {"provenance": provenance(d, seed)}
+    lines = [
+        f"design {d.name}: spots of pixel A0 ({r.n_rays:,} rays)",
+        "Z (mm)  extent x/y (um)   FWHM x/y (um)   centre-cell fraction",
+    ]
+    for s in r.spots:
+        lines.append(
+            f"{s.z_mm:6g}  {s.extent_x_um:7.1f} {s.extent_y_um:7.1f}  "
+            f"{s.fwhm_x_um:7.1f} {s.fwhm_y_um:7.1f}   {s.center_cell_fraction:.3f}"
+        )
+    _emit(data, as_json, lines)
+    if plot:
+        from ..report.plotting import plot_spots
+
+        _plot(plot_spots(r), plot)
+
+
+@command()
+def psf(
+    design: DesignOpt = "paper2016",
+    seed: SeedOpt = 0,
+    rays: RaysOpt = None,
+    z: Annotated[
+        float, typer.Option(help="object distance Z (mm), 0 to 100", callback=_z_mm)
+    ] = 1.0,
+    x_obj: Annotated[
+        float, typer.Option(help="object point x (um), |x| <= 1e5", callback=_coordinate)
+    ] = 0.0,
+    y_obj: Annotated[
+        float, typer.Option(help="object point y (um), |y| <= 1e5", callback=_coordinate)
+    ] = 0.0,
+    fresnel: FresnelOpt = False,
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """Where light from a Lambertian object point lands on the sensor (paper Fig. 10)."""
+    from ..analysis.spots import psf as run
+    from ..io.files import provenance
+
+    d = _design(design)
+    r = run(
+        d,
+        x_obj_um=x_obj,
+        y_obj_um=y_obj,
+        z_mm=z,
+        n_rays=_rays(rays, 1 << 22),
+        seed=seed,
+        fresnel=fresnel,
+        progress=not as_json,
+    )
+    data = r.to_dict() | {"provenance": provenance(d, seed)}
+    lines = [
+        f"design {d.name}: point ({x_obj:g}, {y_obj:g}) um at Z = {z:g} mm",
+        f"own pixel {r.own_pixel_id['row']}{r.own_pixel_id['k']}: {r.own_pixel:.4f}",
+        f"neighbours, own-path blur: {r.neighbour_own_path:.4f}",
+        f"ghosts: {r.neighbour_ghost:.4f}",
+        f"insensitive area: {r.insensitive:.4f}",
+        f"(fractions of the {r.reaching_sensor:.3g} of emitted power reaching the sensor)",
+    ]
+    _emit(data, as_json, lines)
+    if plot:
+        from ..report.plotting import plot_psf
+
+        _plot(plot_psf(r), plot)
+
+
+@command()
+def report(
+    design: DesignOpt = "paper2016",
+    seed: SeedOpt = 0,
+    rays: RaysOpt = None,
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            help="output folder (replaced as a whole)",
+            callback=writable(directory=True, marker="report.json"),
+        ),
+    ] = Path("report"),
+    fresnel: FresnelOpt = False,
+) -> None:
+    """Run every analysis and write JSON, PNG figures and one HTML page."""
+    from ..report.build import build_report
+
+    d = _design(design)
+    build_report(d, out, seed=seed, n_rays=_rays(rays, 1 << 22), fresnel=fresnel, progress=True)
+    typer.echo(f"wrote {out / 'index.html'} and {out / 'report.json'}")
+
+
+def main() -> None:  # pragma: no cover
+    app()

@@ -1,0 +1,345 @@
+"""Commands of the image-quality metrics: rmtf, efficiency, diffraction, measure-rmtf, sfr."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from .common import (
+    DesignOpt,
+    FresnelOpt,
+    JsonOpt,
+    PlotOpt,
+    RaysOpt,
+    SeedOpt,
+    _design,
+    _emit,
+    _fail,
+    _floats,
+    _plot,
+    _rays,
+    _resolution,
+    _z_grid,
+    command,
+    number,
+)
+
+
+def _dpi_list(text: str) -> tuple[float, ...]:
+    return _floats(text, "--dpi", 1.0, 5000.0)
+
+
+@command()
+def rmtf(
+    design: DesignOpt = "paper2016",
+    seed: SeedOpt = 0,
+    rays: RaysOpt = None,
+    dpi: Annotated[str, typer.Option(help="chart resolutions (dpi), comma-separated")] = (
+        "100,150,200,247"
+    ),
+    z: Annotated[str, typer.Option(help="object distances (mm), or START:STOP:STEP")] = (
+        "0:4.5:0.25"
+    ),
+    ghosts: Annotated[bool, typer.Option("--ghosts/--no-ghosts", help="count ghost light")] = True,
+    method: Annotated[str, typer.Option(help="trace (exact) or paraxial (closed form)")] = "trace",
+    window_um: Annotated[
+        float,
+        typer.Option(
+            help="chart window for Imax/Imin (um), (0, 1e6]", callback=number(0, 1e6, lo_open=True)
+        ),
+    ] = 5000.0,
+    shift_um: Annotated[
+        float,
+        typer.Option(
+            help="chart shift step (um), (0, 1000]", callback=number(0, 1000, lo_open=True)
+        ),
+    ] = 1.0,
+    threshold: Annotated[
+        float,
+        typer.Option(
+            help="RMTF threshold of the depth of field, (0, 1)",
+            callback=number(0, 1, lo_open=True, hi_open=True),
+        ),
+    ] = 0.3,
+    dof_dpi: Annotated[
+        float,
+        typer.Option(help="chart dpi of the depth of field, 1 to 5000", callback=number(1, 5000)),
+    ] = 200.0,
+    fresnel: FresnelOpt = False,
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """RMTF of bar charts versus object distance and the depth of field (paper Fig. 11)."""
+    from ..analysis.rmtf import rmtf as run
+    from ..io.files import provenance
+
+    d = _design(design)
+    if method not in ("trace", "paraxial"):
+        _fail(f"--method: must be trace or paraxial (got {method!r})")
+    if method == "paraxial" and any(m.shape == "circle" for m in d.masks):
+        _fail("--method paraxial: needs rectangular holes (this design has circular ones)")
+    zs = _z_grid(z)
+    r = run(
+        d,
+        dpi=_dpi_list(dpi),
+        z_mm=zs,
+        method=method,
+        ghosts=ghosts,
+        fresnel=fresnel,
+        n_rays=_rays(rays, 1 << 21),
+        seed=seed,
+        window_um=window_um,
+        shift_step_um=shift_um,
+        dof_threshold=threshold,
+        dof_dpi=dof_dpi,
+        progress=not as_json,
+    )
+    data = r.to_dict() | {"provenance": provenance(d, seed)}
+    keys = list(r.rmtf_max)
+    lines = [f"design {d.name}: RMTF (max over chart shifts), {r.method}, ghosts {r.ghosts}"]
+    lines.append("Z (mm) " + "".join(f"{k + ' dpi':>10}" for k in keys))
+    for i, zz in enumerate(r.z_mm):
+        lines.append(f"{zz:6.2f} " + "".join(f"{r.rmtf_max[k][i]:10.3f}" for k in keys))
+    lines.append(
+        "depth of field (RMTF >= "
+        + f"{threshold:g}): "
+        + ", ".join(f"{k} dpi {v:.2f} mm" for k, v in r.dof_mm.items())
+    )
+    _emit(data, as_json, lines)
+    if plot:
+        from ..report.plotting import plot_rmtf
+
+        _plot(plot_rmtf(r), plot)
+
+
+@command()
+def efficiency(
+    design: DesignOpt = "paper2016",
+    seed: SeedOpt = 0,
+    study: Annotated[
+        bool, typer.Option("--study", help="also run the study of the unstated parameters")
+    ] = False,
+    fresnel: FresnelOpt = False,
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """Light efficiency against the paper's reference lens (Fig. 13), working F-number."""
+    from ..analysis.efficiency import efficiency as run
+    from ..io.files import provenance
+
+    d = _design(design)
+    r = run(d, seed=seed, fresnel=fresnel, progress=not as_json)
+    data = r.to_dict() | {"provenance": provenance(d, seed)}
+    lines = [
+        f"design {d.name}: etendue of one pixel {r.etendue_um2sr:.4g} +- {r.etendue_se:.2g}"
+        f" um^2 sr (own path {r.etendue_own_um2sr:.4g})",
+        f"reference lens (F {r.reference_f_number:g}, 84.6 um pixel): "
+        f"{r.reference_etendue_um2sr:.4g} um^2 sr",
+        f"ratio 1/{1 / r.ratio:.1f} (own path only 1/{1 / r.ratio_own:.1f}); working F-number "
+        f"{r.working_f_number:.1f} ({r.working_f_number_own:.1f}); paper: 1/36, F 60",
+    ]
+    for a in r.sensitive_area:
+        lines.append(
+            f"sensitive area {a['sensitive_um'][0]:.1f} um ({a['area_scale']:g}x area): "
+            f"{a['gain_vs_design']:.2f}x the light ({a['gain_own_vs_design']:.2f}x own path)"
+        )
+    if study:
+        from ..analysis.paper_study import parameter_study
+
+        st = parameter_study(d, seed=seed, progress=not as_json)
+        data["study"] = st.to_dict()
+        lines.append("shape   area  gap   fresnel glass  1/ratio   F    DOF(mm) ghost  paper?")
+        for row in st.rows:
+            ok = "yes" if row["consistent_efficiency"] and row["consistent_dof"] else ""
+            lines.append(
+                f"{row['hole_shape']:7} {row['sensitive_um']:5.1f} {str(row['gap_medium']):5} "
+                f"{str(row['fresnel']):7} {row['glass_index']:5.2f}  {row['inverse_ratio']:6.1f}"
+                f" {row['working_f_number']:5.1f} {row['dof_mm']:6.2f}  "
+                f"{row['ghost_fraction']:.3f}  {ok}"
+            )
+    _emit(data, as_json, lines)
+    if plot:
+        from ..report.plotting import plot_efficiency
+
+        _plot(plot_efficiency(r), plot)
+
+
+@command()
+def diffraction(
+    design: DesignOpt = "paper2016",
+    slit_um: Annotated[
+        float,
+        typer.Option(help="slit width (um), (0, 10000]", callback=number(0, 1e4, lo_open=True)),
+    ] = 48.0,
+    wavelength_um: Annotated[str, typer.Option(help="wavelengths (um), comma-separated")] = (
+        "0.4,0.7"
+    ),
+    z: Annotated[
+        float, typer.Option(help="point source distance Z (mm), 0 to 100", callback=number(0, 100))
+    ] = 1.0,
+    gap_um: Annotated[
+        float,
+        typer.Option(
+            help="air-equivalent source gap above Z=0 (um), 0 to 1e6", callback=number(0, 1e6)
+        ),
+    ] = 1000.0,
+    next_um: Annotated[
+        float,
+        typer.Option(
+            help="air-equivalent distance to the next layer (um), (0, 1e6]",
+            callback=number(0, 1e6, lo_open=True),
+        ),
+    ] = 1000.0 / 1.52,
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """Fresnel diffraction of a slit (paper Fig. 6) and the design's per-layer budget."""
+    from ..analysis.diffraction import diffraction_budget, slit_case
+
+    d = _design(design)
+    waves = _floats(wavelength_um, "--wavelength-um", 0.2, 2.0)
+    r = slit_case(slit_um=slit_um, z_mm=z, gap_um=gap_um, r2_um=next_um, wavelengths_um=waves)
+    b = diffraction_budget(d, z_mm=z, wavelengths_um=waves)
+    data = r.to_dict() | {"budget": b}
+    lines = [
+        f"slit {slit_um:g} um, source Z = {z:g} mm (R1 {r.r1_um:.0f} um), next layer "
+        f"{r.r2_um:.0f} um: geometric edge X = {r.geometric_edge_um:.2f} um",
+    ]
+    for k, v in r.fraction_outside.items():
+        lines.append(f"  {k} um: {v:.1%} of the light outside the geometric edge")
+    lines.append(f"design {d.name}, per-layer budget at Z = {z:g} mm:")
+    for row in b["layers"]:
+        outs = ", ".join(
+            f"{k} um: {row['outside_shadow'][k]:.1%} outside shadow, "
+            f"{row['outside_next'][k]:.1%} outside {row['next']}"
+            for k in row["outside_shadow"]
+        )
+        lines.append(
+            f"  {row['layer']} ({row['hole_um']:g} um {row['shape']}): {outs} "
+            f"(geometric {row['outside_next_geometric']:.1%})"
+        )
+    for w in b["warnings"]:
+        lines.append(f"warning: {w}")
+    _emit(data, as_json, lines)
+    if plot:
+        from ..report.plotting import plot_diffraction
+
+        _plot(plot_diffraction(r), plot)
+
+
+def _image(path: Path, dpi: float | None, linear: bool, min_px: int = 8):
+    """An image checked from its header (``min_px`` pixels a side at least) and read."""
+    from ..io.files import ImageError, read_image
+
+    try:
+        img, file_dpi = read_image(path, linear=linear, dpi=dpi, min_px=min_px)
+    except ImageError as err:
+        _fail(str(err))
+    return img, _resolution(path, file_dpi, dpi, 10.0)
+
+
+ImageArg = Annotated[Path, typer.Argument(help="image file (PNG, TIFF, JPEG)")]
+DpiOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="image resolution, 10 to 20000 dpi (default: from the file)",
+        callback=number(10, 20000),
+    ),
+]
+LinearOpt = Annotated[bool, typer.Option("--linear", help="decode sRGB values to linear first")]
+
+
+@command("measure-rmtf")
+def measure_rmtf(
+    image: ImageArg,
+    dpi: DpiOpt = None,
+    axis: Annotated[str, typer.Option(help="x: bars vary along x; y: along y")] = "x",
+    linear: LinearOpt = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Find the bar blocks of a chart image and measure RMTF per period (paper Fig. 12)."""
+    from ..imaging.measure import measure_rmtf as run
+
+    if axis not in ("x", "y"):
+        _fail(f"--axis: must be x or y (got {axis!r})")
+    img, use = _image(image, dpi, linear)
+    blocks = run(img, use, axis="xy".index(axis))
+    if not blocks:
+        _fail(f"{image}: no bar blocks found (need >= 3 periods of equal bars along {axis})")
+    data = {"image": str(image), "dpi": use, "blocks": blocks}
+    lines = [f"{image} at {use:g} dpi:", "period (um)   dpi    periods  Imax    Imin    RMTF"]
+    for b in blocks:
+        lines.append(
+            f"{b['period_um']:10.1f} {b['dpi']:6.1f} {b['n_periods']:8.1f} "
+            f"{b['imax']:7.4f} {b['imin']:7.4f} {b['rmtf']:7.4f}"
+        )
+    _emit(data, as_json, lines)
+
+
+@command()
+def sfr(
+    image: ImageArg,
+    dpi: DpiOpt = None,
+    direction: Annotated[
+        str, typer.Option(help="x, y, auto (one edge) or both (a slanted dark square)")
+    ] = "auto",
+    roi: Annotated[str | None, typer.Option(help="region x0,y0,x1,y1 (pixels)")] = None,
+    linear: LinearOpt = False,
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """Slanted-edge SFR (ISO 12233 e-SFR) of an image: curve, MTF50, 100/200-dpi values."""
+    from ..imaging.measure import sfr as run
+
+    img, use = _image(image, dpi, linear, min_px=16)
+    if roi:
+        box = _floats(roi, "--roi", 0, 1e6)
+        if len(box) != 4:
+            _fail("--roi: expected x0,y0,x1,y1")
+        x0, y0, x1, y1 = (int(v) for v in box)
+        if not (x0 < x1 <= img.shape[1] and y0 < y1 <= img.shape[0]):
+            _fail(f"--roi: must lie inside the {img.shape[1]} x {img.shape[0]} image")
+        img = img[y0:y1, x0:x1]
+    if direction == "both":
+        from ..imaging.measure import sfr_xy
+
+        if roi:
+            _fail("--roi: not with --direction both (the square's edges are found)")
+        try:
+            both = sfr_xy(img, use)
+        except ValueError as err:
+            _fail(f"{image}: {err}")
+        data = {"image": str(image), "dpi": use} | both
+        lines = [f"{image} at {use:g} dpi, slanted square:"]
+        for axis, r in both.items():
+            lines.append(
+                f"  along {axis}: MTF50 {r['mtf50_cy_per_mm']:.3f} cycles/mm; SFR at 100 dpi "
+                f"{r['sfr_at_dpi']['100']:.3f}, at 200 dpi {r['sfr_at_dpi']['200']:.3f}"
+            )
+        _emit(data, as_json, lines)
+        if plot:
+            from ..report.plotting import plot_sfr
+
+            _plot(plot_sfr(both["x"], f"{image.name} (x)", extra=both["y"]), plot)
+        return
+    try:
+        r = run(img, use, direction=direction)
+    except ValueError as err:
+        _fail(f"{image}: {err}")
+    if "roi" in r and roi:  # the square's edge found inside --roi: image coordinates
+        r["roi"] = [v + (x0, y0)[i % 2] for i, v in enumerate(r["roi"])]
+    data = {"image": str(image), "dpi": use} | r
+    lines = [
+        f"{image} at {use:g} dpi: edge along {r['direction']}, angle {r['edge_angle_deg']:.2f} deg",
+        f"MTF50 {r['mtf50_cy_per_mm']:.3f} cycles/mm; SFR at 100 dpi {r['sfr_at_dpi']['100']:.3f}"
+        f", at 200 dpi {r['sfr_at_dpi']['200']:.3f}",
+    ]
+    if "roi" in r:
+        lines.insert(1, "the left edge of the dark square, region {},{},{},{}".format(*r["roi"]))
+    _emit(data, as_json, lines)
+    if plot:
+        from ..report.plotting import plot_sfr
+
+        _plot(plot_sfr(r, str(image.name)), plot)

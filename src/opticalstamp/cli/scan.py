@@ -1,0 +1,281 @@
+"""Commands of the scan simulation: scan, chart, ocr-eval."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from ..validate import check_output_path
+from .common import (
+    DesignOpt,
+    JsonOpt,
+    SeedOpt,
+    _design,
+    _emit,
+    _fail,
+    _floats,
+    _resolution,
+    command,
+    number,
+    writable,
+)
+from .metrics import DpiOpt, ImageArg
+
+
+def _document(path: Path, dpi: float | None, color: bool, min_px: int = 2):
+    """A document checked from its header (``min_px`` pixels a side at least) and read."""
+    from ..io.files import ImageError, read_document
+
+    try:
+        doc, file_dpi = read_document(path, color=color, dpi=dpi, min_px=min_px)
+    except ImageError as err:
+        _fail(str(err))
+    use = _resolution(path, file_dpi, dpi, 50.0)
+    if use < 600:
+        typer.echo(
+            f"warning: {path} is sampled at {use:g} dpi; at least 600 dpi is recommended "
+            "(the document's own pixels blur the simulated 300-dpi scan)",
+            err=True,
+        )
+    return doc, use
+
+
+def _height(spec: str | None, z: float | None, doc_shape, dpi: float, seed: int):
+    from ..imaging.heightmap import HeightMapError, load_height_map
+
+    if (spec is None) == (z is None):
+        _fail("give exactly one of --z MM and --height-map FILE|SHAPE")
+    if spec is None:
+        if not 0 <= z <= 10:
+            _fail(f"--z: must lie in [0, 10] mm (got {z:g})")
+        return None
+    h_mm, w_mm = doc_shape[0] * 25.4 / dpi, doc_shape[1] * 25.4 / dpi
+    try:
+        return load_height_map(spec, h_mm, w_mm, seed)
+    except HeightMapError as err:
+        _fail(str(err))
+
+
+def _illumination_profile(path: Path) -> tuple:
+    try:
+        arr = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
+    except (OSError, ValueError) as err:
+        _fail(f"--illumination: cannot read {path} as CSV of x_mm,relative ({err})")
+    if arr.shape[1] != 2 or arr.shape[0] < 2 or np.any(np.diff(arr[:, 0]) <= 0):
+        _fail(f"--illumination: {path} needs two columns x_mm,relative with increasing x")
+    if np.any(arr[:, 1] < 0) or not np.all(np.isfinite(arr)):
+        _fail(f"--illumination: {path} has negative or non-finite values")
+    return tuple((float(a), float(b)) for a, b in arr)
+
+
+def _settings(
+    illumination: str,
+    kernel: str,
+    speed_error: float,
+    surround: float,
+    illuminance: float,
+    exposure: float,
+):
+    from pydantic import ValidationError
+
+    from ..imaging.scan import ScanSettings
+    from ..imaging.sensor import SensorModel
+
+    profile = None
+    if illumination not in ("uniform", "ripple"):
+        profile = _illumination_profile(Path(illumination))
+        illumination = "uniform"
+    try:
+        sensor = SensorModel(illuminance_lux=illuminance, exposure_ms=exposure)
+        return ScanSettings(
+            sensor=sensor,
+            illumination=illumination,
+            illumination_profile=profile,
+            kernel=kernel,
+            speed_error=speed_error,
+            surround=surround,
+        )
+    except ValidationError as err:
+        e = err.errors()[0]
+        name = {"illuminance_lux": "illuminance-lux", "exposure_ms": "exposure-ms"}.get(
+            str(e["loc"][-1]), str(e["loc"][0]).replace("_", "-")
+        )
+        _fail(f"--{name}: {e['msg']} (got {e.get('input')!r})")
+
+
+def _scan_outputs(output: Path) -> tuple[Path, Path, Path]:
+    """The PNG, TIFF and JSON of a scan set; the name given with -o keeps its spelling."""
+    png = output if output.suffix.lower() == ".png" else output.with_suffix(".png")
+    tif = output if output.suffix.lower() != ".png" else output.with_suffix(".tif")
+    sidecar = output.with_suffix(".json")
+    for p in (png, tif, sidecar):
+        check_output_path(p, "-o")
+    return png, tif, sidecar
+
+
+@command()
+def scan(
+    image: ImageArg,
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o",
+            "--output",
+            help="output .png or .tif (the .png, .tif and .json beside it are written as a set)",
+            callback=writable(".png", ".tif", ".tiff"),
+        ),
+    ],
+    z: Annotated[
+        float | None, typer.Option(help="float height (mm), 0 to 10", callback=number(0, 10))
+    ] = None,
+    height_map: Annotated[
+        str | None, typer.Option(help="height map: .npy/.tif in mm, or tilt/gutter/crumple")
+    ] = None,
+    design: DesignOpt = "paper2016",
+    seed: SeedOpt = 0,
+    dpi: DpiOpt = None,
+    noiseless: Annotated[bool, typer.Option("--noiseless", help="no noise (analysis)")] = False,
+    no_ghosts: Annotated[bool, typer.Option("--no-ghosts", help="leave ghost light out")] = False,
+    color: Annotated[bool, typer.Option("--color", help="sequential R, G, B LEDs")] = False,
+    illumination: Annotated[
+        str, typer.Option(help="uniform, ripple, or a CSV file of x_mm,relative")
+    ] = "uniform",
+    illuminance_lux: Annotated[
+        float,
+        typer.Option(
+            help="illuminance on the page (lux), (0, 1e7]", callback=number(0, 1e7, lo_open=True)
+        ),
+    ] = 10_000.0,
+    exposure_ms: Annotated[
+        float,
+        typer.Option(
+            help="exposure per line (ms), (0, 10000]", callback=number(0, 1e4, lo_open=True)
+        ),
+    ] = 1.0,
+    kernel: Annotated[str, typer.Option(help="auto, paraxial or trace")] = "auto",
+    speed_error: Annotated[
+        float,
+        typer.Option(
+            help="relative scan-speed error, (-0.5, 0.5)",
+            callback=number(-0.5, 0.5, lo_open=True, hi_open=True),
+        ),
+    ] = 0.0,
+    surround: Annotated[
+        float, typer.Option(help="reflectance outside the page, 0 to 1", callback=number(0, 1))
+    ] = 0.0,
+) -> None:
+    """Simulate the scanner's output for a document at a float height (paper Figs. 8, 9)."""
+    import json
+
+    from ..imaging.scan import simulate_scan
+    from ..io.files import encode_png, encode_tiff16, provenance, to_json, write_set
+
+    png, tif, sidecar = _scan_outputs(output)
+    d = _design(design)
+    st = _settings(illumination, kernel, speed_error, surround, illuminance_lux, exposure_ms)
+    doc, use = _document(image, dpi, color)
+    hm = _height(height_map, z, doc.shape, use, seed)
+    try:
+        r = simulate_scan(
+            doc,
+            use,
+            d,
+            z_mm=z,
+            height_map=hm,
+            settings=st,
+            seed=seed,
+            ghosts=not no_ghosts,
+            noiseless=noiseless,
+            color=color,
+            progress=True,
+        )
+    except ValueError as err:
+        _fail(str(err))
+    meta = provenance(d, seed) | {k: v for k, v in r.meta.items() if k != "settings"}
+    meta |= {
+        "input": str(image),
+        "output_dpi": r.dpi,
+        "settings": r.meta["settings"],
+        "height_map_spec": height_map,
+    }
+    write_set(
+        {
+            png: encode_png(r.image, r.dpi),
+            tif: encode_tiff16(r.image, r.dpi, description=json.dumps(meta)),
+        },
+        sidecar,
+        json.loads(to_json(meta)),
+    )
+    typer.echo(
+        f"wrote {png} (8-bit sRGB), {tif} (16-bit linear) and {sidecar}: "
+        f"{r.image.shape[1]} x {r.image.shape[0]} pixels at {r.dpi:.1f} dpi",
+        err=True,
+    )
+
+
+@command()
+def chart(
+    kind: Annotated[str, typer.Argument(help="bars, edge, text or lines")],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="output .png", callback=writable(".png"))
+    ],
+    dpi: Annotated[
+        float, typer.Option(help="resolution of the chart, 100 to 4800", callback=number(100, 4800))
+    ] = 1200.0,
+) -> None:
+    """Write a built-in test chart (bar charts, slanted edge, 8-pt text, fine lines)."""
+    from ..imaging.charts import KINDS, make_chart
+    from ..io.files import write_atomic, write_png
+
+    if kind not in KINDS:
+        _fail(f"KIND: must be one of {', '.join(KINDS)} (got {kind!r})")
+    img, text = make_chart(kind, dpi)
+    write_png(output, img, dpi)
+    if text is not None:
+        write_atomic(output.with_suffix(".txt"), text + "\n")
+    typer.echo(f"wrote {output} ({img.shape[1]} x {img.shape[0]} at {dpi:g} dpi)", err=True)
+
+
+@command("ocr-eval")
+def ocr_eval(
+    image: ImageArg,
+    text: Annotated[Path, typer.Option("--text", help="ground-truth text file")],
+    z: Annotated[str, typer.Option(help="float heights (mm)")] = "0.5,1.5,2.5,3.5",
+    design: DesignOpt = "paper2016",
+    seed: SeedOpt = 0,
+    dpi: DpiOpt = None,
+    noiseless: Annotated[bool, typer.Option("--noiseless", help="no sensor noise")] = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Scan a text image at each Z, read it with Tesseract, report the character error rate."""
+    from ..imaging.ocr import OCRUnavailable, character_error_rate, recognise, require_tesseract
+    from ..imaging.scan import simulate_scan
+    from ..io.files import linear_to_srgb, provenance
+
+    d = _design(design)
+    try:
+        truth = text.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        _fail(f"--text: cannot read {text} ({err})")
+    doc, use = _document(image, dpi, False, min_px=32)  # one 8-pt line at 600 dpi: ~65 px
+    zs = _floats(z, "--z", 0.0, 10.0)
+    out = {"z_mm": list(zs), "cer": [], "text": []}
+    try:
+        require_tesseract()  # before the scans, not after the first
+    except OCRUnavailable as err:
+        _fail(str(err))
+    for zz in zs:
+        try:
+            r = simulate_scan(doc, use, d, z_mm=zz, seed=seed, noiseless=noiseless)
+        except ValueError as err:
+            _fail(f"{image}: {err}")
+        got = recognise(linear_to_srgb(r.image), r.dpi)
+        out["cer"].append(character_error_rate(truth, got))
+        out["text"].append(got)
+    data = out | {"provenance": provenance(d, seed)}
+    lines = [f"{image}: character error rate against {text}"]
+    lines += [f"Z = {zz:g} mm: CER {c:.3f}" for zz, c in zip(zs, out["cer"], strict=True)]
+    _emit(data, as_json, lines)

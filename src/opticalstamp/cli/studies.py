@@ -1,0 +1,302 @@
+"""Commands of the design studies: search, tolerance."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..validate import check_number
+from .common import (
+    DesignOpt,
+    JsonOpt,
+    PlotOpt,
+    SeedOpt,
+    _design,
+    _emit,
+    _fail,
+    _floats,
+    _plot,
+    command,
+    number,
+    writable,
+)
+
+DaskOpt = Annotated[
+    str | None, typer.Option("--dask", help="Dask scheduler address, tcp://HOST:PORT")
+]
+WorkersOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--workers",
+        help="local worker processes, 1 to 1024 (default: all cores)",
+        callback=number(1, 1024, integer=True),
+    ),
+]
+OutputOpt = Annotated[
+    Path | None,
+    typer.Option("-o", "--output", help="results .nc", callback=writable(".nc")),
+]
+_DPI = number(50, 2400)
+
+
+def _check_dask(address: str | None) -> None:
+    if address is not None and not address.startswith(("tcp://", "tls://", "inproc://")):
+        _fail(f"--dask: expected tcp://HOST:PORT (got {address!r})")
+
+
+def _journal(out: Path | None) -> Path | None:
+    return None if out is None else out.with_name(out.name + ".journal.jsonl")
+
+
+def _pins(text: str | None) -> dict:
+    if not text:
+        return {}
+    out = {}
+    for part in text.split(","):
+        k, _, v = part.partition("=")
+        try:
+            out[k.strip()] = float(v)
+        except ValueError:
+            _fail(f"--pin: expected NAME=VALUE pairs such as hole0=48,t2=1000 (got {part!r})")
+        check_number(out[k.strip()], f"--pin {part.strip()}")
+    return out
+
+
+@command()
+def search(
+    dpi: Annotated[
+        float,
+        typer.Option(help="target resolution of the merged line (dpi), 50 to 2400", callback=_DPI),
+    ] = 300.0,
+    design: DesignOpt = "paper2016",
+    seed: SeedOpt = 0,
+    dof_dpi: Annotated[
+        float, typer.Option(help="chart dpi of the depth of field, 50 to 2400", callback=_DPI)
+    ] = 200.0,
+    budget_mm: Annotated[
+        float,
+        typer.Option(help="total stack thickness budget (mm), 0.2 to 20", callback=number(0.2, 20)),
+    ] = 2.5,
+    near_mm: Annotated[
+        float,
+        typer.Option(
+            help="no ghost light within this distance (mm), 0 to 100", callback=number(0, 100)
+        ),
+    ] = 1.0,
+    max_ghost: Annotated[
+        float | None,
+        typer.Option(help="bound on the ghost fraction, 0 to 1", callback=number(0, 1)),
+    ] = None,
+    population: Annotated[
+        int,
+        typer.Option(
+            help="designs per generation, 4 to 1000", callback=number(4, 1000, integer=True)
+        ),
+    ] = 32,
+    generations: Annotated[
+        int,
+        typer.Option(help="NSGA-II generations, 1 to 1000", callback=number(1, 1000, integer=True)),
+    ] = 15,
+    pin: Annotated[str | None, typer.Option(help="fixed variables, e.g. hole0=48,t2=1000")] = None,
+    layers: Annotated[
+        str | None, typer.Option(help="also search other numbers of mask layers, e.g. 2,3")
+    ] = None,
+    stagger: Annotated[
+        str | None, typer.Option(help="stagger patterns to search: yes, no or yes,no")
+    ] = None,
+    workers: WorkersOpt = None,
+    dask: DaskOpt = None,
+    output: OutputOpt = None,
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """Search hole sizes and gaps for ghost-free, bright, deep designs (paper §3)."""
+    from ..io.files import provenance, save_dataset
+    from ..studies.search import base_for_dpi, search_dataset
+    from ..studies.search import search as run
+
+    _check_dask(dask)
+    d = _design(design)
+    merged = d.sensor.row_pitch_um / d.sensor.rows
+    # 300 dpi is 84.67 um; the paper's sensor is 84.6 um (600-dpi pixels of 42.3): within
+    # 1 % counts as the same resolution
+    base = d if abs(25400.0 / dpi / merged - 1) < 0.01 else base_for_dpi(d, dpi)
+    from ..studies.search import merged_front, structural_variants
+
+    if layers or stagger:
+        try:
+            n_l = [int(v) for v in (layers or str(len(base.masks))).split(",")]
+            sts = [v.strip() for v in (stagger or "yes").split(",")]
+            bases = structural_variants(base, layers=n_l, stagger=sts)
+        except ValueError as err:
+            _fail(f"--layers/--stagger: {err}")
+    else:
+        bases = {base.name: base}
+    results = {}
+    for i, (name, b) in enumerate(bases.items()):
+        out_i = output
+        if output is not None and len(bases) > 1:
+            out_i = output.with_name(f"{output.stem}.v{i}{output.suffix}")
+        try:
+            results[name] = run(
+                b,
+                dpi=dpi,
+                dof_dpi=dof_dpi,
+                budget_mm=budget_mm,
+                near_mm=near_mm,
+                max_ghost=max_ghost,
+                population=population,
+                generations=generations,
+                seed=seed,
+                pinned=_pins(pin),
+                workers=workers,
+                dask_address=dask,
+                journal=_journal(out_i),
+                progress=not as_json,
+            )
+        except (ValueError, OSError) as err:
+            _fail(str(err))
+        if out_i is not None:
+            save_dataset(search_dataset(results[name], b, seed), out_i)
+    r = next(iter(results.values()))
+    data = r.to_dict() | {"provenance": provenance(base, seed)}
+    if len(results) > 1:
+        data["pareto"] = merged_front(results)
+        data["variants"] = {k: v.to_dict() for k, v in results.items()}
+    lines = [
+        f"{base.name}: {sum(len(v.records) for v in results.values())} designs in "
+        f"{len(results)} variant(s); Pareto front (holes object side first, um; slabs sensor "
+        "first, um):"
+    ]
+    if not data["pareto"]:
+        recs = [x for v in results.values() for x in v.records if x["ok"]]
+        near = sum(x["nearest_ghost_mm"] < near_mm for x in recs)
+        over = sum(x["stack_um"] > budget_mm * 1000.0 for x in recs)
+        lines.append(
+            f"  no design met every constraint: of {len(recs)} evaluated, {near} had ghost light "
+            f"within --near-mm {near_mm:g}, {over} exceeded --budget-mm {budget_mm:g}"
+            + ("" if max_ghost is None else ", or the ghost fraction exceeded --max-ghost")
+            + "; relax a constraint or a --pin"
+        )
+    for p in data["pareto"]:
+        tag = f" [{p['variant']}]" if "variant" in p else ""
+        lines.append(
+            f"  holes {p['holes_um']} slabs {p['thicknesses_um']}: efficiency "
+            f"1/{1 / p['efficiency_ratio']:.0f}, DOF {p['dof_mm']:.2f} mm, ghosts "
+            f"{p['ghost_fraction']:.3f}{tag}"
+        )
+    for name, res in results.items():
+        ref = res.reference
+        if ref:
+            lines.append(
+                f"base {name}: efficiency 1/{1 / ref['efficiency_ratio']:.0f}, DOF "
+                f"{ref['dof_mm']:.2f} mm, ghosts {ref['ghost_fraction']:.3f}, dominated by "
+                f"{ref.get('dominated_by', 0)} of its variant's designs"
+            )
+    _emit(data, as_json, lines)
+    if plot:
+        from ..report.plotting import plot_pareto, plot_pareto_variants
+
+        _plot(plot_pareto(r) if len(results) == 1 else plot_pareto_variants(results), plot)
+
+
+@command()
+def tolerance(
+    design: DesignOpt = "paper2016",
+    seed: SeedOpt = 0,
+    misregistration_um: Annotated[
+        float,
+        typer.Option(help="sigma of x/y misregistration (um), 0 to 100", callback=number(0, 100)),
+    ] = 3.0,
+    hole_um: Annotated[
+        float, typer.Option(help="sigma of the hole sizes (um), 0 to 100", callback=number(0, 100))
+    ] = 1.0,
+    thickness_um: Annotated[
+        float,
+        typer.Option(help="sigma of plates and gaps (um), 0 to 1000", callback=number(0, 1000)),
+    ] = 10.0,
+    tilt_deg: Annotated[
+        float, typer.Option(help="sigma of the stack tilt (deg), 0 to 5", callback=number(0, 5))
+    ] = 0.02,
+    samples: Annotated[
+        int,
+        typer.Option(help="Monte Carlo samples, 1 to 1e6", callback=number(1, 1e6, integer=True)),
+    ] = 1000,
+    dpi: Annotated[
+        float, typer.Option(help="chart dpi of the RMTF, 50 to 2400", callback=_DPI)
+    ] = 200.0,
+    z: Annotated[str, typer.Option(help="distances of the RMTF (mm)")] = "0.5,1,2,3,3.5",
+    spec: Annotated[str | None, typer.Option(help="e.g. dof>=2.2,ghost<=0.2,rmtf@2>=0.35")] = (
+        None
+    ),
+    workers: WorkersOpt = None,
+    dask: DaskOpt = None,
+    output: OutputOpt = None,
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """Monte Carlo of assembly errors: RMTF, DOF, efficiency, ghosts, sensitivity, yield."""
+    from ..io.files import provenance, save_dataset
+    from ..studies.tolerance import parse_spec, tolerance_dataset
+    from ..studies.tolerance import tolerance as run
+
+    _check_dask(dask)
+    d = _design(design)
+    try:
+        parse_spec(spec)
+    except ValueError as err:
+        _fail(f"--spec: {err}")
+    zs = _floats(z, "--z", 0.0, 10.0)
+    sig = {
+        "misregistration_um": misregistration_um,
+        "hole_um": hole_um,
+        "thickness_um": thickness_um,
+        "tilt_deg": tilt_deg,
+    }
+    try:
+        r = run(
+            d,
+            samples=samples,
+            sigmas=sig,
+            dpi=dpi,
+            z_mm=zs,
+            spec=spec,
+            seed=seed,
+            workers=workers,
+            dask_address=dask,
+            journal=_journal(output),
+            progress=not as_json,
+        )
+    except (ValueError, OSError) as err:
+        _fail(str(err))
+    data = r.to_dict() | {"provenance": provenance(d, seed)}
+    if output is not None:
+        save_dataset(tolerance_dataset(r, d), output)
+    key = f"rmtf{dpi:g}"
+    lines = [f"{d.name}: {samples} samples ({data['n_failed']} failed)"]
+    for zz, pc in data[key].items():
+        lines.append(
+            f"  RMTF {dpi:g} dpi at Z = {zz} mm: median {pc['p50']:.3f} "
+            f"(5-95 %: {pc['p5']:.3f}-{pc['p95']:.3f}), nominal "
+            f"{r.nominal['rmtf_at'][zz]:.3f}"
+        )
+    dp = data["dof_mm"]
+    lines.append(
+        f"  DOF median {dp['p50']:.2f} mm (5-95 %: {dp['p5']:.2f}-{dp['p95']:.2f}), "
+        f"nominal {r.nominal['dof_mm']:.2f}"
+    )
+    lines.append(
+        "  most sensitive: "
+        + ", ".join(
+            f"{row['error']} ({row['d_dof_mm']:.3f} mm DOF per sigma)" for row in r.sensitivity[:5]
+        )
+    )
+    if r.yield_fraction is not None:
+        lines.append(f"  yield for {spec}: {r.yield_fraction:.1%}")
+    _emit(data, as_json, lines)
+    if plot:
+        from ..report.plotting import plot_tolerance
+
+        _plot(plot_tolerance(r), plot)

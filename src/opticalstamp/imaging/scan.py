@@ -1,0 +1,350 @@
+"""Scan simulation: from a document (linear reflectance) to the scanner's output image.
+
+Geometry (paper §4, Figs. 3, 8, 9, 12). The document moves along y by one line pitch L
+(84.6 um for the staggered 300-dpi prototype) per line period. Line m is exposed around
+the document position y_m = (m + 1/2) L (1 + speed error) (+ jitter); a pixel at sensor
+height s_row sees document point y = y_m - s_row + Y, so row B (s = 84.6 um) sees each
+document line one line period later than row A; the scanner merges row A's line m with
+row B's line m + d, d = s_B / L (paper §4). Columns: row A's pixels at x = k p + L/2,
+row B's at x = b_x + k p + L/2; merged, they form the 300-dpi columns (c + 1/2) L.
+
+Optics. A pixel's signal is the document's reflectance weighted by its responsivity map
+at the local Z (:mod:`opticalstamp.kernels`): the own path as separable terms applied as
+two sparse matrix products (along y, then x), exact for a document that is uniform within
+its pixels; motion smear averages the y factor over the exposure; ghost light is a coarse
+map convolved with the block-averaged document (FFT). Outside the document the
+reflectance is ``surround``. A height map is handled by computing kernels at levels
+``z_step_mm`` apart and blending each pixel's signals linearly in its local Z.
+
+Then illumination along x, photon and sensor noise (:mod:`opticalstamp.sensor`), dark and
+white calibration scans (mean of ``calibration_lines`` lines of a black and a white page at
+``calibration_z_mm``) and shading correction (raw - dark) / (white - dark).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+from scipy import ndimage, signal
+
+from ..design import Design
+from ..raytrace.stack import lattice_of
+from ..validate import check_seed
+from .heightmap import Z_RANGE_MM, check_range
+from .heightmap import sample as sample_height
+from .kernels import ScanKernel, scan_kernels
+from .sensor import SensorModel, expose, fixed_pattern
+from .separable import box_taps, inside, x_pass, y_pass
+
+
+class ScanSettings(BaseModel):
+    """Everything about a scan except the document, the design and the height."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    sensor: SensorModel = SensorModel()
+    illumination: str = Field("uniform", pattern="^(uniform|ripple)$")
+    ripple_amplitude: float = Field(0.05, ge=0, lt=1)  # relative, light-guide ripple
+    ripple_period_mm: float = Field(8.0, gt=0)  # LED spacing along the light guide
+    illumination_profile: tuple[tuple[float, float], ...] | None = None  # (x_mm, rel)
+    speed_error: float = Field(0.0, gt=-0.5, lt=0.5)  # relative scan-speed error
+    speed_jitter: float = Field(0.0, ge=0, lt=0.5)  # relative rms per line
+    surround: float = Field(0.0, ge=0, le=1)  # reflectance outside the document
+    z_step_mm: float = Field(0.25, gt=0, le=2)
+    calibration_z_mm: float = Field(0.0, ge=0, le=10)
+    calibration_lines: int = Field(32, ge=1, le=4096)
+    white_reference: float = Field(1.0, gt=0, le=1)
+    kernel: str = Field("auto", pattern="^(auto|paraxial|trace)$")
+    kernel_rays: int = Field(1 << 22, ge=1 << 14, le=1 << 30)
+
+
+@dataclass(frozen=True)
+class ScanResult:
+    """A simulated scan: the corrected output, the raw rows and their bookkeeping."""
+
+    image: np.ndarray  # [line, column] or [line, column, channel], shading corrected
+    dpi: float  # output resolution (x and y)
+    pitch_um: float
+    raw: list[np.ndarray]  # per row: [line, pixel] or [line, pixel, channel], DN
+    dark: list[np.ndarray]  # per row: [pixel] or [pixel, channel]
+    white: list[np.ndarray]
+    row_delay_lines: int
+    z_levels_mm: list[float]
+    meta: dict = field(default_factory=dict)
+
+
+def output_pitch(design: Design) -> float:
+    """Column and line pitch of the merged output (um): row pitch / rows."""
+    lat = lattice_of(design)
+    return lat.pitch / design.sensor.rows
+
+
+def _illumination(settings: ScanSettings, x_um: np.ndarray) -> np.ndarray:
+    if settings.illumination_profile:
+        xs, vs = zip(*settings.illumination_profile, strict=True)
+        return np.interp(x_um / 1000.0, xs, vs)
+    if settings.illumination == "ripple":
+        return 1 + settings.ripple_amplitude * np.cos(
+            2 * np.pi * x_um / (settings.ripple_period_mm * 1000.0)
+        )
+    return np.ones_like(x_um)
+
+
+def _taps(
+    kern: ScanKernel,
+    axis: int,
+    centers: np.ndarray,
+    p: float,
+    smear: float = 0.0,
+    sign: float = 1.0,
+):
+    """Tap tables (i0, w (K, n, taps)) of every factor at the sample centres.
+
+    Axis 0 (y): Y = centre - y (the document moves past the pixel), averaged over the
+    motion ``smear``; axis 1 (x): X = x - centre.
+    """
+    reach = kern.half_um + smear / 2 + p
+    i0 = np.floor((centers - reach) / p).astype(np.int64)
+    n_taps = int(np.ceil(2 * reach / p)) + 2
+    pos = (i0[:, None] + np.arange(n_taps)[None, :] + 0.5) * p  # pixel centres
+    # the box of the motion, by the midpoint rule on 9 sub-positions
+    subs = ((np.arange(9) + 0.5) / 9 - 0.5) * smear if smear > 0 else np.zeros(1)
+    w = np.zeros((kern.scale.size,) + pos.shape)
+    for sub in subs:
+        off = (centers[:, None] + sub - pos) if axis == 0 else (pos - centers[:, None])
+        w += kern.weights(axis, off.ravel(), p).reshape(w.shape)
+    return i0, w / subs.size
+
+
+def _own_signal(doc: np.ndarray, kern: ScanKernel, centers, x_pix, p, smear, surround):
+    """Own-path signal (um^2 sr x reflectance) at [center, pixel]."""
+    iy, wy = _taps(kern, 0, centers, p, smear)
+    ix, wx = _taps(kern, 1, x_pix, p)
+    out = np.zeros((centers.size, x_pix.size))
+    for k in range(kern.scale.size):
+        out += kern.scale[k] * x_pass(y_pass(doc, iy, wy[k]), ix, wx[k])
+        if surround:
+            fy = inside(iy, wy[k], doc.shape[0])
+            fx = inside(ix, wx[k], doc.shape[1])
+            total = kern.cum_y[k, -1] * kern.cum_x[k, -1]
+            out += surround * kern.scale[k] * (total - np.outer(fy, fx))
+    return out
+
+
+def _block_mean(doc: np.ndarray, p: float, b: float, pad: tuple[int, int], surround: float):
+    """Document averaged over b x b um cells, padded by pad cells of ``surround``."""
+    ny = int(np.ceil(doc.shape[0] * p / b))
+    nx = int(np.ceil(doc.shape[1] * p / b))
+    iy, wy = box_taps((np.arange(ny) + 0.5) * b, b, p)
+    ix, wx = box_taps((np.arange(nx) + 0.5) * b, b, p)
+    mean = x_pass(y_pass(doc, iy, wy), ix, wx)
+    # the part of a border cell beyond the page has the surround's reflectance
+    frac = np.outer(inside(iy, wy, doc.shape[0]), inside(ix, wx, doc.shape[1]))
+    mean = mean + surround * (1 - frac)
+    return np.pad(mean, ((pad[0], pad[0]), (pad[1], pad[1])), constant_values=surround)
+
+
+def _ghost_signal(blocks: np.ndarray, kern: ScanKernel, centers, x_pix, surround):
+    """Ghost signal from the padded block-averaged document (see :func:`_block_mean`)."""
+    g = kern.ghost
+    b = kern.ghost_bin_um
+    ny, nx = g.shape
+    r = signal.fftconvolve(blocks, g[:, ::-1], mode="full")
+    y0, x0 = kern.ghost_lo_um
+    # F[i, j] = sum G[a, e] D[i - a, j + e] lives in r[i, j + nx - 1]; D cell i is centred
+    # at (i - pad + 1/2) b on the page
+    iy = (centers - y0 - 0.5 * b) / b + ny - 0.5
+    jx = (x_pix + x0 + 0.5 * b) / b + nx - 0.5 + nx - 1
+    yy, xx = np.meshgrid(iy, jx, indexing="ij")
+    return ndimage.map_coordinates(r, [yy, xx], order=1, mode="constant", cval=surround * g.sum())
+
+
+def _levels(z_mm, height_map, step):
+    if height_map is None:
+        return [float(z_mm)]
+    lo = np.floor(height_map.min() / step) * step
+    hi = np.ceil(height_map.max() / step) * step
+    return [float(v) for v in np.round(np.arange(lo, hi + step / 2, step), 6)]
+
+
+def simulate_scan(
+    doc: np.ndarray,
+    doc_dpi: float,
+    design: Design,
+    *,
+    z_mm: float | None = 1.0,
+    height_map: np.ndarray | None = None,
+    settings: ScanSettings | None = None,
+    seed: int = 0,
+    ghosts: bool = True,
+    noiseless: bool = False,
+    color: bool = False,
+    progress: bool = False,
+) -> ScanResult:
+    """Simulate the scanner's output for a document at a float height (or height map).
+
+    Parameters
+    ----------
+    doc : [y, x] or [y, x, 3] linear reflectance in [0, 1]
+    doc_dpi : the document's sampling (dpi)
+    z_mm : constant float height (mm above the reference plane), or None with height_map
+    height_map : [y, x] heights (mm) covering the page (any resolution, page aspect)
+    """
+    check_seed(seed)
+    st = settings or ScanSettings()
+    doc = np.asarray(doc, dtype=np.float32)
+    if doc.ndim == 2:
+        doc = doc[..., None]
+    if doc.ndim != 3 or doc.shape[2] not in (1, 3) or min(doc.shape[:2]) < 2:
+        raise ValueError(f"document must be [y, x] or [y, x, 3] (got shape {doc.shape})")
+    if not 10 <= doc_dpi <= 20_000:
+        raise ValueError(f"document dpi must lie in [10, 20000] (got {doc_dpi})")
+    if color and doc.shape[2] == 1:
+        doc = np.repeat(doc, 3, axis=2)
+    if not color and doc.shape[2] == 3:
+        doc = (doc @ np.array([0.2126, 0.7152, 0.0722], np.float32))[..., None]
+    if height_map is None:
+        if z_mm is None or not Z_RANGE_MM[0] <= z_mm <= Z_RANGE_MM[1]:
+            raise ValueError(f"z_mm must lie in {list(Z_RANGE_MM)} (got {z_mm})")
+    else:
+        check_range(np.asarray(height_map), "height_map")
+    p = 25400.0 / doc_dpi
+    h_um, w_um = doc.shape[0] * p, doc.shape[1] * p
+    lat = lattice_of(design)
+    n_rows = design.sensor.rows
+    pitch = output_pitch(design)
+    n_lines = int(np.floor(h_um / pitch))
+    n_cols = int(np.floor(w_um / pitch))
+    if n_lines < 1 or n_cols < 1:
+        raise ValueError("document smaller than one output pixel")
+    delay = int(round(lat.row_y[1] / pitch)) if n_rows == 2 else 0
+    rng_lines = np.random.default_rng([seed, 7])
+    step = (
+        pitch
+        * (1 + st.speed_error)
+        * (1 + st.speed_jitter * rng_lines.standard_normal(n_lines + delay))
+    )
+    y_line = np.cumsum(step) - step / 2
+    levels = _levels(z_mm, None if height_map is None else np.asarray(height_map), st.z_step_mm)
+    kern = scan_kernels(
+        design,
+        levels,
+        source=st.kernel,
+        ghosts=ghosts,
+        n_rays=st.kernel_rays,
+        seed=seed,
+        progress=progress,
+    )
+    n_ch = doc.shape[2]
+    duty = st.sensor.exposure_duty
+    smear = duty * pitch / (3 if color else 1)
+    e_per = st.sensor.electrons_per_um2sr
+    raw, darks, whites, pix_x = [], [], [], []
+    jobs = [(r, c) for r in range(n_rows) for c in range(n_ch)]
+    if progress:
+        from tqdm import tqdm
+
+        jobs = tqdm(jobs, desc="scan", unit="row-channel")
+    by_row: dict[int, list] = {r: [None] * n_ch for r in range(n_rows)}
+    blocks: dict[int, np.ndarray] = {}
+    for r, ch in jobs:
+        n_k = n_cols // n_rows + 1
+        x_pix = lat.row_x[r] % lat.pitch + np.arange(n_k) * lat.pitch + pitch / 2
+        x_pix = x_pix[x_pix < n_cols * pitch]
+        n_l = n_lines + (delay if r == 1 else 0)
+        centers = y_line[:n_l] - lat.row_y[r]
+        if color:
+            centers = centers + (ch - 1) * pitch / 3
+        z_loc = None
+        if height_map is not None:
+            z_loc = sample_height(
+                np.asarray(height_map), h_um / 1000, w_um / 1000, centers + lat.row_y[r], x_pix
+            )
+        sig = np.zeros((n_l, x_pix.size))
+        for il, zl in enumerate(levels):
+            kr = kern[r][il]
+            if z_loc is None:
+                sel, wts = np.arange(n_l), None
+            else:
+                wts = np.clip(1 - np.abs(z_loc - zl) / st.z_step_mm, 0, 1)
+                sel = np.flatnonzero(wts.max(axis=1) > 0)
+                if sel.size == 0:
+                    continue
+            s = _own_signal(doc[..., ch], kr, centers[sel], x_pix, p, smear, st.surround)
+            if kr.ghost is not None:
+                if ch not in blocks:  # the same cells for every row and level
+                    blocks[ch] = _block_mean(
+                        doc[..., ch], p, kr.ghost_bin_um, kr.ghost.shape, st.surround
+                    )
+                s += _ghost_signal(blocks[ch], kr, centers[sel], x_pix, st.surround)
+            sig[sel] += s if wts is None else s * wts[sel]
+        gain = e_per * _illumination(st, x_pix) * (st.sensor.channel_response[ch] if color else 1.0)
+        s_white = st.white_reference * (kern[r][0].own_etendue + kern[r][0].ghost_etendue)
+        by_row[r][ch] = (sig * gain, s_white * gain)
+        if ch == 0:
+            pix_x.append(x_pix)
+    for r in range(n_rows):
+        pattern = fixed_pattern(
+            st.sensor, by_row[r][0][0].shape[1], np.random.default_rng([seed, r, 99])
+        )
+        chans, dk, wh = [], [], []
+        for ch in range(n_ch):
+            mean_e, white_e = by_row[r][ch]
+            rng = None if noiseless else np.random.default_rng([seed, r, ch, 1])
+            rng_c = None if noiseless else np.random.default_rng([seed, r, ch, 2])
+            n_cal = 1 if noiseless else st.calibration_lines
+            w_cal = np.broadcast_to(white_e, (n_cal, white_e.size))
+            chans.append(expose(mean_e, st.sensor, pattern, rng))
+            wh.append(expose(w_cal, st.sensor, pattern, rng_c).mean(axis=0))
+            dk.append(expose(np.zeros_like(w_cal), st.sensor, pattern, rng_c).mean(axis=0))
+        raw.append(np.stack(chans, axis=-1))
+        darks.append(np.stack(dk, axis=-1))
+        whites.append(np.stack(wh, axis=-1))
+    corrected = [
+        (raw[r] - darks[r][None]) / np.maximum(whites[r] - darks[r], 1e-9)[None]
+        for r in range(n_rows)
+    ]
+    image = merge_rows(corrected, pix_x, delay, n_lines)
+    if not color:
+        image = image[..., 0]
+        raw = [a[..., 0] for a in raw]
+        darks = [a[..., 0] for a in darks]
+        whites = [a[..., 0] for a in whites]
+    return ScanResult(
+        image=image,
+        dpi=25400.0 / pitch,
+        pitch_um=pitch,
+        raw=raw,
+        dark=darks,
+        white=whites,
+        row_delay_lines=delay,
+        z_levels_mm=levels,
+        meta={
+            "design": design.name,
+            "design_fingerprint": design.fingerprint(),
+            "seed": seed,
+            "z_mm": None if height_map is not None else z_mm,
+            "height_map": height_map is not None,
+            "ghosts": ghosts,
+            "noiseless": noiseless,
+            "color": color,
+            "document_dpi": doc_dpi,
+            "settings": st.model_dump(mode="json"),
+            "kernel_source": st.kernel,
+        },
+    )
+
+
+def merge_rows(
+    rows: list[np.ndarray], x_pix: list[np.ndarray], delay: int, n_lines: int
+) -> np.ndarray:
+    """Merge the staggered rows into one image: row B's line m + delay goes with row A's
+    line m (paper §4); columns are ordered by the pixels' x."""
+    parts = [rows[0][:n_lines]]
+    if len(rows) == 2:
+        parts.append(rows[1][delay : delay + n_lines])
+    x = np.concatenate(x_pix)
+    order = np.argsort(x, kind="stable")
+    return np.concatenate(parts, axis=1)[:, order]

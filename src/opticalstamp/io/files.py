@@ -1,0 +1,416 @@
+"""Files: atomic writes, JSON with provenance. The only place results meet the disk."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..validate import InputError
+from .atomic import replace_folder, verify_set, write_atomic, write_set  # noqa: F401
+
+
+def _default(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        return float(obj)
+    if isinstance(obj, tuple):
+        return list(obj)
+    raise TypeError(f"cannot serialise {type(obj).__name__}")
+
+
+def _clean(obj):
+    """Replace non-finite floats by None (JSON has no NaN/inf)."""
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, float | np.floating) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+def to_json(data: dict) -> str:
+    return json.dumps(
+        _clean(json.loads(json.dumps(data, default=_default, allow_nan=True))), indent=2
+    )
+
+
+def provenance(design, seed: int | None) -> dict:
+    return {
+        "design": design.name,
+        "design_fingerprint": design.fingerprint(),
+        "seed": seed,
+        "opticalstamp_version": __version__,
+    }
+
+
+def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
+    """Save a matplotlib figure atomically as PNG."""
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    return write_atomic(path, buf.getvalue())
+
+
+class ImageError(InputError):
+    """An image file that cannot be used (unreadable, truncated, wrong kind)."""
+
+
+def srgb_to_linear(v: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 sRGB decoding of values in [0, 1]."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+#: Bytes per image pixel and channel while reading and measuring an image (the float64
+#: image, a working copy, decoding buffers).
+IMAGE_BYTES_PER_SAMPLE = 24
+
+#: Bytes per document pixel and channel while scanning (float32 reflectance, the y pass,
+#: decoding buffers).
+SCAN_BYTES_PER_SAMPLE = 10
+
+_TIFF_MAGIC = (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+")
+_GREY_MODES = ("L", "I;16", "I;16B", "I;16L", "I", "F")
+
+
+@contextlib.contextmanager
+def _guarded(path: Path, what: str):
+    """Turn any failure of the decoders into an ImageError naming the file.
+
+    Pillow's decompression-bomb limit is lifted inside (the header checks of
+    :func:`_checked_header` replace it with a memory estimate) and restored on leaving.
+    """
+    from PIL import Image
+
+    old = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None
+    try:
+        yield
+    except InputError:
+        raise
+    except Exception as err:  # truncated, corrupt or unsupported files fail in many ways
+        detail = str(err) or type(err).__name__
+        raise ImageError(f"{what} {path}: cannot read it ({detail})") from None
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+
+
+def _ratio(value) -> float:
+    """A TIFF RATIONAL (numerator, denominator) as a float; NaN for a zero denominator."""
+    num, den = value
+    return num / den if den else float("nan")
+
+
+def _header(path: Path, what: str) -> tuple[int, int, int, tuple[float, float] | None, bool]:
+    """Width, height, samples per pixel, the stored (x, y) resolution in dpi (None when
+    absent) and whether the file is a TIFF, from the header alone (first TIFF page)."""
+    with open(path, "rb") as fh:
+        tiff = fh.read(4) in _TIFF_MAGIC
+    if tiff:
+        import tifffile
+
+        with tifffile.TiffFile(path) as tf:
+            if not tf.pages:
+                raise ImageError(f"{what} {path}: a TIFF header with no readable image after it")
+            page = tf.pages[0]
+            tags, res = page.tags, None
+            if "XResolution" in tags:
+                cm = "ResolutionUnit" in tags and tags["ResolutionUnit"].value == 3
+                scale = 2.54 if cm else 1.0
+                x = _ratio(tags["XResolution"].value)
+                y = _ratio(tags["YResolution"].value) if "YResolution" in tags else x
+                res = (x * scale, y * scale)
+            return page.imagewidth, page.imagelength, page.samplesperpixel, res, True
+    from PIL import Image
+
+    with Image.open(path) as im:
+        dpi = im.info.get("dpi")
+        res = (float(dpi[0]), float(dpi[1])) if dpi else None
+        return im.size[0], im.size[1], len(im.getbands()), res, False
+
+
+def _checked_header(
+    path: Path,
+    what: str,
+    *,
+    dpi: float | None,
+    min_px: int,
+    channels: int | None,
+    bytes_per_sample: int,
+    memory_limit_bytes: int | None,
+) -> tuple[float | None, bool]:
+    """Check an image from its header before decoding it: at least ``min_px`` pixels each
+    way, memory for ``bytes_per_sample`` per pixel and channel (``channels``, default:
+    the file's) within ``memory_limit_bytes`` (default: 80 % of the available memory),
+    and, unless ``dpi`` is given, a usable resolution with square pixels.
+
+    Returns the resolution to use (``dpi`` if given, else the file's; None if it stores
+    none) and whether the file is a TIFF.
+    """
+    w, h, bands, res, tiff = _header(path, what)
+    if min(w, h) < min_px:
+        raise ImageError(
+            f"{what} {path}: {w} x {h} pixels is too small (this command needs at least "
+            f"{min_px} x {min_px})"
+        )
+    n_ch = channels or bands
+    need = w * h * n_ch * bytes_per_sample
+    limit = memory_limit_bytes or int(0.8 * available_memory_bytes())
+    if need > limit:
+        raise ImageError(
+            f"{what} {path}: {w} x {h} pixels x {n_ch} channel(s) needs about "
+            f"{need / 2**30:.1f} GiB to {'scan' if what == 'document' else 'measure'}, more "
+            f"than the {limit / 2**30:.1f} GiB available; crop it or lower its resolution"
+        )
+    if dpi is not None or res is None:
+        return dpi, tiff
+    x, y = res
+    if not (np.isfinite(x) and np.isfinite(y)):
+        raise ImageError(
+            f"{what} {path}: its stored resolution is not a number (a zero denominator); give --dpi"
+        )
+    if max(x, y) > 1 and abs(x - y) > 1e-3 * max(x, y):
+        raise ImageError(
+            f"{what} {path}: its pixels are not square ({round(x, 2):g} dpi along x, "
+            f"{round(y, 2):g} dpi along y) and the analyses assume square pixels; resample "
+            "it, or give --dpi to override the file's resolution"
+        )
+    return _round_dpi(x), tiff
+
+
+def _finite(arr: np.ndarray, path: Path, what: str) -> None:
+    if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+        raise ImageError(f"{what} {path}: holds NaN or infinite pixel values; replace them")
+
+
+def read_image(
+    path: str | Path,
+    *,
+    linear: bool = False,
+    dpi: float | None = None,
+    min_px: int = 2,
+    memory_limit_bytes: int | None = None,
+) -> tuple[np.ndarray, float | None]:
+    """Read a PNG, TIFF or JPEG as a grey float image in [0, 1] and its dpi (or None).
+
+    Parameters
+    ----------
+    path : str or Path
+        The image file. TIFFs are read with tifffile (first page), others with Pillow.
+    linear : bool
+        Decode sRGB values to linear ones.
+    dpi : float, optional
+        The resolution to use instead of the file's (which is then not checked).
+    min_px : int
+        The fewest pixels the image may have along each side.
+    memory_limit_bytes : int, optional
+        Refuse, from the header, an image that needs more memory (default: 80 % of the
+        available memory).
+
+    Returns
+    -------
+    image : ndarray
+        [y, x] float64; RGB is reduced to luminance (Rec. 709 weights), grey + alpha to
+        grey; 16-bit files keep their precision.
+    dpi : float or None
+
+    Raises
+    ------
+    ImageError
+        Whatever makes the file unusable, naming it: unreadable, too small or too large,
+        non-square pixels or a broken resolution (unless ``dpi`` is given), NaN or
+        infinite values in a float image.
+    """
+    from PIL import Image
+
+    path = Path(path)
+    if not path.is_file():
+        raise ImageError(f"image {path}: no such file")
+    with _guarded(path, "image"):
+        use, tiff = _checked_header(
+            path,
+            "image",
+            dpi=dpi,
+            min_px=min_px,
+            channels=None,
+            bytes_per_sample=IMAGE_BYTES_PER_SAMPLE,
+            memory_limit_bytes=memory_limit_bytes,
+        )
+        if tiff:
+            import tifffile
+
+            with tifffile.TiffFile(path) as tf:
+                page = tf.pages[0]
+                arr = page.asarray()
+                if arr.ndim == 3 and page.planarconfig == 2:  # separate planes: [c, y, x]
+                    arr = np.moveaxis(arr, 0, -1)
+        else:
+            with Image.open(path) as im:
+                im.load()
+                keep = ("L", "RGB", "I;16", "I;16B", "I;16L", "I", "F")
+                arr = np.asarray(im if im.mode in keep else im.convert("RGB"))
+    if arr.dtype.kind not in "biuf":
+        raise ImageError(f"image {path}: pixel type {arr.dtype} is not supported")
+    _finite(arr, path, "image")
+    if arr.dtype.kind in "iu":
+        scale = float(np.iinfo(arr.dtype).max) if arr.dtype != np.int32 else 65535.0
+        arr = arr.astype(np.float64) / scale
+    else:
+        arr = arr.astype(np.float64)
+    if arr.ndim == 3:  # grey (+ alpha): the first channel; colour: luminance
+        arr = arr[..., 0] if arr.shape[2] < 3 else arr[..., :3] @ [0.2126, 0.7152, 0.0722]
+    if arr.ndim != 2 or min(arr.shape) < min_px:
+        raise ImageError(f"image {path}: expected a 2-D image (got shape {arr.shape})")
+    if linear:
+        arr = srgb_to_linear(np.clip(arr, 0, 1))
+    return arr, use  # PNG stores pixels per metre: 600 dpi reads as 599.9988 (rounded)
+
+
+def available_memory_bytes() -> int:
+    """MemAvailable from /proc/meminfo (or 4 GiB where it cannot be read)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 4 << 30
+
+
+def read_document(
+    path: str | Path,
+    *,
+    color: bool = False,
+    memory_limit_bytes: int | None = None,
+    dpi: float | None = None,
+    min_px: int = 2,
+) -> tuple[np.ndarray, float | None]:
+    """A document image as linear reflectance (float32, [y, x] or [y, x, 3]) and its dpi.
+
+    8- and 16-bit sRGB values are decoded through a lookup table. The file is checked
+    from its header before it is decoded, as in :func:`read_image` (``dpi``, ``min_px``),
+    and a file whose scan would not fit in ``memory_limit_bytes`` (default: 80 % of the
+    available memory) is refused with the numbers.
+
+    Raises
+    ------
+    ImageError
+        Whatever makes the file unusable, naming it (see :func:`read_image`).
+    """
+    from PIL import Image
+
+    path = Path(path)
+    if not path.is_file():
+        raise ImageError(f"document {path}: no such file")
+    with _guarded(path, "document"):
+        with Image.open(path) as im:
+            n_ch = 3 if color and im.mode not in _GREY_MODES else 1
+            use, _ = _checked_header(
+                path,
+                "document",
+                dpi=dpi,
+                min_px=min_px,
+                channels=n_ch,
+                bytes_per_sample=SCAN_BYTES_PER_SAMPLE,
+                memory_limit_bytes=memory_limit_bytes,
+            )
+            im.load()
+            if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+                arr = (
+                    np.asarray(im, dtype=np.uint16)
+                    if im.mode != "I"
+                    else np.clip(np.asarray(im), 0, 65535).astype(np.uint16)
+                )
+                lut = srgb_to_linear(np.arange(65536) / 65535.0).astype(np.float32)
+                return _apply_lut(lut, arr), use
+            if im.mode == "F":
+                arr = np.asarray(im, np.float32)
+                _finite(arr, path, "document")
+                return np.clip(arr, 0, 1), use
+            arr = np.asarray(im.convert("RGB" if n_ch == 3 else "L"))
+    lut = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)
+    return _apply_lut(lut, arr), use
+
+
+def _apply_lut(lut: np.ndarray, arr: np.ndarray, rows: int = 512) -> np.ndarray:
+    """lut[arr] in strips of rows (a whole-page fancy index would need an 8-byte index
+    per pixel: 1.1 GB for an A4 page at 1200 dpi)."""
+    out = np.empty(arr.shape, np.float32)
+    for i in range(0, arr.shape[0], rows):
+        out[i : i + rows] = lut[arr[i : i + rows]]
+    return out
+
+
+def _round_dpi(dpi: float | None) -> float | None:
+    return round(float(dpi), 2) if dpi is not None and dpi > 1 else None
+
+
+def linear_to_srgb(v: np.ndarray) -> np.ndarray:
+    v = np.clip(np.asarray(v, dtype=np.float64), 0, 1)
+    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
+
+
+def encode_png(linear: np.ndarray, dpi: float, *, srgb: bool = True) -> bytes:
+    """8-bit PNG bytes (sRGB-encoded unless ``srgb`` is False) with the resolution."""
+    import io as _io
+
+    from PIL import Image
+
+    v = linear_to_srgb(linear) if srgb else np.clip(linear, 0, 1)
+    im = Image.fromarray(np.round(v * 255).astype(np.uint8))
+    buf = _io.BytesIO()
+    im.save(buf, format="PNG", dpi=(dpi, dpi))
+    return buf.getvalue()
+
+
+def write_png(path: str | Path, linear: np.ndarray, dpi: float, *, srgb: bool = True) -> Path:
+    """8-bit PNG (sRGB-encoded unless ``srgb`` is False) with its resolution, atomically."""
+    return write_atomic(path, encode_png(linear, dpi, srgb=srgb))
+
+
+def encode_tiff16(linear: np.ndarray, dpi: float, description: str = "") -> bytes:
+    """16-bit TIFF bytes of linear values (0..65535) with the resolution in dpi."""
+    import io as _io
+
+    import tifffile
+
+    buf = _io.BytesIO()
+    data = np.round(np.clip(linear, 0, 1) * 65535).astype(np.uint16)
+    tifffile.imwrite(
+        buf,
+        data,
+        resolution=(dpi, dpi),
+        resolutionunit="INCH",
+        description=description or None,
+        photometric="rgb" if data.ndim == 3 else "minisblack",
+    )
+    return buf.getvalue()
+
+
+def write_tiff16(path: str | Path, linear: np.ndarray, dpi: float, description: str = ""):
+    """16-bit TIFF of linear values (0..65535) with its resolution in dpi, atomically."""
+    return write_atomic(path, encode_tiff16(linear, dpi, description))
+
+
+def save_dataset(ds, path: str | Path) -> Path:
+    """An xarray Dataset as netCDF (scipy engine: NETCDF3, no extra library), atomically.
+
+    Attributes that are not numbers or strings are stored as JSON strings.
+    """
+    ds = ds.copy()
+    ds.attrs = {
+        k: v if isinstance(v, int | float | str) else json.dumps(v, default=_default)
+        for k, v in ds.attrs.items()
+        if v is not None
+    }
+    return write_atomic(path, ds.to_netcdf(engine="scipy"))

@@ -1,0 +1,401 @@
+"""The HTML page of `opticalstamp report`: tables and sections from the report's numbers."""
+
+from __future__ import annotations
+
+import html
+
+from ..design import Design
+
+
+def _scans_html(s: dict) -> str:
+    sfr = [[x["z_mm"], x["axis"], x["mtf50_cy_per_mm"], x["sfr100"], x["sfr200"]] for x in s["sfr"]]
+    ocr = "".join(f"<li>Z = {o['z_mm']:g} mm: CER {o['cer']:.3f}</li>" for o in s["ocr"])
+    ocr_p = (
+        f"<p>Tesseract on these scans, character error rate:</p><ul>{ocr}</ul>"
+        if ocr
+        else "<p>(tesseract not installed: no OCR)</p>"
+    )
+    prof = [
+        [p["z_mm"], p["rmtf_measured"], p["rmtf_computed_min"], p["rmtf_computed_max"]]
+        for p in s["profiles"]
+    ]
+    return f"""<h2>Simulated scans (paper Figs. 8, 9, 12)</h2>
+<p>Built-in charts at 1200 dpi through the scan simulation ({html.escape(s["settings"])}):
+the document moves one 84.6 um line per period, the rows are merged with the line delay,
+and dark/white shading correction is applied. See <code>opticalstamp scan</code>.</p>
+<img src="scan_text.png">{ocr_p}
+<img src="scan_bars.png"><img src="scan_profiles.png">
+<p>RMTF measured on simulated 200-dpi scans (own path, ghost light off, noise on) against
+the RMTF computed from the folded line-spread functions (own path; minimum and maximum
+over chart positions). With ghost light on they differ for a reason, not an error: ghost
+light comes from 6-34 mm away, so a finite chart on a white page gets a different veiling
+background than the infinite chart of the computed RMTF.</p>
+{_table(prof, ["Z (mm)", "measured on the scan", "computed min", "computed max"])}
+<p>Slanted-edge SFR (ISO 12233) of the simulated scans of the slanted-square chart, along
+x (main scan) and y (sub-scan, which adds the motion smear of one line):</p>
+{_table(sfr, ["Z (mm)", "axis", "MTF50 (cycles/mm)", "SFR at 100 dpi", "SFR at 200 dpi"])}
+<img src="scan_lines.png"><img src="scan_tilt.png">
+"""
+
+
+def _search_html(s: dict | None, t: dict | None) -> str:
+    if s is None:
+        return "<h2>Design search and tolerancing</h2><p>(needs square holes)</p>"
+    front = [
+        [
+            str(p["holes_um"]),
+            str(p["thicknesses_um"]),
+            p["efficiency_ratio"],
+            1 / p["efficiency_ratio"],
+            p["dof_mm"],
+            p["ghost_fraction"],
+        ]
+        for p in s["pareto"]
+    ]
+    ref = s["reference"]
+    sens = [
+        [r["error"], r["sigma"], r["d_dof_mm"], r.get("d_rmtf@2", None), r["d_ghost_fraction"]]
+        for r in t["sensitivity"][:10]
+    ]
+    rm = [
+        [z, v["p5"], v["p50"], v["p95"], t["nominal"]["rmtf_at"][z]]
+        for z, v in t["rmtf200"].items()
+    ]
+    return f"""<h2>Design search (paper §3)</h2>
+<p>NSGA-II over hole sizes and slab thicknesses ({s["n_evaluations"]} designs,
+{s["n_feasible"]} feasible: no ghost light within {s["meta"]["near_mm"]:g} mm, stack within
+{s["meta"]["budget_mm"]:g} mm, diffraction spill below {s["meta"]["max_spill"]:g}; a compact
+run, `opticalstamp search` runs 480). This design: efficiency 1/{1 / ref["efficiency_ratio"]:.0f},
+depth of field {ref["dof_mm"]:.2f} mm, dominated by {ref.get("dominated_by", 0)} of the designs
+found.</p>
+{
+        _table(
+            front,
+            [
+                "holes (um, object side first)",
+                "slabs (um, sensor first)",
+                "efficiency",
+                "1/efficiency",
+                "DOF (mm)",
+                "ghost fraction",
+            ],
+        )
+    }
+<img src="pareto.png">
+<h2>Tolerancing (paper §5)</h2>
+<p>{t["n_samples"]} Monte Carlo samples: misregistration {t["sigmas"]["misregistration_um"]:g}
+um, holes {t["sigmas"]["hole_um"]:g} um, plates and gaps {t["sigmas"]["thickness_um"]:g} um,
+tilt {t["sigmas"]["tilt_deg"]:g} deg (1 sigma). Yield for {html.escape(t["spec"])}:
+{t["yield"]:.1%}.</p>
+{_table(rm, ["Z (mm)", "RMTF 5 %", "median", "95 %", "nominal"])}
+{_table(sens, ["error", "sigma", "DOF change (mm)", "RMTF@2mm change", "ghost change"])}
+<img src="tolerance.png">
+"""
+
+
+def _table(rows: list[list], head: list[str]) -> str:
+    th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{html.escape(_fmt(c))}</td>" for c in r) + "</tr>" for r in rows
+    )
+    return f"<table><tr>{th}</tr>{body}</table>"
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return "-" if v is None else str(v)
+
+
+def page(design: Design, d: dict) -> str:
+    g, sp = d["ghosts"], d["spots"]
+    ghost_rows = [
+        [
+            " / ".join(f"{h['mask']}: {h['row']} {h['dk']:+d}" for h in p["holes"]),
+            p["etendue_um2sr"],
+            p["etendue_se"],
+            p["share"],
+            f"{p['emission_angle_deg'][0]:.1f}-{p['emission_angle_deg'][1]:.1f}",
+            p["nearest_landing_um"].get("0"),
+        ]
+        for p in g["paths"][:15]
+    ]
+    land_rows = [
+        [z, v["nearest_um"], v["median_um"], v["within_detector_um2sr"]]
+        for z, v in g["landing"].items()
+    ]
+    spot_rows = [
+        [
+            z,
+            sp["extent_x_um"][i],
+            sp["extent_y_um"][i],
+            sp["fwhm_x_um"][i],
+            sp["fwhm_y_um"][i],
+            sp["center_cell_fraction"][i],
+        ]
+        for i, z in enumerate(sp["z_mm"])
+    ]
+    psf_rows = [
+        [
+            p["x_obj_um"],
+            p["z_mm"],
+            p["own_pixel"],
+            p["neighbour_own_path"],
+            p["neighbour_ghost"],
+            p["insensitive"],
+            p["reaching_sensor"],
+        ]
+        for p in d["psf"]
+    ]
+    conc = [
+        [
+            c["design"],
+            c["etendue_own_um2sr"],
+            c["etendue_ghost_um2sr"],
+            c["ghost_fraction"],
+            c["nearest_ghost_um_z0"],
+        ]
+        for c in d["concepts"]
+    ]
+    prov = d["provenance"]
+    return f"""<!doctype html><html><head><meta charset="utf-8">
+<title>opticalstamp report: {html.escape(design.name)}</title>
+<style>body{{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}}
+table{{border-collapse:collapse;margin:.5em 0}}td,th{{border:1px solid #bbb;padding:2px 6px;
+font-size:13px;text-align:right}}img{{max-width:100%}}</style></head><body>
+<h1>opticalstamp report: {html.escape(design.name)}</h1>
+<p>{html.escape(design.description)}</p>
+<p>design fingerprint {prov["design_fingerprint"]}, seed {prov["seed"]},
+opticalstamp {prov["opticalstamp_version"]}, Fresnel losses {"on" if prov["fresnel"] else "off"},
+pixel acceptance half-angle {design.sensor.acceptance_half_angle_deg:g} deg.
+Numbers: <a href="report.json">report.json</a>.</p>
+<h2>Ghost analysis (paper Figs. 2 and 4)</h2>
+<p>Own-path etendue {g["etendue_own_um2sr"]:.4g} &plusmn; {g["etendue_own_se"]:.2g} um&sup2;sr,
+ghost etendue {g["etendue_ghost_um2sr"]:.4g} &plusmn; {g["etendue_ghost_se"]:.2g} um&sup2;sr,
+ghost fraction {g["ghost_fraction"]:.4g} &plusmn; {g["ghost_fraction_se"]:.2g}
+({g["n_rays"]:,} importance-sampled rays).</p>
+{
+        _table(
+            ghost_rows,
+            [
+                "holes (object side first)",
+                "etendue",
+                "se",
+                "share of ghost",
+                "emission angle (deg)",
+                "nearest landing at Z=0 (um)",
+            ],
+        )
+    }
+<p>Where ghost light meets the object plane (distance from the pixel's axis) and how much
+lands inside the virtual detector (&plusmn;{
+        g["landing"][next(iter(g["landing"]))]["detector_half_um"]:g} um):</p>
+{_table(land_rows, ["Z (mm)", "nearest (um)", "median (um)", "inside detector (um2 sr)"])}
+<img src="ghosts.png">
+<h3>The paper's Fig. 1 concepts</h3>
+{
+        _table(
+            conc,
+            [
+                "design",
+                "own etendue",
+                "ghost etendue",
+                "ghost fraction",
+                "nearest ghost at Z=0 (um)",
+            ],
+        )
+    }
+<h2>Spots on the object plane (paper Fig. 5)</h2>
+{
+        _table(
+            spot_rows,
+            [
+                "Z (mm)",
+                "extent x (um)",
+                "extent y (um)",
+                "FWHM x (um)",
+                "FWHM y (um)",
+                "fraction in centre 84.6 um cell",
+            ],
+        )
+    }
+<img src="spots.png">
+<h2>PSFs on the sensor (paper Fig. 10)</h2>
+{
+        _table(
+            psf_rows,
+            [
+                "X obj (um)",
+                "Z (mm)",
+                "own pixel",
+                "neighbour, own-path blur",
+                "ghost",
+                "insensitive",
+                "fraction of emitted power reaching sensor",
+            ],
+        )
+    }
+<img src="psf_x0.png"><img src="psf_x42.png">
+{_quality_html(d)}
+{_scans_html(d["scans"])}
+{_search_html(d["search"], d["tolerance"])}
+<p>Generated in {d["elapsed_s"]:.1f} s.</p>
+</body></html>
+"""
+
+
+def _quality_html(d: dict) -> str:
+    r, own, par = d["rmtf"], d["rmtf_traced_own"], d["rmtf_paraxial_own"]
+    keys = list(r["rmtf_max"])
+    rows = [
+        [z] + [r["rmtf_max"][k][i] for k in keys] + [r["rmtf_max_se"]["200"][i]]
+        for i, z in enumerate(r["z_mm"])
+    ]
+    dof_rows = [
+        [name, res["dof_mm"]["200"], res["dof_mm"]["247"], res["dof_mm"]["150"]]
+        for name, res in (
+            ("exact tracer, own + ghost light", r),
+            ("exact tracer, own path only", own),
+            (f"{par['method']}, own path only", par),
+        )
+    ]
+    prof = [
+        [p["z_mm"], p["shift_um"], p["rmtf_computed"], p["rmtf_measured_from_waveform"]]
+        for p in d["chart_profiles"]
+    ]
+    e = d["efficiency"]
+    eff_rows = [
+        ["own + ghost", e["etendue_um2sr"], e["ratio"], 1 / e["ratio"], e["working_f_number"]],
+        [
+            "own path",
+            e["etendue_own_um2sr"],
+            e["ratio_own"],
+            1 / e["ratio_own"],
+            e["working_f_number_own"],
+        ],
+        ["paper (Fig. 13)", None, 1 / 36, 36.0, 60.0],
+    ]
+    area_rows = [
+        [
+            a["sensitive_um"][0],
+            a["area_scale"],
+            a["gain_own_vs_design"],
+            a["gain_vs_design"],
+            a["ghost_fraction"],
+        ]
+        for a in e["sensitive_area"]
+    ]
+    df = d["diffraction"]
+    slit_rows = [[k, df["fresnel_number"][k], v] for k, v in df["fraction_outside"].items()]
+    bud_rows = []
+    for row in df["budget"]["layers"]:
+        for k in row["outside_shadow"]:
+            bud_rows.append(
+                [
+                    row["layer"],
+                    row["next"],
+                    row["hole_um"],
+                    k,
+                    row["fresnel_number"][k],
+                    row["outside_shadow"][k],
+                    row["outside_next"][k],
+                    row["outside_next_geometric"],
+                ]
+            )
+    warn = "".join(f"<p><b>warning:</b> {html.escape(w)}</p>" for w in df["budget"]["warnings"])
+    st = d["parameter_study"]
+    st_rows = [
+        [
+            x["hole_shape"],
+            x["sensitive_um"],
+            x["gap_medium"],
+            x["fresnel"],
+            x["glass_index"],
+            x["inverse_ratio"],
+            x["working_f_number"],
+            x["dof_mm"],
+            x["rmtf200_at_3_5mm"],
+            x["ghost_fraction"],
+            "yes"
+            if x["consistent_efficiency"] and x["consistent_dof"]
+            else (
+                "F only"
+                if x["consistent_efficiency"]
+                else ("DOF only" if x["consistent_dof"] else "")
+            ),
+        ]
+        for x in st["rows"]
+    ]
+    return f"""<h2>RMTF and depth of field (paper Eq. 1, Fig. 11)</h2>
+<p>Bar charts of {", ".join(f"{k} dpi" for k in keys)} over a {r["window_um"]:g} um window,
+shifted in {r["shift_step_um"]:g} um steps; RMTF is the maximum over shifts ({r["method"]},
+ghost light {"included" if r["ghosts"] else "left out"}, {r["n_rays"]:,} rays per pixel row).
+Depth of field: largest Z with RMTF({r["dof_dpi"]:g} dpi) &ge; {r["dof_threshold"]:g}:
+<b>{r["dof_mm"]["200"]:.2f} mm</b> (paper: 3.5 mm measured).</p>
+{_table(rows, ["Z (mm)"] + [f"{k} dpi" for k in keys] + ["SE (200 dpi)"])}
+<img src="rmtf.png">
+<p>Depth of field (mm) by model: the paraxial closed form against the exact tracer shows
+how far the paraxial limit is off; the ghost light's uniform background lowers contrast.</p>
+{_table(dof_rows, ["model", "200 dpi", "247 dpi", "150 dpi"])}
+<h3>The 200-dpi chart as the merged line sees it (paper Fig. 12 c, d)</h3>
+<p>Signals of the pixels under the chart at the best shift; the RMTF measured back from
+this waveform as from an image agrees with the computed one.</p>
+{_table(prof, ["Z (mm)", "chart shift (um)", "RMTF computed", "RMTF measured from waveform"])}
+<img src="chart_profiles.png">
+<h2>Light efficiency (paper Fig. 13)</h2>
+<p>Reference: 1:1 lens, f = 10 mm, 2 mm pupil, 20 mm conjugates, 84.6 um pixel:
+{e["reference_etendue_um2sr"]:.4g} um&sup2;sr (working F {e["reference_f_number"]:g}).</p>
+{_table(eff_rows, ["light", "etendue (um2 sr)", "ratio", "1/ratio", "working F"])}
+<p>Effect of the sensitive-area size (the paper expects 4x the light from 4x the area):</p>
+{_table(area_rows, ["side (um)", "area ratio", "own-path gain", "total gain", "ghost fraction"])}
+<img src="efficiency.png">
+<h2>Diffraction (paper Fig. 6)</h2>
+<p>Slit {df["slit_um"]:g} um at layer 1, point source at Z = {df["z_mm"]:g} mm
+(R1 = {df["r1_um"]:.0f} um), observed at layer 2 (R2 = {df["r2_um"]:.0f} um air-equivalent):
+geometric edge X = {df["geometric_edge_um"]:.2f} um (paper: 32 um); paper: about 7 %
+outside.</p>
+{_table(slit_rows, ["wavelength (um)", "Fresnel number", "fraction outside the edge"])}
+<img src="diffraction.png">
+<p>Per-layer budget of this design (2-D holes, point source on the axis at
+Z = {df["budget"]["z_mm"]:g} mm):</p>
+{
+        _table(
+            bud_rows,
+            [
+                "layer",
+                "next aperture",
+                "hole (um)",
+                "wavelength (um)",
+                "Fresnel number",
+                "outside own shadow",
+                "outside next (diffraction)",
+                "outside next (geometric)",
+            ],
+        )
+    }
+{warn}
+<h2>The paper's unstated parameters</h2>
+<p>Every combination of hole shape, sensitive-area size, reference-gap medium, Fresnel
+losses and glass index; consistent with the paper when the working F-number is within
+{st["meta"]["f_tolerance"]:g} of 60 and the depth of field at least
+{st["paper"]["dof_mm"] - st["meta"]["dof_tolerance_mm"]:g} mm.</p>
+{
+        _table(
+            st_rows,
+            [
+                "holes",
+                "sensitive (um)",
+                "gap",
+                "Fresnel",
+                "glass n",
+                "1/ratio",
+                "working F",
+                "DOF (mm)",
+                "RMTF200 at 3.5 mm",
+                "ghost fraction",
+                "consistent with paper",
+            ],
+        )
+    }
+<img src="study.png">
+"""

@@ -1,0 +1,466 @@
+"""Figures (matplotlib imported lazily, Agg backend). Each returns a Figure."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..analysis.ghosts import GhostResult
+from ..analysis.spots import CELL_UM, PSF, SpotResult
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_spots(res: SpotResult):
+    """Responsivity maps on the 84.6 um grid, one panel per Z (paper Fig. 5)."""
+    plt = _plt()
+    n = len(res.spots)
+    fig, axes = plt.subplots(1, n, figsize=(2.6 * n, 3.0), squeeze=False)
+    half = max(s.x_edges_um[-1] for s in res.spots)
+    for ax, s in zip(axes[0], res.spots, strict=True):
+        e = s.x_edges_um
+        ax.imshow(
+            s.map_sr,
+            extent=(e[0], e[-1], s.y_edges_um[0], s.y_edges_um[-1]),
+            origin="lower",
+            cmap="gray",
+            interpolation="nearest",
+        )
+        ax.set_facecolor("black")
+        grid = np.arange(-np.ceil(half / CELL_UM) - 0.5, np.ceil(half / CELL_UM) + 1) * CELL_UM
+        for g in grid:
+            ax.axvline(g, color="tab:red", lw=0.4, alpha=0.7)
+            ax.axhline(g, color="tab:red", lw=0.4, alpha=0.7)
+        ax.set_xlim(-half, half)
+        ax.set_ylim(-half, half)
+        ax.set_title(
+            f"Z = {s.z_mm:g} mm\nFWHM {s.fwhm_x_um:.0f} um, edge {s.extent_x_um:.0f} um", fontsize=8
+        )
+        ax.set_xlabel("x (um)", fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[0][0].set_ylabel("y (um)", fontsize=8)
+    fig.suptitle(
+        f"{res.design}: spots of pixel {res.pixel['row']}{res.pixel['k']} on the "
+        f"object plane (grid {CELL_UM} um)",
+        fontsize=9,
+    )
+    return fig
+
+
+def plot_psf(p: PSF):
+    """Landing density on the sensor, 600-dpi grid, used pixels outlined (paper Fig. 10)."""
+    plt = _plt()
+    from matplotlib.patches import Rectangle
+
+    fig, ax = plt.subplots(figsize=(9, 2.6))
+    ex, ey = p.fine_edges_x_um, p.fine_edges_y_um
+    img = np.log10(p.fine_map + p.fine_map.max() * 1e-4) if p.fine_map.max() > 0 else p.fine_map
+    ax.imshow(
+        img,
+        extent=(ex[0], ex[-1], ey[0], ey[-1]),
+        origin="lower",
+        cmap="magma",
+        aspect="equal",
+        interpolation="nearest",
+    )
+    pitch = p.grid_pitch_um
+    for g in np.arange(np.floor(ex[0] / pitch) - 0.5, np.ceil(ex[-1] / pitch) + 1) * pitch:
+        ax.axvline(g, color="0.6", lw=0.4)
+    for g in np.arange(-0.5, p.grid_power.shape[0] + 0.5) * pitch:
+        ax.axhline(g, color="0.6", lw=0.4)
+    sw, sh = p.sensitive_um
+    for cx, cy in p.used_pixels:
+        own = abs(cx - p.own_pixel_id["x_um"]) < 1e-6 and abs(cy - p.own_pixel_id["y_um"]) < 1e-6
+        ax.add_patch(
+            Rectangle(
+                (cx - sw / 2, cy - sh / 2),
+                sw,
+                sh,
+                fill=False,
+                ec="cyan" if own else "white",
+                lw=1.4 if own else 0.9,
+            )
+        )
+    ax.plot([p.x_obj_um], [p.y_obj_um], "+", color="lime", ms=8)
+    ax.set_xlim(ex[0], ex[-1])
+    ax.set_ylim(ey[0], ey[-1])
+    ax.set_xlabel("x on sensor (um)")
+    ax.set_ylabel("y (um)")
+    ax.set_title(
+        f"{p.design}: PSF of a point at X = {p.x_obj_um:g} um, Z = {p.z_mm:g} mm "
+        f"(log density; own {p.own_pixel:.1%}, blur {p.neighbour_own_path:.1%}, "
+        f"ghost {p.neighbour_ghost:.1%}, insensitive {p.insensitive:.1%})",
+        fontsize=8,
+    )
+    return fig
+
+
+def plot_ghosts(res: GhostResult, top: int = 12):
+    """Etendue of the strongest ghost paths and where ghost light lands (per Z)."""
+    plt = _plt()
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 3.4))
+    paths = res.paths[:top]
+    labels = [
+        " / ".join(f"{'o' if h['row'] == 'other' else ''}{h['dk']:+d}" for h in p.holes)
+        for p in paths
+    ]
+    a1.barh(
+        range(len(paths)),
+        [p.etendue_um2sr for p in paths],
+        xerr=[p.etendue_se for p in paths],
+        color="tab:red",
+    )
+    a1.set_yticks(range(len(paths)), labels, fontsize=7)
+    a1.invert_yaxis()
+    a1.set_xlabel("etendue (um^2 sr)")
+    names = " / ".join(h["mask"] for h in paths[0].holes) if paths else ""
+    a1.set_title(
+        f"ghost paths: hole offset per mask ({names}; o = other row)\n"
+        f"own {res.etendue_own_um2sr:.3f}, ghost {res.etendue_ghost_um2sr:.3g} um^2 sr,"
+        f" fraction {res.ghost_fraction:.3g}",
+        fontsize=8,
+    )
+    for z, land in res.landing.items():
+        h = np.asarray(land["etendue_by_distance_um2sr"])
+        r = (np.arange(h.size) + 0.5) * land["bin_um"] / 1000
+        a2.step(r, h, where="mid", label=f"Z = {z} mm")
+    a2.set_yscale("symlog", linthresh=1e-6)
+    a2.set_xlabel("distance of ghost light from the pixel's axis on the object plane (mm)")
+    a2.set_ylabel("etendue per bin (um^2 sr)")
+    a2.legend(fontsize=7)
+    fig.suptitle(
+        f"{res.design}: ghost analysis of pixel {res.pixel['row']}{res.pixel['k']}", fontsize=9
+    )
+    fig.tight_layout()
+    return fig
+
+
+def plot_rmtf(res, paper_points: dict | None = None):
+    """RMTF versus object distance, one line per chart dpi (paper Fig. 11).
+
+    Solid: maximum over chart shifts (the paper's RMTF); band: minimum to maximum.
+    ``paper_points`` ({dpi: [(z, rmtf), ...]}) are drawn as dots when given.
+    """
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    z = np.asarray(res.z_mm)
+    for i, (key, vals) in enumerate(res.rmtf_max.items()):
+        c = f"C{i}"
+        ax.plot(z, vals, "-", color=c, label=f"{key} dpi ({res.periods_um[i]:.0f} um)")
+        ax.fill_between(z, res.rmtf_min[key], vals, color=c, alpha=0.12, lw=0)
+        if paper_points and key in paper_points:
+            pz, pv = zip(*paper_points[key], strict=True)
+            ax.plot(pz, pv, "o", color=c)
+    ax.axhline(res.dof_threshold, color="k", lw=0.6, ls=":")
+    dof = res.dof_mm.get(f"{res.dof_dpi:g}")
+    if dof is not None:
+        ax.axvline(dof, color="k", lw=0.6, ls="--")
+        ax.text(dof, 0.95, f" DOF {dof:.2f} mm", fontsize=8, va="top")
+    ax.set_xlabel("object distance Z (mm)")
+    ax.set_ylabel("RMTF")
+    ax.set_ylim(0, 1.02)
+    ax.set_xlim(z[0], z[-1])
+    ax.legend(fontsize=8, loc="lower left")
+    what = "own + ghost light" if res.ghosts else "own path only"
+    ax.set_title(
+        f"{res.design}: RMTF vs Z ({res.method}, {what}; band = min..max over chart shifts)",
+        fontsize=9,
+    )
+    return fig
+
+
+def plot_efficiency(res):
+    """Collected etendue vs Z for finite uniform objects, and the sensitive-area effect."""
+    plt = _plt()
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    zs = sorted(res.by_object_radius, key=float)
+    radii = list(res.by_object_radius[zs[0]])
+    for i, r in enumerate(radii):
+        vals = [res.by_object_radius[z][r] for z in zs]
+        lab = "infinite object" if r == "inf" else f"object radius {r} mm"
+        a1.plot([float(z) for z in zs], vals, "o-", color=f"C{i}", label=lab)
+    a1.axhline(res.etendue_own_um2sr, color="k", lw=0.6, ls=":", label="own path")
+    a1.set_xlabel("object distance Z (mm)")
+    a1.set_ylabel("etendue collected (um^2 sr)")
+    a1.set_title(
+        f"ratio to reference lens 1/{1 / res.ratio:.1f}, working F {res.working_f_number:.0f}",
+        fontsize=9,
+    )
+    a1.legend(fontsize=7)
+    areas = res.sensitive_area
+    x = np.arange(len(areas))
+    a2.bar(x - 0.2, [a["gain_own_vs_design"] for a in areas], 0.4, label="own path")
+    a2.bar(x + 0.2, [a["gain_vs_design"] for a in areas], 0.4, label="own + ghost")
+    a2.plot(x, [a["area_scale"] for a in areas], "k_", ms=30, label="area ratio")
+    a2.set_xticks(x, [f"{a['sensitive_um'][0]:.1f} um" for a in areas])
+    a2.set_ylabel("light relative to the design")
+    a2.set_title("sensitive-area size (paper: 4x area -> 4x light)", fontsize=9)
+    a2.legend(fontsize=7)
+    fig.suptitle(f"{res.design}: light efficiency (paper Fig. 13)", fontsize=10)
+    return fig
+
+
+def plot_diffraction(res):
+    """Slit diffraction at the next layer, per wavelength (paper Fig. 6b)."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    for i, (k, v) in enumerate(res.intensity.items()):
+        ax.plot(res.x_um, v, color=f"C{i}", label=f"{k} um: {res.fraction_outside[k]:.1%} outside")
+    for s in (-1, 1):
+        ax.axvline(s * res.geometric_edge_um, color="k", lw=0.7, ls="--")
+    ax.set_xlabel("X at the next layer (um)")
+    ax.set_ylabel("I / I0")
+    ax.set_title(
+        f"slit {res.slit_um:g} um, Z = {res.z_mm:g} mm (R1 {res.r1_um:.0f} um, "
+        f"R2 {res.r2_um:.0f} um); geometric edge {res.geometric_edge_um:.1f} um",
+        fontsize=9,
+    )
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_study(res):
+    """Parameter study: working F-number against depth of field, per combination."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7.5, 4.6))
+    marks = {"square": "s", "circle": "o"}
+    for r in res.rows:
+        col = "C0" if r["gap_medium"] == "air" else "C1"
+        face = col if r["fresnel"] else "none"
+        size = 60 if r["sensitive_um"] == max(x["sensitive_um"] for x in res.rows) else 25
+        ax.scatter(
+            r["dof_mm"],
+            r["working_f_number"],
+            marker=marks.get(r["hole_shape"], "^"),
+            edgecolors=col,
+            facecolors=face,
+            s=size,
+        )
+    ax.axhline(res.paper["working_f_number"], color="k", lw=0.7, ls=":")
+    ax.axvline(res.paper["dof_mm"], color="k", lw=0.7, ls="--")
+    ax.text(res.paper["dof_mm"], ax.get_ylim()[1], " paper: DOF 3.5 mm, F 60", fontsize=8, va="top")
+    ax.set_xlabel("depth of field at 200 dpi, RMTF >= 0.3 (mm)")
+    ax.set_ylabel("equivalent working F-number")
+    ax.set_title(
+        "square/circle: hole shape; blue: air gap, orange: light guide n=1.49; "
+        "filled: Fresnel losses; large: bigger sensitive area",
+        fontsize=8,
+    )
+    return fig
+
+
+def plot_sfr(res: dict, title: str = "", extra: dict | None = None):
+    """SFR curve of a slanted edge with MTF50 and the 100/200-dpi values (``extra``: a
+    second curve, e.g. along y)."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    ax.plot(res["freq_cy_per_mm"], res["sfr"], "-", label=f"along {res['direction']}")
+    if extra is not None:
+        ax.plot(
+            extra["freq_cy_per_mm"],
+            extra["sfr"],
+            "-",
+            label=f"along {extra['direction']}: MTF50 {extra['mtf50_cy_per_mm']:.2f}",
+        )
+    ax.axhline(0.5, color="k", lw=0.5, ls=":")
+    for k, v in res["sfr_at_dpi"].items():
+        ax.plot(float(k) / 50.8, v, "o", label=f"{k} dpi: {v:.3f}")
+    ax.axvline(res["nyquist_cy_per_mm"], color="k", lw=0.5, ls="--")
+    ax.set_xlim(0, 2 * res["nyquist_cy_per_mm"])
+    ax.set_ylim(0, 1.1)
+    ax.set_xlabel("spatial frequency (cycles/mm)")
+    ax.set_ylabel("SFR")
+    ax.set_title(
+        f"{title} slanted-edge SFR along {res['direction']}: MTF50 "
+        f"{res['mtf50_cy_per_mm']:.2f} cy/mm",
+        fontsize=9,
+    )
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_chart_profiles(profiles: list[dict]):
+    """Merged-line signals across a bar chart at two distances (paper Fig. 12 c, d)."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
+    for ax, p in zip(axes[0], profiles, strict=True):
+        x = np.asarray(p["x_um"]) / 1000
+        ax.step(x, p["signal"], where="mid")
+        ax.set_ylim(0, 1.05)
+        ax.set_xlim(0, min(x[-1], 2.0))
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("pixel signal (max = 1)")
+        ax.set_title(
+            f"{p['dpi']:g} dpi chart, Z = {p['z_mm']:g} mm: RMTF {p['rmtf_computed']:.2f}",
+            fontsize=9,
+        )
+    return fig
+
+
+def plot_scan_panels(panels: list[tuple[str, np.ndarray]], title: str, cols: int = 1):
+    """Simulated scans side by side or stacked (paper Figs. 8, 9, 12 a-b), display-encoded."""
+    plt = _plt()
+    from ..io.files import linear_to_srgb
+
+    rows = int(np.ceil(len(panels) / cols))
+    h, w = panels[0][1].shape[:2]
+    fig, axes = plt.subplots(
+        rows,
+        cols,
+        figsize=(min(12, 3 + 9 * w / max(w, h)), 0.6 + rows * max(1.2, 9 * h / w / cols)),
+        squeeze=False,
+    )
+    for ax, (name, img) in zip(axes.ravel(), panels, strict=False):
+        ax.imshow(linear_to_srgb(img), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+        ax.set_title(name, fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    for ax in axes.ravel()[len(panels) :]:
+        ax.axis("off")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_scan_profiles(profiles: list[dict]):
+    """Profiles across the simulated 200-dpi chart scans (paper Fig. 12 c, d)."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
+    for ax, p in zip(axes[0], profiles, strict=True):
+        x = np.asarray(p["x_mm"])
+        ax.plot(x, p["profile"], "-", lw=1)
+        ax.set_ylim(0, 1.1)
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("output (white = 1)")
+        ax.set_title(
+            f"Z = {p['z_mm']:g} mm: RMTF measured {p['rmtf_measured']:.2f}, computed "
+            f"{p['rmtf_computed_min']:.2f}-{p['rmtf_computed_max']:.2f}",
+            fontsize=9,
+        )
+    return fig
+
+
+def plot_pareto(res, title: str = ""):
+    """Search: every feasible design, the Pareto front, and the base design."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    feas = [r for r in res.records if r["feasible"]]
+    bad = [r for r in res.records if r["ok"] and not r["feasible"]]
+    if bad:
+        ax.scatter(
+            [r["dof_mm"] for r in bad],
+            [r["efficiency_ratio"] for r in bad],
+            s=6,
+            c="0.8",
+            label="infeasible (near ghosts, budget, diffraction)",
+        )
+    if feas:
+        ax.scatter(
+            [r["dof_mm"] for r in feas],
+            [r["efficiency_ratio"] for r in feas],
+            s=10,
+            c="C0",
+            alpha=0.6,
+            label="feasible",
+        )
+    if res.pareto:
+        f = sorted(res.pareto, key=lambda r: r["dof_mm"])
+        ax.plot(
+            [r["dof_mm"] for r in f],
+            [r["efficiency_ratio"] for r in f],
+            "o-",
+            c="C3",
+            ms=4,
+            label="Pareto front",
+        )
+    if res.reference:
+        ax.plot(
+            res.reference["dof_mm"],
+            res.reference["efficiency_ratio"],
+            "*",
+            c="k",
+            ms=14,
+            label=f"base design ({res.base})",
+        )
+    ax.set_xlabel(f"depth of field at {res.meta['dof_dpi']:g} dpi (mm)")
+    ax.set_ylabel("light efficiency, own path (ratio to F10 lens)")
+    ax.set_yscale("log")
+    ax.legend(fontsize=7)
+    ax.set_title(
+        title or f"design search for {res.dpi:g} dpi ({len(res.records)} designs)", fontsize=9
+    )
+    return fig
+
+
+def plot_tolerance(res):
+    """Tolerance study: histograms of RMTF, DOF, efficiency, ghosts; sensitivity bars."""
+    plt = _plt()
+    ok = [s for s in res.samples if s is not None]
+    fig, axes = plt.subplots(1, 4, figsize=(15, 3.4))
+    z_show = [z for z in res.z_mm if z in (1.0, 2.0, 3.0)] or res.z_mm[:3]
+    for i, z in enumerate(z_show):
+        v = [s["rmtf_at"][f"{z:g}"] for s in ok]
+        axes[0].hist(v, bins=30, alpha=0.6, color=f"C{i}", label=f"Z = {z:g} mm")
+        axes[0].axvline(res.nominal["rmtf_at"][f"{z:g}"], color=f"C{i}", ls="--")
+    axes[0].set_xlabel(f"RMTF at {res.dpi:g} dpi (dashed: nominal)")
+    axes[0].legend(fontsize=7)
+    for ax, k, lab in (
+        (axes[1], "dof_mm", "depth of field (mm)"),
+        (axes[2], "ghost_fraction", "ghost fraction"),
+    ):
+        ax.hist([s[k] for s in ok], bins=30, color="C0")
+        ax.axvline(res.nominal[k], color="k", ls="--")
+        ax.set_xlabel(lab)
+    rows = res.sensitivity[:10][::-1]
+    axes[3].barh([r["error"] for r in rows], [r["d_dof_mm"] for r in rows], color="C3")
+    axes[3].set_xlabel("mean |change in DOF| at +-1 sigma (mm)")
+    axes[3].tick_params(labelsize=7)
+    s = res.sigmas
+    fig.suptitle(
+        f"{res.design}: {len(res.samples)} samples, misregistration {s['misregistration_um']:g}"
+        f" um, holes {s['hole_um']:g} um, thickness {s['thickness_um']:g} um, tilt "
+        f"{s['tilt_deg']:g} deg (1 sigma)"
+        + (
+            f"; yield {res.yield_fraction:.1%} for {res.spec}"
+            if res.yield_fraction is not None
+            else ""
+        ),
+        fontsize=9,
+    )
+    fig.tight_layout()
+    return fig
+
+
+def plot_pareto_variants(results: dict):
+    """Pareto fronts of searches over structural variants (layers, stagger), one colour
+    each, with the base design."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for i, (name, res) in enumerate(results.items()):
+        f = sorted(res.pareto, key=lambda r: r["dof_mm"])
+        if f:
+            ax.plot(
+                [r["dof_mm"] for r in f],
+                [r["efficiency_ratio"] for r in f],
+                "o-",
+                c=f"C{i}",
+                ms=4,
+                label=name,
+            )
+        if res.reference:
+            ax.plot(
+                res.reference["dof_mm"], res.reference["efficiency_ratio"], "*", c=f"C{i}", ms=12
+            )
+    first = next(iter(results.values()))
+    ax.set_xlabel(f"depth of field at {first.meta['dof_dpi']:g} dpi (mm)")
+    ax.set_ylabel("light efficiency, own path (ratio to F10 lens)")
+    ax.set_yscale("log")
+    ax.legend(fontsize=7)
+    ax.set_title("Pareto fronts by structure (stars: the base of each)", fontsize=9)
+    return fig

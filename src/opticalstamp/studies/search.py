@@ -1,0 +1,435 @@
+"""Design search (paper §3): hole sizes and slab thicknesses of a stack for a sensor and a
+target resolution, maximising light efficiency and depth of field, with no near ghosts.
+
+Variables: the square hole size of each layer (1 um steps between ``min_hole_um`` and the
+largest that leaves ``min_wall_um`` of mask between the staggered rows) and each slab's
+thickness (``thickness_step_um`` steps; glass plates and air gaps between ``bounds``);
+any of them can be pinned. Constraints: no ghost light within ``near_mm`` of the pixel's
+axis at Z = 0 ... 4 mm (the paper's virtual detector), optionally a ghost-fraction bound,
+a total stack-thickness budget, and a diffraction spill below ``max_spill``. Objectives:
+light efficiency (ratio to the paper's reference lens) and depth of field at ``dpi``.
+
+The optimiser is Optuna's NSGA-II (multi-objective, constraint-aware), seeded, driven by
+batches of ``population`` designs that are evaluated in parallel (:mod:`execute`); the
+result is the Pareto front of the feasible designs. Seeds belong to the evaluations, so
+the front is the same for any number of workers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..design import Design, design_from_dict
+from ..validate import InputError, check_number, check_seed
+from .evaluate import evaluate_design, stack_params, with_stack
+from .runner import journal_lock, run_tasks, task_key
+
+
+def base_for_dpi(design: Design, dpi: float) -> Design:
+    """The design's sensor and stack scaled so the merged pixel pitch is 25.4 mm / dpi
+    (pixel pitch, sensitive area, row pitch, stagger and holes; plate thicknesses kept)."""
+    s = design.sensor
+    lat_pitch = s.row_pitch_um / s.rows
+    k = 25400.0 / dpi / lat_pitch
+    data = design.model_dump(mode="json", exclude_none=True)
+    sens = data["sensor"]
+    for key in (
+        "pixel_pitch_um",
+        "sensitive_width_um",
+        "sensitive_height_um",
+        "row_pitch_um",
+        "row_b_offset_x_um",
+        "row_b_offset_y_um",
+    ):
+        if key in sens:
+            sens[key] = sens[key] * k
+    for sl in data["slabs"]:
+        m = sl.get("mask_top")
+        if m:
+            for key in ("size_um", "width_um", "height_um"):
+                if key in m:
+                    m[key] = round(m[key] * k, 1)
+    data["name"] = f"{design.name} at {dpi:g} dpi"
+    return design_from_dict(data, f"{design.name} scaled to {dpi:g} dpi")
+
+
+@dataclass(frozen=True)
+class SearchSpace:
+    hole_bounds_um: tuple[float, float]
+    thickness_bounds_um: list[tuple[float, float]]
+    thickness_step_um: float
+    pinned: dict = field(default_factory=dict)  # "hole0".., "t0".. -> value
+
+    def names(self, n_holes: int, n_slabs: int) -> list[str]:
+        return [f"hole{i}" for i in range(n_holes)] + [f"t{i}" for i in range(n_slabs)]
+
+
+def default_space(
+    design: Design,
+    budget_um: float,
+    min_hole_um: float = 10.0,
+    min_wall_um: float = 10.0,
+    thickness_step_um: float = 50.0,
+) -> SearchSpace:
+    s = design.sensor
+    dx = s.row_b_offset_x_um % s.row_pitch_um if s.rows == 2 else s.row_pitch_um
+    dx = min(dx, s.row_pitch_um - dx) if s.rows == 2 else s.row_pitch_um
+    hole_max = min(dx, s.row_pitch_um) - min_wall_um
+    lo = max(thickness_step_um, 100.0)
+    hi = lo + math.floor((min(budget_um, 2000.0) - lo) / thickness_step_um) * thickness_step_um
+    bounds = [(lo, hi) for _ in design.slabs]
+    return SearchSpace((min_hole_um, float(math.floor(hole_max))), bounds, thickness_step_um)
+
+
+def _evaluate_payload(payload: dict) -> dict:
+    """Worker entry: build the candidate from plain data and evaluate it."""
+    base = design_from_dict(payload["base"], "search base")
+    d = with_stack(base, holes_um=payload["holes_um"], thicknesses_um=payload["thicknesses_um"])
+    return evaluate_design(d, **payload["options"])
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    base: str
+    dpi: float
+    seed: int
+    records: list[dict]  # every evaluation: params, metrics, feasible
+    pareto: list[dict]
+    reference: dict | None  # the base design's own evaluation
+    meta: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        target = self.reference["dof_mm"] if self.reference else None
+        deep = [
+            r
+            for r in self.records
+            if r["feasible"] and target is not None and r["dof_mm"] >= target
+        ]
+        thinnest = min(deep, key=lambda r: (r["stack_um"], -r["efficiency_ratio"]), default=None)
+        return {
+            "base": self.base,
+            "dpi": self.dpi,
+            "seed": self.seed,
+            "pareto": self.pareto,
+            "thinnest_with_base_dof": thinnest,
+            "reference": self.reference,
+            "n_evaluations": len(self.records),
+            "n_feasible": sum(r["feasible"] for r in self.records),
+            "n_failed": sum(not r["ok"] for r in self.records),
+            "meta": self.meta,
+        }
+
+
+def pareto_front(points: np.ndarray) -> np.ndarray:
+    """Indices of the non-dominated rows of ``points`` (maximise every column)."""
+    keep = []
+    for i, p in enumerate(points):
+        dominated = np.any(np.all(points >= p, axis=1) & np.any(points > p, axis=1))
+        if not dominated:
+            keep.append(i)
+    return np.array(keep, dtype=np.int64)
+
+
+CONSTRAINTS = ("near_ghost", "ghost_fraction", "stack_budget", "diffraction_spill")
+
+
+def _feasible(m: dict, budget_um: float, max_ghost: float | None, max_spill: float) -> list:
+    """Constraint values (<= 0 feasible) for NSGA-II."""
+    return [
+        1.0 if m["near_ghost"] else 0.0,
+        (m["ghost_fraction"] - max_ghost) if max_ghost is not None else 0.0,
+        (m["stack_um"] - budget_um) / 1000.0,
+        m["diffraction_spill"] - max_spill,
+    ]
+
+
+def search(
+    design: Design,
+    *,
+    dpi: float = 300.0,
+    dof_dpi: float = 200.0,
+    budget_mm: float = 2.5,
+    near_mm: float = 1.0,
+    max_ghost: float | None = None,
+    max_spill: float = 0.25,
+    population: int = 24,
+    generations: int = 10,
+    seed: int = 0,
+    pinned: dict | None = None,
+    space: SearchSpace | None = None,
+    ghost_rays: int = 1 << 17,
+    warm_start: bool = True,
+    workers: int | None = None,
+    dask_address: str | None = None,
+    journal=None,
+    progress: bool = False,
+) -> SearchResult:
+    """NSGA-II search of hole sizes and thicknesses; returns every evaluation and the front.
+
+    ``design`` gives the sensor, the glass, the number and order of slabs and masks and
+    the reference gap (scale it to another resolution with :func:`base_for_dpi`).
+    ``pinned``: {"hole0": 48, "t2": 1000, ...} fixes variables (holes object side first,
+    thicknesses sensor first).
+    """
+    check_seed(seed)
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    if any(m.shape == "circle" for m in design.masks):
+        raise ValueError("search: the closed-form evaluation needs square holes")
+    budget_um = budget_mm * 1000.0
+    sp = space or default_space(design, budget_um)
+    pins = dict(pinned or {})
+    n_h, n_t = len(design.masks), len(design.slabs)
+    names = sp.names(n_h, n_t)
+    unknown = set(pins) - set(names)
+    if unknown:
+        raise InputError(f"pinned: unknown variables {sorted(unknown)} (use {names})")
+    for name, value in pins.items():
+        j = int(name[4:] if name.startswith("hole") else name[1:])
+        lo, hi = sp.hole_bounds_um if name.startswith("hole") else sp.thickness_bounds_um[j]
+        check_number(value, f"pinned {name} (--pin {name}=...)", lo, hi)
+    t_pins = {k: v for k, v in pins.items() if k.startswith("t")}
+    least = sum(t_pins.get(f"t{j}", sp.thickness_bounds_um[j][0]) for j in range(n_t))
+    if t_pins and least > budget_um:
+        raise InputError(
+            f"pinned {', '.join(f'{k}={v:g}' for k, v in t_pins.items())}: the thinnest stack "
+            f"with these pins is {least:g} um, over the budget of {budget_um:g} um "
+            "(--budget-mm): every design would be infeasible"
+        )
+    options = {"dpi": dof_dpi, "near_mm": near_mm, "ghost_rays": ghost_rays}
+    base_json = design.model_dump(mode="json", exclude_none=True)
+
+    def payload(params: dict) -> dict:
+        holes = [float(params[f"hole{j}"]) for j in range(n_h)]
+        ts = [float(params[f"t{j}"]) for j in range(n_t)]
+        return {
+            "base": base_json,
+            "holes_um": holes,
+            "thicknesses_um": ts,
+            "options": options | {"seed": seed},
+        }
+
+    sampler = optuna.samplers.NSGAIISampler(population_size=population, seed=seed)
+    study = optuna.create_study(directions=["maximize", "maximize"], sampler=sampler)
+    dists = {}
+    for j in range(n_h):
+        lo, hi = sp.hole_bounds_um
+        dists[f"hole{j}"] = optuna.distributions.IntDistribution(int(lo), int(hi))
+    for j in range(n_t):
+        lo, hi = sp.thickness_bounds_um[j]
+        dists[f"t{j}"] = optuna.distributions.FloatDistribution(lo, hi, step=sp.thickness_step_um)
+    records = []
+    p0 = stack_params(design)
+    base_params = {f"hole{j}": v for j, v in enumerate(p0["holes_um"])}
+    base_params |= {f"t{j}": v for j, v in enumerate(p0["thicknesses_um"])}
+    if warm_start:  # the base design joins the first generation (NSGA-II breeds from it)
+        start = {
+            k: int(round(v)) if k.startswith("hole") else float(v)
+            for k, v in base_params.items()
+            if k not in pins
+        }
+        study.enqueue_trial(start, skip_if_exists=True)
+    with journal_lock(journal):  # one lock for every generation of this run
+        # the base design itself, for reference on the front
+        ref_payload = payload(base_params)
+        ref_key = task_key(ref_payload)
+        ref_rec = run_tasks(
+            _evaluate_payload, [(ref_key, ref_payload)], workers=1, journal=journal
+        )[ref_key]
+        for gen in range(generations):
+            trials = []
+            tasks = []
+            for _ in range(population):
+                t = study.ask({k: v for k, v in dists.items() if k not in pins})
+                params = t.params | pins
+                p = payload(params)
+                trials.append((t, params, task_key(p)))
+                tasks.append((task_key(p), p))
+            recs = run_tasks(
+                _evaluate_payload,
+                tasks,
+                workers=workers,
+                dask_address=dask_address,
+                journal=journal,
+                progress=progress,
+                desc=f"generation {gen + 1}/{generations}",
+            )
+            for t, params, key in trials:
+                rec = recs.get(key)
+                if rec is None or not rec["ok"]:
+                    study.tell(t, state=optuna.trial.TrialState.FAIL)
+                    records.append(_row(params, rec, None, False, n_h, n_t))
+                    continue
+                m = rec["result"]
+                cons = _feasible(m, budget_um, max_ghost, max_spill)
+                for name, c in zip(CONSTRAINTS, cons, strict=True):
+                    t.set_constraint(name, c)  # <= 0: satisfied (NSGA-II's constrained domination)
+                study.tell(t, [m["efficiency_ratio"], m["dof_mm"]])
+                records.append(_row(params, rec, m, all(c <= 0 for c in cons), n_h, n_t))
+    ok = [r for r in records if r["feasible"]]
+    # one entry per distinct design on the front
+    uniq = {}
+    for r in ok:
+        uniq.setdefault((tuple(r["holes_um"]), tuple(r["thicknesses_um"])), r)
+    ok = list(uniq.values())
+    front = []
+    if ok:
+        pts = np.array([[r["efficiency_ratio"], r["dof_mm"]] for r in ok])
+        front = sorted((ok[i] for i in pareto_front(pts)), key=lambda r: -r["dof_mm"])
+    reference = None
+    if ref_rec["ok"]:
+        m = ref_rec["result"]
+        reference = _row(
+            base_params,
+            ref_rec,
+            m,
+            all(c <= 0 for c in _feasible(m, budget_um, max_ghost, max_spill)),
+            n_h,
+            n_t,
+        )
+        if ok:
+            pts = np.array([[r["efficiency_ratio"], r["dof_mm"]] for r in ok])
+            p = np.array([reference["efficiency_ratio"], reference["dof_mm"]])
+            dom = np.all(pts >= p, axis=1) & np.any(pts > p, axis=1)
+            reference["dominated_by"] = int(dom.sum())
+    return SearchResult(
+        base=design.name,
+        dpi=dpi,
+        seed=seed,
+        records=records,
+        pareto=front,
+        reference=reference,
+        meta={
+            "dof_dpi": dof_dpi,
+            "budget_mm": budget_mm,
+            "near_mm": near_mm,
+            "max_ghost": max_ghost,
+            "max_spill": max_spill,
+            "population": population,
+            "generations": generations,
+            "pinned": pins,
+            "ghost_rays": ghost_rays,
+            "hole_bounds_um": list(sp.hole_bounds_um),
+            "thickness_bounds_um": [list(b) for b in sp.thickness_bounds_um],
+        },
+    )
+
+
+def _row(
+    params: dict, rec: dict | None, m: dict | None, feasible: bool, n_h: int, n_t: int
+) -> dict:
+    row = {
+        "holes_um": [float(params[f"hole{j}"]) for j in range(n_h)],
+        "thicknesses_um": [float(params[f"t{j}"]) for j in range(n_t)],
+        "ok": m is not None,
+        "feasible": feasible,
+        "error": None if rec is None or rec["ok"] else rec.get("error", "not run"),
+    }
+    keys = (
+        "efficiency_ratio",
+        "dof_mm",
+        "ghost_fraction",
+        "nearest_ghost_mm",
+        "diffraction_spill",
+        "stack_um",
+    )
+    for k in keys:
+        v = None if m is None else m[k]
+        # JSON (the journal) has no infinity: a missing nearest ghost means none at all
+        row[k] = (
+            float(v)
+            if v is not None
+            else (math.inf if m is not None and k == "nearest_ghost_mm" else math.nan)
+        )
+    return row
+
+
+def search_dataset(res: SearchResult, design: Design, seed: int):
+    """Every evaluation of a search as an xarray Dataset (dims: evaluation, layer, slab)."""
+    import xarray as xr
+
+    from .. import __version__
+
+    recs = res.records
+    front = {(tuple(r["holes_um"]), tuple(r["thicknesses_um"])) for r in res.pareto}
+    key = [(tuple(r["holes_um"]), tuple(r["thicknesses_um"])) for r in recs]
+    data = {
+        "hole_um": (("evaluation", "layer"), np.array([r["holes_um"] for r in recs])),
+        "thickness_um": (("evaluation", "slab"), np.array([r["thicknesses_um"] for r in recs])),
+        "feasible": ("evaluation", np.array([r["feasible"] for r in recs], dtype=np.int8)),
+        "on_front": ("evaluation", np.array([k in front for k in key], dtype=np.int8)),
+    }
+    for k in (
+        "efficiency_ratio",
+        "dof_mm",
+        "ghost_fraction",
+        "nearest_ghost_mm",
+        "diffraction_spill",
+        "stack_um",
+    ):
+        v = np.array([r[k] for r in recs], dtype=np.float64)
+        data[k] = ("evaluation", np.where(np.isfinite(v), v, np.nan))
+    return xr.Dataset(
+        data,
+        coords={"evaluation": np.arange(len(recs))},
+        attrs={
+            "kind": "opticalstamp search",
+            "design": design.name,
+            "design_fingerprint": design.fingerprint(),
+            "seed": seed,
+            "opticalstamp_version": __version__,
+            "dpi": res.dpi,
+            "reference": res.reference,
+            "meta": res.meta,
+            "layer_order": "holes: object side first; slabs: sensor first",
+        },
+    )
+
+
+def structural_variants(design: Design, layers=(3,), stagger=("yes",)) -> dict[str, Design]:
+    """Bases that differ in the number of mask layers and the stagger pattern.
+
+    ``layers``: how many masks to keep, dropping masks from the middle of the stack
+    outward (3 -> 2 keeps the object-side and sensor-side masks, as the paper's Fig. 1c/d);
+    ``stagger``: "yes" keeps the two staggered rows, "no" puts every pixel in one row at
+    the merged pitch (paper Fig. 1c), with the same resolution.
+    """
+    out = {}
+    n_masks = len(design.masks)
+    for n in layers:
+        if not 1 <= n <= n_masks:
+            raise ValueError(f"layers: between 1 and {n_masks} (got {n})")
+        for st in stagger:
+            if st not in ("yes", "no"):
+                raise ValueError(f"stagger: yes or no (got {st!r})")
+            data = design.model_dump(mode="json", exclude_none=True)
+            idx = [i for i, sl in enumerate(data["slabs"]) if "mask_top" in sl]
+            keep = {idx[0], idx[-1]} if n >= 2 else {idx[-1]}
+            middle = [i for i in idx if i not in keep]
+            keep |= set(middle[: max(0, n - len(keep))])
+            for i in idx:
+                if i not in keep:
+                    del data["slabs"][i]["mask_top"]
+            s = data["sensor"]
+            if st == "no" and s.get("rows", 2) == 2:
+                s["rows"] = 1
+                s["row_pitch_um"] = s["row_pitch_um"] / 2
+                s.pop("row_b_offset_x_um", None)
+                s.pop("row_b_offset_y_um", None)
+            name = f"{design.name}, {n} layers, {'staggered' if st == 'yes' else 'one row'}"
+            data["name"] = name
+            out[name] = design_from_dict(data, name)
+    return out
+
+
+def merged_front(results: dict[str, SearchResult]) -> list[dict]:
+    """The Pareto front over several searches, each entry tagged with its variant."""
+    rows = [r | {"variant": name} for name, res in results.items() for r in res.pareto]
+    if not rows:
+        return []
+    pts = np.array([[r["efficiency_ratio"], r["dof_mm"]] for r in rows])
+    return sorted((rows[i] for i in pareto_front(pts)), key=lambda r: -r["dof_mm"])

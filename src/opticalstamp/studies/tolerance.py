@@ -1,0 +1,312 @@
+"""Assembly and manufacturing tolerancing (paper §5: "misalignment ... at least 3 um").
+
+Error sources, each Gaussian with its own sigma, drawn per sample from a generator keyed
+by (seed, sample index) so that results do not depend on workers or order:
+
+- x and y misregistration of each mask against the sensor (default 3 um);
+- hole size of each mask (default 1 um);
+- thickness of each slab, plates and air gaps (default 10 um);
+- a tilt of the stack about the y axis (default 0.02 deg), taken at the end of the
+  array, where it changes the air gap by (half the array length) x tan(tilt).
+
+Each sample is evaluated like a search candidate (:mod:`evaluate`): RMTF at the chosen
+dpi and distances, depth of field, light efficiency, ghost fraction. A one-at-a-time
+sensitivity table (each error at +-1 sigma alone) ranks the sources; the yield is the
+fraction of samples that meet a specification such as ``dof>=2.2,ghost<=0.2``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..design import Design, design_from_dict
+from ..raytrace.stack import lattice_of
+from ..validate import check_seed
+from .evaluate import evaluate_design, stack_params, with_stack
+from .runner import run_tasks, task_key
+
+DEFAULT_SIGMAS = {"misregistration_um": 3.0, "hole_um": 1.0, "thickness_um": 10.0, "tilt_deg": 0.02}
+SPEC_RE = re.compile(r"^(dof|ghost|efficiency|rmtf@[0-9.]+)(>=|<=)(-?[0-9.]+)$")
+
+
+def error_names(design: Design) -> list[str]:
+    n_m, n_s = len(design.masks), len(design.slabs)
+    names = [f"dx{i}" for i in range(n_m)] + [f"dy{i}" for i in range(n_m)]
+    names += [f"hole{i}" for i in range(n_m)] + [f"t{j}" for j in range(n_s)] + ["tilt"]
+    return names
+
+
+def _sigma_vector(design: Design, sigmas: dict) -> np.ndarray:
+    n_m, n_s = len(design.masks), len(design.slabs)
+    return np.array(
+        [sigmas["misregistration_um"]] * (2 * n_m)
+        + [sigmas["hole_um"]] * n_m
+        + [sigmas["thickness_um"]] * n_s
+        + [sigmas["tilt_deg"]]
+    )
+
+
+def draw_errors(design: Design, index: int, seed: int, sigmas: dict) -> dict:
+    """The errors of sample ``index`` (a dict by error name)."""
+    rng = np.random.default_rng([seed, index, 31])
+    v = rng.standard_normal(len(error_names(design))) * _sigma_vector(design, sigmas)
+    return dict(zip(error_names(design), v.tolist(), strict=True))
+
+
+def apply_errors(design: Design, errors: dict) -> Design:
+    """The design built with the given errors (masks object side first, slabs sensor
+    first; the tilt lengthens the first slab at the array's end)."""
+    p = stack_params(design)
+    n_m = len(design.masks)
+    holes = [max(1.0, h + errors.get(f"hole{i}", 0.0)) for i, h in enumerate(p["holes_um"])]
+    ts = [max(1.0, t + errors.get(f"t{j}", 0.0)) for j, t in enumerate(p["thicknesses_um"])]
+    lat = lattice_of(design)
+    half_len = max(abs(lat.k_lo), abs(lat.k_hi)) * lat.pitch
+    ts[0] = max(1.0, ts[0] + half_len * math.tan(math.radians(errors.get("tilt", 0.0))))
+    offs = [(errors.get(f"dx{i}", 0.0), errors.get(f"dy{i}", 0.0)) for i in range(n_m)]
+    return with_stack(design, holes_um=holes, thicknesses_um=ts, offsets_um=offs)
+
+
+def _evaluate_payload(payload: dict) -> dict:
+    base = design_from_dict(payload["base"], "tolerance base")
+    return evaluate_design(apply_errors(base, payload["errors"]), **payload["options"])
+
+
+def parse_spec(text: str | None) -> list[tuple[str, str, float]]:
+    """'dof>=2.2,ghost<=0.2,rmtf@2>=0.3,efficiency>=0.03' -> [(metric, op, value)]."""
+    if not text:
+        return []
+    out = []
+    for part in text.replace(" ", "").split(","):
+        m = SPEC_RE.match(part)
+        if not m:
+            raise ValueError(
+                f"spec: cannot read {part!r} (use dof, ghost, efficiency or rmtf@Z with >= or "
+                "<= and a number, comma-separated)"
+            )
+        out.append((m.group(1), m.group(2), float(m.group(3))))
+    return out
+
+
+def _metric(res: dict, name: str) -> float:
+    if name == "dof":
+        return res["dof_mm"]
+    if name == "ghost":
+        return res["ghost_fraction"]
+    if name == "efficiency":
+        return res["efficiency_ratio"]
+    z = float(name.split("@")[1])
+    return res["rmtf_at"][f"{z:g}"]
+
+
+def meets(res: dict, spec) -> bool:
+    return all(
+        (_metric(res, m) >= v) if op == ">=" else (_metric(res, m) <= v) for m, op, v in spec
+    )
+
+
+@dataclass(frozen=True)
+class ToleranceResult:
+    design: str
+    seed: int
+    sigmas: dict
+    dpi: float
+    z_mm: list[float]
+    nominal: dict
+    errors: list[dict]
+    samples: list[dict | None]  # evaluation per sample (None: failed, see failures)
+    failures: list[dict]
+    sensitivity: list[dict]
+    spec: str
+    yield_fraction: float | None
+    meta: dict = field(default_factory=dict)
+
+    def percentiles(self, q=(5, 25, 50, 75, 95)) -> dict:
+        ok = [s for s in self.samples if s is not None]
+        out = {"rmtf": {}, "dof_mm": {}, "efficiency_ratio": {}, "ghost_fraction": {}}
+        for z in self.z_mm:
+            v = np.array([s["rmtf_at"][f"{z:g}"] for s in ok])
+            out["rmtf"][f"{z:g}"] = dict(
+                zip([f"p{x}" for x in q], np.percentile(v, q).tolist(), strict=True)
+            )
+        for k in ("dof_mm", "efficiency_ratio", "ghost_fraction"):
+            v = np.array([s[k] for s in ok])
+            out[k] = dict(zip([f"p{x}" for x in q], np.percentile(v, q).tolist(), strict=True))
+        return out
+
+    def to_dict(self) -> dict:
+        pct = self.percentiles()
+        return {
+            "design": self.design,
+            "seed": self.seed,
+            "sigmas": self.sigmas,
+            "dpi": self.dpi,
+            "z_mm": self.z_mm,
+            "nominal": self.nominal,
+            f"rmtf{self.dpi:g}": pct["rmtf"],
+            "dof_mm": pct["dof_mm"],
+            "efficiency_ratio": pct["efficiency_ratio"],
+            "ghost_fraction": pct["ghost_fraction"],
+            "sensitivity": self.sensitivity,
+            "spec": self.spec,
+            "yield": self.yield_fraction,
+            "n_samples": len(self.samples),
+            "n_failed": len(self.failures),
+            "failures": self.failures,
+            "meta": self.meta,
+        }
+
+
+def tolerance(
+    design: Design,
+    *,
+    samples: int = 1000,
+    sigmas: dict | None = None,
+    dpi: float = 200.0,
+    z_mm=(0.5, 1.0, 2.0, 3.0, 3.5),
+    spec: str | None = None,
+    seed: int = 0,
+    ghost_rays: int = 1 << 16,
+    workers: int | None = None,
+    dask_address: str | None = None,
+    journal=None,
+    progress: bool = False,
+) -> ToleranceResult:
+    """Monte Carlo of assembly errors, sensitivity table and yield (see module doc)."""
+    check_seed(seed)
+    sg = DEFAULT_SIGMAS | (sigmas or {})
+    if any(v < 0 for v in sg.values()):
+        raise ValueError("sigmas must be >= 0")
+    if samples < 1:
+        raise ValueError("samples must be >= 1")
+    spec_l = parse_spec(spec)
+    base = design.model_dump(mode="json", exclude_none=True)
+    options = {
+        "dpi": dpi,
+        "rmtf_z_mm": tuple(float(z) for z in z_mm),
+        "ghost_rays": ghost_rays,
+        "seed": seed,
+    }
+
+    def task(errors: dict) -> tuple[str, dict]:
+        p = {"base": base, "errors": errors, "options": options}
+        return task_key(p), p
+
+    nominal_key, nominal_p = task({})
+    oat = []
+    for name, s in zip(error_names(design), _sigma_vector(design, sg), strict=True):
+        if s > 0:
+            oat += [(name, +1, task({name: float(s)})), (name, -1, task({name: -float(s)}))]
+    draws = [draw_errors(design, i, seed, sg) for i in range(samples)]
+    mc = [task(e) for e in draws]
+    tasks = [(nominal_key, nominal_p)] + [t for _, _, t in oat] + mc
+    recs = run_tasks(
+        _evaluate_payload,
+        tasks,
+        workers=workers,
+        dask_address=dask_address,
+        journal=journal,
+        progress=progress,
+        desc="tolerance",
+    )
+    if not recs[nominal_key]["ok"]:
+        raise ValueError(f"the nominal design could not be evaluated: {recs[nominal_key]['error']}")
+    nominal = recs[nominal_key]["result"]
+    sens = {}
+    for name, _sign, (key, _) in oat:
+        r = recs.get(key)
+        if r is None or not r["ok"]:
+            continue
+        row = sens.setdefault(name, {"error": name, "sigma": None})
+        row["sigma"] = float(_sigma_vector(design, sg)[error_names(design).index(name)])
+        for k, v in (
+            ("dof_mm", r["result"]["dof_mm"]),
+            ("efficiency_ratio", r["result"]["efficiency_ratio"]),
+            ("ghost_fraction", r["result"]["ghost_fraction"]),
+        ):
+            row.setdefault(f"d_{k}", []).append(v - nominal[k])
+        for z in options["rmtf_z_mm"]:
+            key_z = f"d_rmtf@{z:g}"
+            row.setdefault(key_z, []).append(
+                r["result"]["rmtf_at"][f"{z:g}"] - nominal["rmtf_at"][f"{z:g}"]
+            )
+    table = []
+    for row in sens.values():
+        out = {"error": row["error"], "sigma": row["sigma"]}
+        for k, v in row.items():
+            if k.startswith("d_"):
+                out[k] = float(np.mean(np.abs(v)))  # mean |change| at +-1 sigma
+        table.append(out)
+    table.sort(key=lambda r: -r["d_dof_mm"])
+    results, failures = [], []
+    for (key, _p), e in zip(mc, draws, strict=True):
+        r = recs.get(key)
+        if r is not None and r["ok"]:
+            results.append(r["result"])
+        else:
+            results.append(None)
+            failures.append({"errors": e, "error": None if r is None else r.get("error")})
+    ok = [r for r in results if r is not None]
+    yld = None
+    if spec_l and ok:
+        yld = sum(meets(r, spec_l) for r in ok) / len(results)
+    return ToleranceResult(
+        design=design.name,
+        seed=seed,
+        sigmas=sg,
+        dpi=dpi,
+        z_mm=[float(z) for z in z_mm],
+        nominal=nominal,
+        errors=draws,
+        samples=results,
+        failures=failures,
+        sensitivity=table,
+        spec=spec or "",
+        yield_fraction=yld,
+        meta={"ghost_rays": ghost_rays},
+    )
+
+
+def tolerance_dataset(res: ToleranceResult, design: Design):
+    """Samples of a tolerance study as an xarray Dataset (dims: sample, error, z)."""
+    import xarray as xr
+
+    from .. import __version__
+
+    names = error_names(design)
+    ok = [s is not None for s in res.samples]
+    nan = float("nan")
+
+    def col(k):
+        return np.array([s[k] if s is not None else nan for s in res.samples])
+
+    rm = np.array(
+        [[s["rmtf_at"][f"{z:g}"] if s is not None else nan for z in res.z_mm] for s in res.samples]
+    )
+    return xr.Dataset(
+        {
+            "errors": (("sample", "error"), np.array([[e[n] for n in names] for e in res.errors])),
+            "ok": ("sample", np.array(ok, dtype=np.int8)),
+            f"rmtf{res.dpi:g}": (("sample", "z_mm"), rm),
+            "dof_mm": ("sample", col("dof_mm")),
+            "efficiency_ratio": ("sample", col("efficiency_ratio")),
+            "ghost_fraction": ("sample", col("ghost_fraction")),
+        },
+        coords={"sample": np.arange(len(res.samples)), "error": names, "z_mm": res.z_mm},
+        attrs={
+            "kind": "opticalstamp tolerance",
+            "design": design.name,
+            "design_fingerprint": design.fingerprint(),
+            "seed": res.seed,
+            "opticalstamp_version": __version__,
+            "sigmas": res.sigmas,
+            "spec": res.spec,
+            "yield": res.yield_fraction,
+            "sensitivity": res.sensitivity,
+            "nominal": res.nominal,
+        },
+    )
