@@ -6,14 +6,8 @@ import warnings
 
 import pytest
 
-from opticalstamp.studies.runner import (
-    JournalLocked,
-    JournalWarning,
-    journal_lock,
-    read_journal,
-    run_tasks,
-    task_key,
-)
+from opticalstamp.io.journal import JournalLocked, JournalWarning, journal_lock, read_journal
+from opticalstamp.studies.runner import run_tasks, task_key
 from opticalstamp.validate import InputError
 
 TASKS = [(task_key({"v": v}), {"v": v}) for v in range(4)]
@@ -23,10 +17,12 @@ def _square(p: dict) -> dict:
     return {"y": p["v"] ** 2}
 
 
-def _run(journal, fn=_square, tasks=TASKS):
+def _run(journal, fn=_square, tasks=TASKS, lock=True):
     """One run in this process; returns (records, payloads evaluated)."""
     calls = []
-    out = run_tasks(lambda p: calls.append(p) or fn(p), tasks, workers=1, journal=journal)
+    out = run_tasks(
+        lambda p: calls.append(p) or fn(p), tasks, workers=1, journal=journal, lock=lock
+    )
     return out, calls
 
 
@@ -95,7 +91,7 @@ def test_a_clean_journal_does_not_warn(tmp_path):
 HOLDER = """
 import sys
 from pathlib import Path
-from opticalstamp.studies.runner import journal_lock
+from opticalstamp.io.journal import journal_lock
 with journal_lock(Path(sys.argv[1])):
     print("locked", flush=True)
     sys.stdin.read()
@@ -135,11 +131,13 @@ def test_a_second_run_on_a_locked_journal_fails_at_once(tmp_path, release):
     assert len(calls) == 4 and len(out) == 4
 
 
-def test_the_lock_is_released_on_an_exception_and_nests(tmp_path):
+def test_the_lock_is_released_on_an_exception_and_a_caller_may_hold_it(tmp_path):
     j = tmp_path / "j.jsonl"
     with pytest.raises(RuntimeError), journal_lock(j):
         raise RuntimeError("boom")
     with journal_lock(j):  # taken again: the first was released
-        out, _ = _run(j)  # a run inside the same process's lock (search: per generation)
+        out, _ = _run(j, lock=False)  # the caller holds it (search: across generations)
+        with pytest.raises(JournalLocked):  # not re-entrant: a second taker is refused
+            _run(j)
     assert len(out) == 4
     assert (tmp_path / "j.jsonl.lock").read_text().startswith("PID ")

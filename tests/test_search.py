@@ -14,8 +14,9 @@ from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.analysis.rmtf import rmtf
 from opticalstamp.cli.common import app
 from opticalstamp.design import load_design
+from opticalstamp.io.journal import JournalWarning, read_journal
 from opticalstamp.studies.evaluate import evaluate_design, rmtf_with_background, with_stack
-from opticalstamp.studies.runner import JournalWarning, read_journal, run_tasks, task_key
+from opticalstamp.studies.runner import run_tasks, task_key
 from opticalstamp.studies.search import base_for_dpi, pareto_front, search
 from opticalstamp.studies.tolerance import apply_errors, draw_errors, parse_spec, tolerance
 

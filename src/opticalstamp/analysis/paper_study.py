@@ -9,6 +9,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import asdict, dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 
@@ -22,13 +23,15 @@ PAPER_RATIO = 1 / 36
 PAPER_F_NUMBER = 60.0
 PAPER_DOF_MM = 3.5
 
-DEFAULT_FACTORS = {
-    "hole_shape": ("square", "circle"),
-    "sensitive_um": (42.3, 32.0),
-    "gap_medium": ("air", 1.49),
-    "fresnel": (False, True),
-    "glass_index": (1.52, 1.46),
-}
+DEFAULT_FACTORS = MappingProxyType(
+    {
+        "hole_shape": ("square", "circle"),
+        "sensitive_um": (42.3, 32.0),
+        "gap_medium": ("air", 1.49),
+        "fresnel": (False, True),
+        "glass_index": (1.52, 1.46),
+    }
+)
 
 
 def study_variant(design: Design, combo: dict) -> Design:

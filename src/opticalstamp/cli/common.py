@@ -43,7 +43,7 @@ def command(*args, **kwargs):
             try:
                 return fn(*a, **kw)
             except InputError as err:
-                _fail(str(err))
+                fail(str(err))
             except OSError as err:  # the disk failed us mid-run: no traceback, exit 1
                 typer.echo(f"error: {err}", err=True)
                 raise typer.Exit(1) from None
@@ -120,12 +120,12 @@ _z_mm = number(0, 100)
 _coordinate = number(-1e5, 1e5)
 
 
-def _fail(msg: str) -> None:
+def fail(msg: str) -> None:
     typer.echo(f"error: {msg}", err=True)
     raise typer.Exit(2)
 
 
-def _design(spec: str) -> Design:
+def open_design(spec: str) -> Design:
     """Load a design (InputError: exit 2); print its geometric-optics warnings."""
     from ..analysis.diffraction import geometric_optics_warnings
 
@@ -135,28 +135,28 @@ def _design(spec: str) -> Design:
     return d
 
 
-def _floats(text: str, name: str, lo: float = 0.0, hi: float = 1000.0) -> tuple[float, ...]:
+def float_list(text: str, name: str, lo: float = 0.0, hi: float = 1000.0) -> tuple[float, ...]:
     return parse_numbers(text, name, lo, hi)
 
 
-def _z_grid(text: str, hi: float = 100.0) -> tuple[float, ...]:
+def z_grid(text: str, hi: float = 100.0) -> tuple[float, ...]:
     return parse_grid(text, "--z", 0.0, hi)
 
 
-def _rays(n: int | None, default: int) -> int:
+def ray_count(n: int | None, default: int) -> int:
     return default if n is None else n
 
 
-def _resolution(path: Path, file_dpi: float | None, dpi: float | None, lo: float) -> float:
+def resolution(path: Path, file_dpi: float | None, dpi: float | None, lo: float) -> float:
     """The image's dpi: --dpi, else the file's; checked to lie in [lo, 20000]."""
     use = dpi or file_dpi
     if use is None:
-        _fail(f"{path}: the file carries no resolution; give --dpi")
+        fail(f"{path}: the file carries no resolution; give --dpi")
     check_number(use, "--dpi" if dpi else f"{path}: resolution", lo, 20000)
     return use
 
 
-def _emit(data: dict, as_json: bool, lines: list[str]) -> None:
+def emit(data: dict, as_json: bool, lines: list[str]) -> None:
     from ..io.files import to_json
 
     if as_json:
@@ -165,7 +165,7 @@ def _emit(data: dict, as_json: bool, lines: list[str]) -> None:
         typer.echo("\n".join(lines))
 
 
-def _plot(fig, path: Path | None) -> None:
+def save_plot(fig, path: Path | None) -> None:
     if path is not None:
         from ..io.files import save_figure
 
@@ -201,15 +201,15 @@ def ghosts(
     from ..analysis.ghosts import analyse_ghosts
     from ..io.files import provenance
 
-    d = _design(design)
+    d = open_design(design)
     if row not in ("A", "B") or (row == "B" and d.sensor.rows == 1):
-        _fail("--row: must be A, or B for a two-row design")
-    zs = _floats(z, "--z", 0.0, 100.0)
+        fail("--row: must be A, or B for a two-row design")
+    zs = float_list(z, "--z", 0.0, 100.0)
     r = analyse_ghosts(
         d,
         pixel=("AB".index(row), 0),
         z_mm=zs,
-        n_rays=None if rays is None else _rays(rays, 0),
+        n_rays=None if rays is None else ray_count(rays, 0),
         rse_own=rse_own,
         rse_ghost=rse_ghost,
         seed=seed,
@@ -235,11 +235,11 @@ def ghosts(
             f"  {p.etendue_um2sr:9.4g} um^2 sr  {p.share:6.1%}  [{hs}]  "
             f"{p.emission_angle_deg[0]:.1f}-{p.emission_angle_deg[1]:.1f} deg"
         )
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_ghosts
 
-        _plot(plot_ghosts(r), plot)
+        save_plot(plot_ghosts(r), plot)
 
 
 @command()
@@ -257,11 +257,11 @@ def spots(
     from ..analysis.spots import spots as run
     from ..io.files import provenance
 
-    d = _design(design)
+    d = open_design(design)
     r = run(
         d,
-        z_mm=_floats(z, "--z", 0.0, 100.0),
-        n_rays=_rays(rays, 1 << 22),
+        z_mm=float_list(z, "--z", 0.0, 100.0),
+        n_rays=ray_count(rays, 1 << 22),
         seed=seed,
         fresnel=fresnel,
         ghosts=not no_ghosts,
@@ -277,11 +277,11 @@ def spots(
             f"{s.z_mm:6g}  {s.extent_x_um:7.1f} {s.extent_y_um:7.1f}  "
             f"{s.fwhm_x_um:7.1f} {s.fwhm_y_um:7.1f}   {s.center_cell_fraction:.3f}"
         )
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_spots
 
-        _plot(plot_spots(r), plot)
+        save_plot(plot_spots(r), plot)
 
 
 @command()
@@ -306,13 +306,13 @@ def psf(
     from ..analysis.spots import psf as run
     from ..io.files import provenance
 
-    d = _design(design)
+    d = open_design(design)
     r = run(
         d,
         x_obj_um=x_obj,
         y_obj_um=y_obj,
         z_mm=z,
-        n_rays=_rays(rays, 1 << 22),
+        n_rays=ray_count(rays, 1 << 22),
         seed=seed,
         fresnel=fresnel,
         progress=not as_json,
@@ -326,11 +326,11 @@ def psf(
         f"insensitive area: {r.insensitive:.4f}",
         f"(fractions of the {r.reaching_sensor:.3g} of emitted power reaching the sensor)",
     ]
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_psf
 
-        _plot(plot_psf(r), plot)
+        save_plot(plot_psf(r), plot)
 
 
 @command()
@@ -352,8 +352,8 @@ def report(
     """Run every analysis and write JSON, PNG figures and one HTML page."""
     from ..report.build import build_report
 
-    d = _design(design)
-    build_report(d, out, seed=seed, n_rays=_rays(rays, 1 << 22), fresnel=fresnel, progress=True)
+    d = open_design(design)
+    build_report(d, out, seed=seed, n_rays=ray_count(rays, 1 << 22), fresnel=fresnel, progress=True)
     typer.echo(f"wrote {out / 'index.html'} and {out / 'report.json'}")
 
 

@@ -14,21 +14,21 @@ from .common import (
     PlotOpt,
     RaysOpt,
     SeedOpt,
-    _design,
-    _emit,
-    _fail,
-    _floats,
-    _plot,
-    _rays,
-    _resolution,
-    _z_grid,
     command,
+    emit,
+    fail,
+    float_list,
     number,
+    open_design,
+    ray_count,
+    resolution,
+    save_plot,
+    z_grid,
 )
 
 
 def _dpi_list(text: str) -> tuple[float, ...]:
-    return _floats(text, "--dpi", 1.0, 5000.0)
+    return float_list(text, "--dpi", 1.0, 5000.0)
 
 
 @command()
@@ -75,12 +75,12 @@ def rmtf(
     from ..analysis.rmtf import rmtf as run
     from ..io.files import provenance
 
-    d = _design(design)
+    d = open_design(design)
     if method not in ("trace", "paraxial"):
-        _fail(f"--method: must be trace or paraxial (got {method!r})")
+        fail(f"--method: must be trace or paraxial (got {method!r})")
     if method == "paraxial" and any(m.shape == "circle" for m in d.masks):
-        _fail("--method paraxial: needs rectangular holes (this design has circular ones)")
-    zs = _z_grid(z)
+        fail("--method paraxial: needs rectangular holes (this design has circular ones)")
+    zs = z_grid(z)
     r = run(
         d,
         dpi=_dpi_list(dpi),
@@ -88,7 +88,7 @@ def rmtf(
         method=method,
         ghosts=ghosts,
         fresnel=fresnel,
-        n_rays=_rays(rays, 1 << 21),
+        n_rays=ray_count(rays, 1 << 21),
         seed=seed,
         window_um=window_um,
         shift_step_um=shift_um,
@@ -107,11 +107,11 @@ def rmtf(
         + f"{threshold:g}): "
         + ", ".join(f"{k} dpi {v:.2f} mm" for k, v in r.dof_mm.items())
     )
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_rmtf
 
-        _plot(plot_rmtf(r), plot)
+        save_plot(plot_rmtf(r), plot)
 
 
 @command()
@@ -129,7 +129,7 @@ def efficiency(
     from ..analysis.efficiency import efficiency as run
     from ..io.files import provenance
 
-    d = _design(design)
+    d = open_design(design)
     r = run(d, seed=seed, fresnel=fresnel, progress=not as_json)
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     lines = [
@@ -159,11 +159,11 @@ def efficiency(
                 f" {row['working_f_number']:5.1f} {row['dof_mm']:6.2f}  "
                 f"{row['ghost_fraction']:.3f}  {ok}"
             )
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_efficiency
 
-        _plot(plot_efficiency(r), plot)
+        save_plot(plot_efficiency(r), plot)
 
 
 @command()
@@ -198,8 +198,8 @@ def diffraction(
     """Fresnel diffraction of a slit (paper Fig. 6) and the design's per-layer budget."""
     from ..analysis.diffraction import diffraction_budget, slit_case
 
-    d = _design(design)
-    waves = _floats(wavelength_um, "--wavelength-um", 0.2, 2.0)
+    d = open_design(design)
+    waves = float_list(wavelength_um, "--wavelength-um", 0.2, 2.0)
     r = slit_case(slit_um=slit_um, z_mm=z, gap_um=gap_um, r2_um=next_um, wavelengths_um=waves)
     b = diffraction_budget(d, z_mm=z, wavelengths_um=waves)
     data = r.to_dict() | {"budget": b}
@@ -222,11 +222,11 @@ def diffraction(
         )
     for w in b["warnings"]:
         lines.append(f"warning: {w}")
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_diffraction
 
-        _plot(plot_diffraction(r), plot)
+        save_plot(plot_diffraction(r), plot)
 
 
 def _image(path: Path, dpi: float | None, linear: bool, min_px: int = 8):
@@ -236,8 +236,8 @@ def _image(path: Path, dpi: float | None, linear: bool, min_px: int = 8):
     try:
         img, file_dpi = read_image(path, linear=linear, dpi=dpi, min_px=min_px)
     except ImageError as err:
-        _fail(str(err))
-    return img, _resolution(path, file_dpi, dpi, 10.0)
+        fail(str(err))
+    return img, resolution(path, file_dpi, dpi, 10.0)
 
 
 ImageArg = Annotated[Path, typer.Argument(help="image file (PNG, TIFF, JPEG)")]
@@ -263,11 +263,11 @@ def measure_rmtf(
     from ..imaging.measure import measure_rmtf as run
 
     if axis not in ("x", "y"):
-        _fail(f"--axis: must be x or y (got {axis!r})")
+        fail(f"--axis: must be x or y (got {axis!r})")
     img, use = _image(image, dpi, linear)
     blocks = run(img, use, axis="xy".index(axis))
     if not blocks:
-        _fail(f"{image}: no bar blocks found (need >= 3 periods of equal bars along {axis})")
+        fail(f"{image}: no bar blocks found (need >= 3 periods of equal bars along {axis})")
     data = {"image": str(image), "dpi": use, "blocks": blocks}
     lines = [f"{image} at {use:g} dpi:", "period (um)   dpi    periods  Imax    Imin    RMTF"]
     for b in blocks:
@@ -275,7 +275,7 @@ def measure_rmtf(
             f"{b['period_um']:10.1f} {b['dpi']:6.1f} {b['n_periods']:8.1f} "
             f"{b['imax']:7.4f} {b['imin']:7.4f} {b['rmtf']:7.4f}"
         )
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)
 
 
 @command()
@@ -295,22 +295,22 @@ def sfr(
 
     img, use = _image(image, dpi, linear, min_px=16)
     if roi:
-        box = _floats(roi, "--roi", 0, 1e6)
+        box = float_list(roi, "--roi", 0, 1e6)
         if len(box) != 4:
-            _fail("--roi: expected x0,y0,x1,y1")
+            fail("--roi: expected x0,y0,x1,y1")
         x0, y0, x1, y1 = (int(v) for v in box)
         if not (x0 < x1 <= img.shape[1] and y0 < y1 <= img.shape[0]):
-            _fail(f"--roi: must lie inside the {img.shape[1]} x {img.shape[0]} image")
+            fail(f"--roi: must lie inside the {img.shape[1]} x {img.shape[0]} image")
         img = img[y0:y1, x0:x1]
     if direction == "both":
         from ..imaging.measure import sfr_xy
 
         if roi:
-            _fail("--roi: not with --direction both (the square's edges are found)")
+            fail("--roi: not with --direction both (the square's edges are found)")
         try:
             both = sfr_xy(img, use)
         except ValueError as err:
-            _fail(f"{image}: {err}")
+            fail(f"{image}: {err}")
         data = {"image": str(image), "dpi": use} | both
         lines = [f"{image} at {use:g} dpi, slanted square:"]
         for axis, r in both.items():
@@ -318,16 +318,16 @@ def sfr(
                 f"  along {axis}: MTF50 {r['mtf50_cy_per_mm']:.3f} cycles/mm; SFR at 100 dpi "
                 f"{r['sfr_at_dpi']['100']:.3f}, at 200 dpi {r['sfr_at_dpi']['200']:.3f}"
             )
-        _emit(data, as_json, lines)
+        emit(data, as_json, lines)
         if plot:
             from ..report.plotting import plot_sfr
 
-            _plot(plot_sfr(both["x"], f"{image.name} (x)", extra=both["y"]), plot)
+            save_plot(plot_sfr(both["x"], f"{image.name} (x)", extra=both["y"]), plot)
         return
     try:
         r = run(img, use, direction=direction)
     except ValueError as err:
-        _fail(f"{image}: {err}")
+        fail(f"{image}: {err}")
     if "roi" in r and roi:  # the square's edge found inside --roi: image coordinates
         r["roi"] = [v + (x0, y0)[i % 2] for i, v in enumerate(r["roi"])]
     data = {"image": str(image), "dpi": use} | r
@@ -338,8 +338,8 @@ def sfr(
     ]
     if "roi" in r:
         lines.insert(1, "the left edge of the dark square, region {},{},{},{}".format(*r["roi"]))
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_sfr
 
-        _plot(plot_sfr(r, str(image.name)), plot)
+        save_plot(plot_sfr(r, str(image.name)), plot)

@@ -13,13 +13,13 @@ from .common import (
     DesignOpt,
     JsonOpt,
     SeedOpt,
-    _design,
-    _emit,
-    _fail,
-    _floats,
-    _resolution,
     command,
+    emit,
+    fail,
+    float_list,
     number,
+    open_design,
+    resolution,
     writable,
 )
 from .metrics import DpiOpt, ImageArg
@@ -32,8 +32,8 @@ def _document(path: Path, dpi: float | None, color: bool, min_px: int = 2):
     try:
         doc, file_dpi = read_document(path, color=color, dpi=dpi, min_px=min_px)
     except ImageError as err:
-        _fail(str(err))
-    use = _resolution(path, file_dpi, dpi, 50.0)
+        fail(str(err))
+    use = resolution(path, file_dpi, dpi, 50.0)
     if use < 600:
         typer.echo(
             f"warning: {path} is sampled at {use:g} dpi; at least 600 dpi is recommended "
@@ -47,27 +47,27 @@ def _height(spec: str | None, z: float | None, doc_shape, dpi: float, seed: int)
     from ..imaging.heightmap import HeightMapError, load_height_map
 
     if (spec is None) == (z is None):
-        _fail("give exactly one of --z MM and --height-map FILE|SHAPE")
+        fail("give exactly one of --z MM and --height-map FILE|SHAPE")
     if spec is None:
         if not 0 <= z <= 10:
-            _fail(f"--z: must lie in [0, 10] mm (got {z:g})")
+            fail(f"--z: must lie in [0, 10] mm (got {z:g})")
         return None
     h_mm, w_mm = doc_shape[0] * 25.4 / dpi, doc_shape[1] * 25.4 / dpi
     try:
         return load_height_map(spec, h_mm, w_mm, seed)
     except HeightMapError as err:
-        _fail(str(err))
+        fail(str(err))
 
 
 def _illumination_profile(path: Path) -> tuple:
     try:
         arr = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
     except (OSError, ValueError) as err:
-        _fail(f"--illumination: cannot read {path} as CSV of x_mm,relative ({err})")
+        fail(f"--illumination: cannot read {path} as CSV of x_mm,relative ({err})")
     if arr.shape[1] != 2 or arr.shape[0] < 2 or np.any(np.diff(arr[:, 0]) <= 0):
-        _fail(f"--illumination: {path} needs two columns x_mm,relative with increasing x")
+        fail(f"--illumination: {path} needs two columns x_mm,relative with increasing x")
     if np.any(arr[:, 1] < 0) or not np.all(np.isfinite(arr)):
-        _fail(f"--illumination: {path} has negative or non-finite values")
+        fail(f"--illumination: {path} has negative or non-finite values")
     return tuple((float(a), float(b)) for a, b in arr)
 
 
@@ -103,7 +103,7 @@ def _settings(
         name = {"illuminance_lux": "illuminance-lux", "exposure_ms": "exposure-ms"}.get(
             str(e["loc"][-1]), str(e["loc"][0]).replace("_", "-")
         )
-        _fail(f"--{name}: {e['msg']} (got {e.get('input')!r})")
+        fail(f"--{name}: {e['msg']} (got {e.get('input')!r})")
 
 
 def _scan_outputs(output: Path) -> tuple[Path, Path, Path]:
@@ -174,7 +174,7 @@ def scan(
     from ..io.files import encode_png, encode_tiff16, provenance, to_json, write_set
 
     png, tif, sidecar = _scan_outputs(output)
-    d = _design(design)
+    d = open_design(design)
     st = _settings(illumination, kernel, speed_error, surround, illuminance_lux, exposure_ms)
     doc, use = _document(image, dpi, color)
     hm = _height(height_map, z, doc.shape, use, seed)
@@ -193,7 +193,7 @@ def scan(
             progress=True,
         )
     except ValueError as err:
-        _fail(str(err))
+        fail(str(err))
     meta = provenance(d, seed) | {k: v for k, v in r.meta.items() if k != "settings"}
     meta |= {
         "input": str(image),
@@ -231,7 +231,7 @@ def chart(
     from ..io.files import write_atomic, write_png
 
     if kind not in KINDS:
-        _fail(f"KIND: must be one of {', '.join(KINDS)} (got {kind!r})")
+        fail(f"KIND: must be one of {', '.join(KINDS)} (got {kind!r})")
     img, text = make_chart(kind, dpi)
     write_png(output, img, dpi)
     if text is not None:
@@ -255,27 +255,27 @@ def ocr_eval(
     from ..imaging.scan import simulate_scan
     from ..io.files import linear_to_srgb, provenance
 
-    d = _design(design)
+    d = open_design(design)
     try:
         truth = text.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
-        _fail(f"--text: cannot read {text} ({err})")
+        fail(f"--text: cannot read {text} ({err})")
     doc, use = _document(image, dpi, False, min_px=32)  # one 8-pt line at 600 dpi: ~65 px
-    zs = _floats(z, "--z", 0.0, 10.0)
+    zs = float_list(z, "--z", 0.0, 10.0)
     out = {"z_mm": list(zs), "cer": [], "text": []}
     try:
         require_tesseract()  # before the scans, not after the first
     except OCRUnavailable as err:
-        _fail(str(err))
+        fail(str(err))
     for zz in zs:
         try:
             r = simulate_scan(doc, use, d, z_mm=zz, seed=seed, noiseless=noiseless)
         except ValueError as err:
-            _fail(f"{image}: {err}")
+            fail(f"{image}: {err}")
         got = recognise(linear_to_srgb(r.image), r.dpi)
         out["cer"].append(character_error_rate(truth, got))
         out["text"].append(got)
     data = out | {"provenance": provenance(d, seed)}
     lines = [f"{image}: character error rate against {text}"]
     lines += [f"Z = {zz:g} mm: CER {c:.3f}" for zz, c in zip(zs, out["cer"], strict=True)]
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)

@@ -13,13 +13,13 @@ from .common import (
     JsonOpt,
     PlotOpt,
     SeedOpt,
-    _design,
-    _emit,
-    _fail,
-    _floats,
-    _plot,
     command,
+    emit,
+    fail,
+    float_list,
     number,
+    open_design,
+    save_plot,
     writable,
 )
 
@@ -43,7 +43,7 @@ _DPI = number(50, 2400)
 
 def _check_dask(address: str | None) -> None:
     if address is not None and not address.startswith(("tcp://", "tls://", "inproc://")):
-        _fail(f"--dask: expected tcp://HOST:PORT (got {address!r})")
+        fail(f"--dask: expected tcp://HOST:PORT (got {address!r})")
 
 
 def _journal(out: Path | None) -> Path | None:
@@ -59,7 +59,7 @@ def _pins(text: str | None) -> dict:
         try:
             out[k.strip()] = float(v)
         except ValueError:
-            _fail(f"--pin: expected NAME=VALUE pairs such as hole0=48,t2=1000 (got {part!r})")
+            fail(f"--pin: expected NAME=VALUE pairs such as hole0=48,t2=1000 (got {part!r})")
         check_number(out[k.strip()], f"--pin {part.strip()}")
     return out
 
@@ -118,7 +118,7 @@ def search(
     from ..studies.search import search as run
 
     _check_dask(dask)
-    d = _design(design)
+    d = open_design(design)
     merged = d.sensor.row_pitch_um / d.sensor.rows
     # 300 dpi is 84.67 um; the paper's sensor is 84.6 um (600-dpi pixels of 42.3): within
     # 1 % counts as the same resolution
@@ -131,7 +131,7 @@ def search(
             sts = [v.strip() for v in (stagger or "yes").split(",")]
             bases = structural_variants(base, layers=n_l, stagger=sts)
         except ValueError as err:
-            _fail(f"--layers/--stagger: {err}")
+            fail(f"--layers/--stagger: {err}")
     else:
         bases = {base.name: base}
     results = {}
@@ -157,7 +157,7 @@ def search(
                 progress=not as_json,
             )
         except (ValueError, OSError) as err:
-            _fail(str(err))
+            fail(str(err))
         if out_i is not None:
             save_dataset(search_dataset(results[name], b, seed), out_i)
     r = next(iter(results.values()))
@@ -195,11 +195,11 @@ def search(
                 f"{ref['dof_mm']:.2f} mm, ghosts {ref['ghost_fraction']:.3f}, dominated by "
                 f"{ref.get('dominated_by', 0)} of its variant's designs"
             )
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_pareto, plot_pareto_variants
 
-        _plot(plot_pareto(r) if len(results) == 1 else plot_pareto_variants(results), plot)
+        save_plot(plot_pareto(r) if len(results) == 1 else plot_pareto_variants(results), plot)
 
 
 @command()
@@ -243,12 +243,12 @@ def tolerance(
     from ..studies.tolerance import tolerance as run
 
     _check_dask(dask)
-    d = _design(design)
+    d = open_design(design)
     try:
         parse_spec(spec)
     except ValueError as err:
-        _fail(f"--spec: {err}")
-    zs = _floats(z, "--z", 0.0, 10.0)
+        fail(f"--spec: {err}")
+    zs = float_list(z, "--z", 0.0, 10.0)
     sig = {
         "misregistration_um": misregistration_um,
         "hole_um": hole_um,
@@ -270,7 +270,7 @@ def tolerance(
             progress=not as_json,
         )
     except (ValueError, OSError) as err:
-        _fail(str(err))
+        fail(str(err))
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     if output is not None:
         save_dataset(tolerance_dataset(r, d), output)
@@ -295,8 +295,8 @@ def tolerance(
     )
     if r.yield_fraction is not None:
         lines.append(f"  yield for {spec}: {r.yield_fraction:.1%}")
-    _emit(data, as_json, lines)
+    emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_tolerance
 
-        _plot(plot_tolerance(r), plot)
+        save_plot(plot_tolerance(r), plot)

@@ -7,7 +7,8 @@ dispersion formula. Wavelengths are in micrometres.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
 
 import numpy as np
 
@@ -30,18 +31,20 @@ def _soda_lime(wavelength_um: float) -> float:
 #: Named media. Sources: Schott data sheet (N-BK7); I. H. Malitson, JOSA 55, 1205 (1965)
 #: (fused silica); N. Sultanova et al., Acta Phys. Pol. A 116, 585 (2009) (PMMA, the usual
 #: light-guide plate material); M. Rubin (1985) (soda-lime glass, n_d ~ 1.52 as in the paper).
-CATALOGUE: dict[str, Callable[[float], float]] = {
-    "air": lambda wavelength_um: 1.0,
-    "vacuum": lambda wavelength_um: 1.0,
-    "N-BK7": _sellmeier(
-        (1.03961212, 0.231792344, 1.01046945), (0.00600069867, 0.0200179144, 103.560653)
-    ),
-    "fused-silica": _sellmeier(
-        (0.6961663, 0.4079426, 0.8974794), (0.0684043**2, 0.1162414**2, 9.896161**2)
-    ),
-    "PMMA": _sellmeier((1.1819,), (0.011313,)),
-    "soda-lime": _soda_lime,
-}
+CATALOGUE: Mapping[str, Callable[[float], float]] = MappingProxyType(
+    {
+        "air": lambda wavelength_um: 1.0,
+        "vacuum": lambda wavelength_um: 1.0,
+        "N-BK7": _sellmeier(
+            (1.03961212, 0.231792344, 1.01046945), (0.00600069867, 0.0200179144, 103.560653)
+        ),
+        "fused-silica": _sellmeier(
+            (0.6961663, 0.4079426, 0.8974794), (0.0684043**2, 0.1162414**2, 9.896161**2)
+        ),
+        "PMMA": _sellmeier((1.1819,), (0.011313,)),
+        "soda-lime": _soda_lime,
+    }
+)
 
 #: Wavelength range (um) over which the catalogue formulas are used.
 WAVELENGTH_RANGE_UM = (0.35, 1.1)

@@ -15,6 +15,7 @@ its own misregistration (offset_x_um, offset_y_um).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
@@ -24,7 +25,7 @@ from ..design import Design
 #: a ray that leaves this region inside the stack is counted as escaped.
 PLATE_MARGIN_UM = 5000.0
 
-SHAPE_CODE = {"square": 0, "rectangle": 0, "circle": 1}
+SHAPE_CODE = MappingProxyType({"square": 0, "rectangle": 0, "circle": 1})
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""Figures (matplotlib imported lazily, Agg backend). Each returns a Figure."""
+"""Figures (matplotlib imported lazily, object-oriented: no pyplot, no backend switch).
+Each returns a :class:`matplotlib.figure.Figure`."""
 
 from __future__ import annotations
 
@@ -8,20 +9,19 @@ from ..analysis.ghosts import GhostResult
 from ..analysis.spots import CELL_UM, PSF, SpotResult
 
 
-def _plt():
-    import matplotlib
+def _subplots(*args, figsize=None, layout=None, **kw):
+    """A new Figure and its axes, like ``pyplot.subplots`` but without pyplot: no backend
+    switch, no global figure registry (a figure is freed when it is no longer used)."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    fig = Figure(figsize=figsize, layout=layout)
+    return fig, fig.subplots(*args, **kw)
 
 
 def plot_spots(res: SpotResult):
     """Responsivity maps on the 84.6 um grid, one panel per Z (paper Fig. 5)."""
-    plt = _plt()
     n = len(res.spots)
-    fig, axes = plt.subplots(1, n, figsize=(2.6 * n, 3.0), squeeze=False)
+    fig, axes = _subplots(1, n, figsize=(2.6 * n, 3.0), squeeze=False)
     half = max(s.x_edges_um[-1] for s in res.spots)
     for ax, s in zip(axes[0], res.spots, strict=True):
         e = s.x_edges_um
@@ -55,10 +55,9 @@ def plot_spots(res: SpotResult):
 
 def plot_psf(p: PSF):
     """Landing density on the sensor, 600-dpi grid, used pixels outlined (paper Fig. 10)."""
-    plt = _plt()
     from matplotlib.patches import Rectangle
 
-    fig, ax = plt.subplots(figsize=(9, 2.6))
+    fig, ax = _subplots(figsize=(9, 2.6))
     ex, ey = p.fine_edges_x_um, p.fine_edges_y_um
     img = np.log10(p.fine_map + p.fine_map.max() * 1e-4) if p.fine_map.max() > 0 else p.fine_map
     ax.imshow(
@@ -103,8 +102,7 @@ def plot_psf(p: PSF):
 
 def plot_ghosts(res: GhostResult, top: int = 12):
     """Etendue of the strongest ghost paths and where ghost light lands (per Z)."""
-    plt = _plt()
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 3.4))
+    fig, (a1, a2) = _subplots(1, 2, figsize=(11, 3.4))
     paths = res.paths[:top]
     labels = [
         " / ".join(f"{'o' if h['row'] == 'other' else ''}{h['dk']:+d}" for h in p.holes)
@@ -147,8 +145,7 @@ def plot_rmtf(res, paper_points: dict | None = None):
     Solid: maximum over chart shifts (the paper's RMTF); band: minimum to maximum.
     ``paper_points`` ({dpi: [(z, rmtf), ...]}) are drawn as dots when given.
     """
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    fig, ax = _subplots(figsize=(6.4, 4.2))
     z = np.asarray(res.z_mm)
     for i, (key, vals) in enumerate(res.rmtf_max.items()):
         c = f"C{i}"
@@ -177,8 +174,7 @@ def plot_rmtf(res, paper_points: dict | None = None):
 
 def plot_efficiency(res):
     """Collected etendue vs Z for finite uniform objects, and the sensitive-area effect."""
-    plt = _plt()
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    fig, (a1, a2) = _subplots(1, 2, figsize=(10, 3.6))
     zs = sorted(res.by_object_radius, key=float)
     radii = list(res.by_object_radius[zs[0]])
     for i, r in enumerate(radii):
@@ -208,8 +204,7 @@ def plot_efficiency(res):
 
 def plot_diffraction(res):
     """Slit diffraction at the next layer, per wavelength (paper Fig. 6b)."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    fig, ax = _subplots(figsize=(6.4, 3.8))
     for i, (k, v) in enumerate(res.intensity.items()):
         ax.plot(res.x_um, v, color=f"C{i}", label=f"{k} um: {res.fraction_outside[k]:.1%} outside")
     for s in (-1, 1):
@@ -227,8 +222,7 @@ def plot_diffraction(res):
 
 def plot_study(res):
     """Parameter study: working F-number against depth of field, per combination."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7.5, 4.6))
+    fig, ax = _subplots(figsize=(7.5, 4.6))
     marks = {"square": "s", "circle": "o"}
     for r in res.rows:
         col = "C0" if r["gap_medium"] == "air" else "C1"
@@ -258,8 +252,7 @@ def plot_study(res):
 def plot_sfr(res: dict, title: str = "", extra: dict | None = None):
     """SFR curve of a slanted edge with MTF50 and the 100/200-dpi values (``extra``: a
     second curve, e.g. along y)."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(6, 3.6))
+    fig, ax = _subplots(figsize=(6, 3.6))
     ax.plot(res["freq_cy_per_mm"], res["sfr"], "-", label=f"along {res['direction']}")
     if extra is not None:
         ax.plot(
@@ -287,8 +280,7 @@ def plot_sfr(res: dict, title: str = "", extra: dict | None = None):
 
 def plot_chart_profiles(profiles: list[dict]):
     """Merged-line signals across a bar chart at two distances (paper Fig. 12 c, d)."""
-    plt = _plt()
-    fig, axes = plt.subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
+    fig, axes = _subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
     for ax, p in zip(axes[0], profiles, strict=True):
         x = np.asarray(p["x_um"]) / 1000
         ax.step(x, p["signal"], where="mid")
@@ -305,12 +297,11 @@ def plot_chart_profiles(profiles: list[dict]):
 
 def plot_scan_panels(panels: list[tuple[str, np.ndarray]], title: str, cols: int = 1):
     """Simulated scans side by side or stacked (paper Figs. 8, 9, 12 a-b), display-encoded."""
-    plt = _plt()
     from ..io.files import linear_to_srgb
 
     rows = int(np.ceil(len(panels) / cols))
     h, w = panels[0][1].shape[:2]
-    fig, axes = plt.subplots(
+    fig, axes = _subplots(
         rows,
         cols,
         figsize=(min(12, 3 + 9 * w / max(w, h)), 0.6 + rows * max(1.2, 9 * h / w / cols)),
@@ -330,8 +321,7 @@ def plot_scan_panels(panels: list[tuple[str, np.ndarray]], title: str, cols: int
 
 def plot_scan_profiles(profiles: list[dict]):
     """Profiles across the simulated 200-dpi chart scans (paper Fig. 12 c, d)."""
-    plt = _plt()
-    fig, axes = plt.subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
+    fig, axes = _subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
     for ax, p in zip(axes[0], profiles, strict=True):
         x = np.asarray(p["x_mm"])
         ax.plot(x, p["profile"], "-", lw=1)
@@ -348,8 +338,7 @@ def plot_scan_profiles(profiles: list[dict]):
 
 def plot_pareto(res, title: str = ""):
     """Search: every feasible design, the Pareto front, and the base design."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    fig, ax = _subplots(figsize=(7, 4.5))
     feas = [r for r in res.records if r["feasible"]]
     bad = [r for r in res.records if r["ok"] and not r["feasible"]]
     if bad:
@@ -400,9 +389,8 @@ def plot_pareto(res, title: str = ""):
 
 def plot_tolerance(res):
     """Tolerance study: histograms of RMTF, DOF, efficiency, ghosts; sensitivity bars."""
-    plt = _plt()
     ok = [s for s in res.samples if s is not None]
-    fig, axes = plt.subplots(1, 4, figsize=(15, 3.4))
+    fig, axes = _subplots(1, 4, figsize=(15, 3.4))
     z_show = [z for z in res.z_mm if z in (1.0, 2.0, 3.0)] or res.z_mm[:3]
     for i, z in enumerate(z_show):
         v = [s["rmtf_at"][f"{z:g}"] for s in ok]
@@ -440,8 +428,7 @@ def plot_tolerance(res):
 def plot_pareto_variants(results: dict):
     """Pareto fronts of searches over structural variants (layers, stagger), one colour
     each, with the base design."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    fig, ax = _subplots(figsize=(7, 4.5))
     for i, (name, res) in enumerate(results.items()):
         f = sorted(res.pareto, key=lambda r: r["dof_mm"])
         if f:

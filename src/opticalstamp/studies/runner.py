@@ -19,165 +19,16 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import socket
-import warnings
-from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from ..io.files import to_json
-from ..validate import InputError
-
-try:
-    import fcntl
-except ImportError:  # pragma: no cover - Windows: journals are not locked
-    fcntl = None
-
-
-class JournalWarning(UserWarning):
-    """Lines of a journal that are not records were skipped (their evaluations are redone)."""
-
-
-class JournalLocked(InputError):
-    """Another run holds the journal: two runs on one output would do all the work twice."""
+from ..io.journal import append_record, journal_lock, read_journal
 
 
 def task_key(payload: dict) -> str:
     """Stable key of a payload (sorted JSON, SHA-256, 16 hex digits)."""
     blob = json.dumps(payload, sort_keys=True, default=str).encode()
     return hashlib.sha256(blob).hexdigest()[:16]
-
-
-def _is_record(rec) -> bool:
-    """Whether a parsed journal line has the shape that :func:`run_tasks` writes."""
-    return (
-        isinstance(rec, dict)
-        and isinstance(rec.get("key"), str)
-        and isinstance(rec.get("payload"), dict)
-        and type(rec.get("attempts")) is int
-        and (
-            isinstance(rec.get("result"), dict)
-            if rec.get("ok") is True
-            else rec.get("ok") is False and isinstance(rec.get("error"), str)
-        )
-    )
-
-
-def read_journal(path: Path | None) -> dict[str, dict]:
-    """Finished records of a journal, by key.
-
-    Parameters
-    ----------
-    path : Path or None
-        The JSON-lines journal; None or a missing file: no records.
-
-    Returns
-    -------
-    dict
-        Records by key (a later line with the same key wins).
-
-    Warns
-    -----
-    JournalWarning
-        Once, naming the file and the line numbers, when lines are skipped because they
-        are not records: a truncated last line (a kill during a write), bytes that are not
-        UTF-8 or not JSON, or JSON of another shape. Their evaluations are run again.
-    """
-    done: dict[str, dict] = {}
-    if path is None or not path.exists():
-        return done
-    bad = []
-    for n, line in enumerate(path.read_bytes().split(b"\n"), start=1):
-        if not line.strip():
-            continue
-        try:
-            rec = json.loads(line.decode("utf-8"))
-        except (ValueError, RecursionError):  # UnicodeDecodeError and JSONDecodeError included
-            rec = None
-        if _is_record(rec):
-            done[rec["key"]] = rec
-        else:
-            bad.append(n)
-    if bad:
-        shown = ", ".join(map(str, bad[:20])) + (
-            f" and {len(bad) - 20} more" if len(bad) > 20 else ""
-        )
-        warnings.warn(
-            f"journal {path}: skipped {len(bad)} line(s) that are not records (line {shown}); "
-            "their evaluations are run again",
-            JournalWarning,
-            stacklevel=2,
-        )
-    return done
-
-
-def _append(path: Path | None, rec: dict) -> None:
-    """Append one record as one line, on a line of its own, flushed and synced to disk."""
-    if path is None:
-        return
-    path.parent.mkdir(parents=True, exist_ok=True)
-    line = to_json(rec).replace("\n", " ").encode() + b"\n"
-    with open(path, "a+b") as fh:
-        end = fh.seek(0, os.SEEK_END)
-        if end:
-            fh.seek(end - 1)
-            if fh.read(1) != b"\n":  # a truncated last line: end it, or this record joins it
-                line = b"\n" + line
-        fh.write(line)
-        fh.flush()
-        os.fsync(fh.fileno())
-
-
-_HELD: set[str] = set()  # lock files this process holds
-
-
-@contextmanager
-def journal_lock(journal: Path | None) -> Iterator[None]:
-    """Hold the journal's lock, ``<journal>.lock``, for one run; nested use is free.
-
-    The holder writes its PID and host into the lock file. The lock (``flock``) is released
-    when the block exits, normally or by an exception, and by the OS when the process dies.
-
-    Parameters
-    ----------
-    journal : Path or None
-        The journal; None: nothing to lock.
-
-    Raises
-    ------
-    JournalLocked
-        At once, when another process holds the lock; the message names the journal and
-        the holder.
-    """
-    if journal is None or fcntl is None:
-        yield
-        return
-    journal = Path(journal)
-    lock = journal.with_name(journal.name + ".lock")
-    lock.parent.mkdir(parents=True, exist_ok=True)
-    name = str(lock.resolve())
-    if name in _HELD:  # search: one run_tasks per generation, inside the study's lock
-        yield
-        return
-    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "PID unknown"
-            raise JournalLocked(
-                f"journal {journal} is in use by another run ({holder}); wait for it to "
-                f"finish or write to another output (lock file: {lock})"
-            ) from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"PID {os.getpid()} on {socket.gethostname()}\n".encode(), 0)
-        _HELD.add(name)
-        try:
-            yield
-        finally:
-            _HELD.discard(name)
-    finally:
-        os.close(fd)  # releases the lock
 
 
 def _single_thread() -> None:  # pragma: no cover - runs in worker processes
@@ -196,6 +47,7 @@ def run_tasks(
     retries: int = 1,
     progress: bool = False,
     desc: str = "evaluations",
+    lock: bool = True,
 ) -> dict[str, dict]:
     """Run ``fn(payload)`` for every task not yet journalled; return records by key.
 
@@ -217,6 +69,9 @@ def run_tasks(
         Show a progress bar.
     desc : str
         Label of the progress bar.
+    lock : bool
+        Take the journal's lock for this call (False: the caller holds it, as
+        :func:`opticalstamp.studies.search.search` does across its generations).
 
     Returns
     -------
@@ -229,7 +84,7 @@ def run_tasks(
         Before any work, when another process runs on the same journal.
     """
     tasks = list(tasks)
-    with journal_lock(journal):  # before any work: one run at a time
+    with journal_lock(journal if lock else None):  # before any work: one run at a time
         done = read_journal(journal)
         todo = [(k, p) for k, p in tasks if k not in done]
         bar = None
@@ -242,7 +97,7 @@ def run_tasks(
             rec = {"key": key, "payload": payload, "ok": ok, "attempts": attempts}
             rec["result" if ok else "error"] = value
             done[key] = rec
-            _append(journal, rec)
+            append_record(journal, rec)
             if bar is not None:
                 bar.update(1)
 

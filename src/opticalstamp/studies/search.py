@@ -17,15 +17,17 @@ the front is the same for any number of workers.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..design import Design, design_from_dict
+from ..io.journal import journal_lock
 from ..validate import InputError, check_number, check_seed
 from .evaluate import evaluate_design, stack_params, with_stack
-from .runner import journal_lock, run_tasks, task_key
+from .runner import run_tasks, task_key
 
 
 def base_for_dpi(design: Design, dpi: float) -> Design:
@@ -146,6 +148,25 @@ def _feasible(m: dict, budget_um: float, max_ghost: float | None, max_spill: flo
     ]
 
 
+def _optuna_warnings_only(fn):
+    """Run ``fn`` with optuna's logging at WARNING (its INFO line per trial is noise) and
+    restore the caller's level afterwards: no process-wide setting is left changed."""
+
+    @functools.wraps(fn)
+    def run(*args, **kwargs):
+        import optuna
+
+        old = optuna.logging.get_verbosity()
+        optuna.logging.set_verbosity(optuna.logging.WARNING)
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            optuna.logging.set_verbosity(old)
+
+    return run
+
+
+@_optuna_warnings_only
 def search(
     design: Design,
     *,
@@ -177,7 +198,6 @@ def search(
     check_seed(seed)
     import optuna
 
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
     if any(m.shape == "circle" for m in design.masks):
         raise ValueError("search: the closed-form evaluation needs square holes")
     budget_um = budget_mm * 1000.0
@@ -238,7 +258,7 @@ def search(
         ref_payload = payload(base_params)
         ref_key = task_key(ref_payload)
         ref_rec = run_tasks(
-            _evaluate_payload, [(ref_key, ref_payload)], workers=1, journal=journal
+            _evaluate_payload, [(ref_key, ref_payload)], workers=1, journal=journal, lock=False
         )[ref_key]
         for gen in range(generations):
             trials = []
@@ -257,6 +277,7 @@ def search(
                 journal=journal,
                 progress=progress,
                 desc=f"generation {gen + 1}/{generations}",
+                lock=False,
             )
             for t, params, key in trials:
                 rec = recs.get(key)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 
@@ -29,7 +30,9 @@ from ..validate import check_seed
 from .evaluate import evaluate_design, stack_params, with_stack
 from .runner import run_tasks, task_key
 
-DEFAULT_SIGMAS = {"misregistration_um": 3.0, "hole_um": 1.0, "thickness_um": 10.0, "tilt_deg": 0.02}
+DEFAULT_SIGMAS = MappingProxyType(
+    {"misregistration_um": 3.0, "hole_um": 1.0, "thickness_um": 10.0, "tilt_deg": 0.02}
+)
 SPEC_RE = re.compile(r"^(dof|ghost|efficiency|rmtf@[0-9.]+)(>=|<=)(-?[0-9.]+)$")
 
 

@@ -1,0 +1,186 @@
+"""The layout guard (docs/architecture.md): stages import only earlier stages, no import
+cycles, matplotlib only in report/plotting.py, typer only in cli/, no process-wide state
+changed, no private names imported across modules."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "opticalstamp"
+#: the stages in pipeline order: each may import itself and those before it
+ORDER = (
+    "validate",
+    "units",
+    "design",
+    "io",
+    "raytrace",
+    "analysis",
+    "imaging",
+    "studies",
+    "report",
+    "cli",
+)
+
+
+def _modules():
+    for py in sorted(SRC.rglob("*.py")):
+        rel = py.relative_to(SRC).with_suffix("")
+        parts = rel.parts[:-1] if rel.parts[-1] == "__init__" else rel.parts
+        yield ".".join(parts) or "__init__", py, ast.parse(py.read_text())
+
+
+def _package(module: str, py: Path) -> list[str]:
+    parts = module.split(".") if module != "__init__" else []
+    return parts if py.name == "__init__.py" else parts[:-1]
+
+
+def _imports(module: str, py: Path, tree: ast.Module, top_level_only: bool = False):
+    """(target module, imported names, node) for every opticalstamp import."""
+    nodes = tree.body if top_level_only else ast.walk(tree)
+    for node in nodes:
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                pkg = _package(module, py)
+                base = pkg[: len(pkg) - node.level + 1]
+                target = ".".join([*base, node.module] if node.module else base)
+            elif (node.module or "").startswith("opticalstamp"):
+                target = node.module.removeprefix("opticalstamp").lstrip(".")
+            else:
+                continue
+            names = [a.name for a in node.names]
+            if not node.module:  # from . import a, b: modules
+                for n in names:
+                    yield (f"{target}.{n}" if target else n), [], node
+            else:
+                yield target, names, node
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("opticalstamp."):
+                    yield a.name.removeprefix("opticalstamp."), [], node
+
+
+def _stage(module: str) -> str:
+    return module.split(".")[0]
+
+
+MODULES = list(_modules())
+
+
+def test_every_module_belongs_to_a_stage():
+    stray = [m for m, _, _ in MODULES if m != "__init__" and _stage(m) not in ORDER]
+    assert stray == []
+
+
+def test_stages_import_only_earlier_stages():
+    bad = []
+    for module, py, tree in MODULES:
+        if module == "__init__":
+            continue
+        me = ORDER.index(_stage(module))
+        for target, _, node in _imports(module, py, tree):
+            if target and _stage(target) in ORDER and ORDER.index(_stage(target)) > me:
+                bad.append(f"{module}:{node.lineno} imports {target}")
+    assert bad == []
+
+
+def test_no_import_cycles():
+    graph = {m: set() for m, _, _ in MODULES}
+    for module, py, tree in MODULES:
+        for target, _, _ in _imports(module, py, tree, top_level_only=True):
+            if target in graph and target != module:
+                graph[module].add(target)
+    state: dict[str, int] = {}
+
+    def visit(m, trail):
+        if state.get(m) == 1:
+            pytest.fail("import cycle: " + " -> ".join([*trail, m]))
+        if state.get(m) == 2:
+            return
+        state[m] = 1
+        for t in sorted(graph[m]):
+            visit(t, [*trail, m])
+        state[m] = 2
+
+    for m in graph:
+        visit(m, [])
+
+
+def _third_party(tree: ast.Module) -> set[str]:
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            out.add(node.module.split(".")[0])
+    return out
+
+
+@pytest.mark.parametrize(
+    ("library", "allowed"),
+    [("matplotlib", ("report.plotting",)), ("typer", ("cli",)), ("click", ("cli",))],
+)
+def test_libraries_stay_at_their_edge(library, allowed):
+    bad = [
+        m
+        for m, _, tree in MODULES
+        if library in _third_party(tree) and not any(m.startswith(a) for a in allowed)
+    ]
+    assert bad == []
+
+
+#: calls that change process-wide state, and the one scoped, restored exception each
+FORBIDDEN_CALLS = {
+    "matplotlib.use",
+    "np.random.seed",
+    "numpy.random.seed",
+    "warnings.simplefilter",
+    "warnings.filterwarnings",
+    "logging.basicConfig",
+}
+
+
+def test_no_process_wide_state_is_changed():
+    bad = []
+    for module, _, tree in MODULES:
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call):
+                name = ast.unparse(node.func)
+                if name in FORBIDDEN_CALLS:
+                    bad.append(f"{module}:{node.lineno} {name}")
+            if isinstance(node, ast.Assign | ast.AugAssign):
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                for t in targets:  # an attribute of another module, e.g. Image.MAX_IMAGE_PIXELS
+                    if isinstance(t, ast.Attribute) and isinstance(t.value, ast.Name):
+                        if t.value.id[0].isupper() or t.value.id in ("np", "numba", "optuna"):
+                            bad.append(f"{module}:{node.lineno} sets {ast.unparse(t)}")
+    # Pillow has no per-call pixel limit: io.files lifts it inside one context manager and
+    # restores it on leaving (its header checks replace the limit with a memory estimate)
+    bad = [b for b in bad if not b.startswith("io.files:") or "MAX_IMAGE_PIXELS" not in b]
+    assert bad == []
+
+
+def test_module_level_state_is_immutable():
+    """No module-level list, dict or set that code could mutate (constants are tuples)."""
+    bad = []
+    for module, _, tree in MODULES:
+        for node in tree.body:
+            if isinstance(node, ast.Assign | ast.AnnAssign) and isinstance(
+                node.value, ast.List | ast.Dict | ast.Set | ast.ListComp | ast.DictComp
+            ):
+                if module.startswith("cli") or ast.unparse(node).startswith("__all__"):
+                    continue
+                bad.append(f"{module}:{node.lineno} {ast.unparse(node)[:60]}")
+    assert bad == []
+
+
+def test_no_private_names_across_modules():
+    bad = []
+    for module, py, tree in MODULES:
+        for target, names, node in _imports(module, py, tree):
+            for n in names:
+                if n.startswith("_") and n != "__version__":
+                    bad.append(f"{module}:{node.lineno} imports {n} from {target}")
+    assert bad == []
