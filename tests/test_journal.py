@@ -126,7 +126,7 @@ def test_a_second_run_on_a_locked_journal_fails_at_once(tmp_path, release):
             proc.communicate("")  # the holder leaves its block normally
         else:
             proc.kill()  # the OS releases the lock of a killed process
-            proc.wait()
+            proc.communicate()
     out, calls = _run(j)
     assert len(calls) == 4 and len(out) == 4
 
