@@ -13,10 +13,9 @@ from opticalstamp.analysis.efficiency import (
     efficiency,
     reference_etendue,
     reference_f_number,
-    sensor_with_area,
 )
 from opticalstamp.analysis.lsf import paraxial_etendue
-from opticalstamp.design import load_design
+from opticalstamp.design import load_design, with_sensitive_area
 
 
 def test_disk_projected_solid_angle_by_quadrature():
@@ -34,7 +33,7 @@ def test_disk_projected_solid_angle_by_quadrature():
 
 def test_reference_lens():
     """On-axis: pi sin^2(theta), tan(theta) = 1/20; F_w = 2 f / D = 10 (paper Fig. 13)."""
-    g = reference_etendue()
+    g = reference_etendue(84.6)  # the paper's 300-dpi pixel
     assert g == pytest.approx(84.6**2 * math.pi / 401, rel=1e-4)
     assert reference_f_number() == 10.0
     with pytest.raises(ValueError, match="must be > 0"):
@@ -56,11 +55,11 @@ def test_efficiency_of_the_prototype():
 def test_four_times_the_area_is_not_four_times_the_light():
     """Paper §5 claims 4x light from a 4x sensitive area; the holes (40 um) limit it."""
     d = load_design("paper2016")
-    big = sensor_with_area(d, 84.6, 84.6)
+    big = with_sensitive_area(d, 84.6, 84.6)
     ratio = paraxial_etendue(big) / paraxial_etendue(d)
     assert 1.8 < ratio < 2.3
     # the claim holds only when the pixel limits the beam: tiny pixel areas scale linearly
-    small = sensor_with_area(d, 10.0, 10.0)
-    tiny = sensor_with_area(d, 5.0, 5.0)
+    small = with_sensitive_area(d, 10.0, 10.0)
+    tiny = with_sensitive_area(d, 5.0, 5.0)
     assert paraxial_etendue(small) / paraxial_etendue(tiny) == pytest.approx(4.0, rel=1e-6)
     assert np.isfinite(ratio)

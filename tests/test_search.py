@@ -13,11 +13,11 @@ from typer.testing import CliRunner
 from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.analysis.rmtf import rmtf
 from opticalstamp.cli.common import app
-from opticalstamp.design import load_design
+from opticalstamp.design import load_design, scale_to_dpi, with_stack
 from opticalstamp.io.journal import JournalWarning, read_journal
-from opticalstamp.studies.evaluate import evaluate_design, rmtf_with_background, with_stack
+from opticalstamp.studies.evaluate import evaluate_design, rmtf_with_background
 from opticalstamp.studies.runner import run_tasks, task_key
-from opticalstamp.studies.search import base_for_dpi, pareto_front, search
+from opticalstamp.studies.search import pareto_front, search
 from opticalstamp.studies.tolerance import apply_errors, draw_errors, parse_spec, tolerance
 
 runner = CliRunner()
@@ -141,8 +141,8 @@ def test_pins_and_bad_pins(paper):
         search(paper, population=8, generations=1, pinned={"hole9": 1}, workers=1)
 
 
-def test_base_for_dpi_scales_the_sensor(paper):
-    d600 = base_for_dpi(paper, 600.0)
+def test_scale_to_dpi_scales_the_sensor(paper):
+    d600 = scale_to_dpi(paper, 600.0)
     assert d600.sensor.row_pitch_um / 2 == pytest.approx(42.3, rel=2e-3)
     assert d600.masks[-1].hole_width_um == pytest.approx(24.0, abs=0.1)
     assert [sl.thickness_um for sl in d600.slabs] == [450.0, 400.0, 1000.0]
@@ -278,7 +278,8 @@ def test_cli_bad_options(args, text):
 
 def test_structural_variants_and_merged_front(paper):
     from opticalstamp.analysis.lsf import paraxial_etendue
-    from opticalstamp.studies.search import merged_front, structural_variants
+    from opticalstamp.design import structural_variants
+    from opticalstamp.studies.search import merged_front
 
     v = structural_variants(paper, layers=(2, 3), stagger=("yes", "no"))
     assert len(v) == 4

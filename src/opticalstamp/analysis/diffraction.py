@@ -271,3 +271,24 @@ def geometric_optics_warnings(design: Design, warn_fraction: float = 0.25) -> li
         w + " (geometric optics no longer holds: the traced figures are optimistic)"
         for w in b["warnings"]
     ]
+
+
+def design_slit_case(
+    design: Design, *, z_mm: float = 1.0, wavelengths_um=DEFAULT_WAVELENGTHS_UM
+) -> SlitResult:
+    """Paper Fig. 6 for this design: its object-side mask as the slit.
+
+    The slit is that mask's hole (the smaller side), R1 the air-equivalent distance from a
+    source Z above the reference plane (through the reference gap), R2 the air-equivalent
+    distance to the next mask, or to the sensor for a one-mask stack; the same geometry as
+    the first row of :func:`diffraction_budget`.
+    """
+    row = diffraction_budget(design, z_mm=z_mm, wavelengths_um=wavelengths_um)["layers"][0]
+    r_obj = z_mm * 1000.0 / design.index(design.object_medium)
+    return slit_case(
+        slit_um=row["hole_um"],
+        z_mm=z_mm,
+        gap_um=row["r1_um"] - r_obj,
+        r2_um=row["r2_um"],
+        wavelengths_um=wavelengths_um,
+    )

@@ -16,8 +16,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..design import Design, design_from_dict
-from .ghosts import DISTANCE_BIN_UM, GhostResult, analyse_ghosts
+from ..design import Design, with_sensitive_area
+from ..raytrace.stack import output_pitch
+from .ghosts import GhostResult, analyse_ghosts
 
 
 def disk_projected_solid_angle(rho_um, h_um: float, radius_um: float) -> np.ndarray:
@@ -32,13 +33,16 @@ def disk_projected_solid_angle(rho_um, h_um: float, radius_um: float) -> np.ndar
 
 
 def reference_etendue(
-    pixel_um: float = 84.6,
+    pixel_um: float,
     focal_mm: float = 10.0,
     pupil_mm: float = 2.0,
     conjugate_mm: float = 20.0,
     order: int = 16,
 ) -> float:
     """Etendue (um^2 sr) of a square pixel behind the paper's reference lens (Fig. 13).
+
+    The paper's pixel is its 84.6 um merged pixel; :func:`efficiency` uses the design's own
+    output pitch.
 
     Gauss-Legendre quadrature over the pixel of the pupil's projected solid angle seen
     from the image plane ``conjugate_mm`` behind the lens.
@@ -82,39 +86,6 @@ class EfficiencyResult:
         return asdict(self)
 
 
-def with_changes(design: Design, changes: dict, name: str | None = None) -> Design:
-    """A validated copy of ``design`` with nested fields replaced (dict merge)."""
-
-    def merge(a, b):
-        if isinstance(a, dict) and isinstance(b, dict):
-            return {k: merge(a.get(k), v) if k in a else v for k, v in b.items()} | {
-                k: v for k, v in a.items() if k not in b
-            }
-        return b
-
-    data = merge(design.model_dump(mode="json", exclude_none=True), changes)
-    if name:
-        data["name"] = name
-    return design_from_dict(data, f"variant of {design.name}")
-
-
-def sensor_with_area(design: Design, width_um: float, height_um: float) -> Design:
-    """The design with a sensitive area of width x height (pixel pitch grown if needed)."""
-    s = design.sensor
-    pitch = max(s.pixel_pitch_um, width_um, height_um)
-    return with_changes(
-        design,
-        {
-            "sensor": {
-                "pixel_pitch_um": pitch,
-                "sensitive_width_um": width_um,
-                "sensitive_height_um": height_um,
-            }
-        },
-        name=f"{design.name} (sensitive {width_um:g} x {height_um:g} um)",
-    )
-
-
 def efficiency(
     design: Design,
     *,
@@ -138,7 +109,7 @@ def efficiency(
     four times the area, the paper's custom-sensor claim). ``ghosts``: the design's
     ghost analysis if the caller has one already (its Z values are used).
     """
-    ref = reference or {}
+    ref = {"pixel_um": output_pitch(design)} | dict(reference or {})
     g_ref = reference_etendue(**ref)
     f_ref = reference_f_number(ref.get("focal_mm", 10.0), ref.get("pupil_mm", 2.0))
     g = ghosts or analyse_ghosts(
@@ -155,7 +126,7 @@ def efficiency(
     by_r = {}
     for zkey, land in g.landing.items():
         h = np.asarray(land["etendue_by_distance_um2sr"])
-        edges = (np.arange(h.size) + 1) * DISTANCE_BIN_UM  # upper edge of each bin
+        edges = (np.arange(h.size) + 1) * land["bin_um"]  # upper edge of each bin
         by_r[zkey] = {
             f"{r:g}": g.etendue_own_um2sr + float(h[edges <= r * 1000.0].sum())
             for r in object_radii_mm
@@ -166,7 +137,7 @@ def efficiency(
         d = (
             design
             if k == 1.0
-            else sensor_with_area(design, s.sensitive_width_um * k, s.sensitive_height_um * k)
+            else with_sensitive_area(design, s.sensitive_width_um * k, s.sensitive_height_um * k)
         )
         gk = g if k == 1.0 else analyse_ghosts(d, seed=seed, fresnel=fresnel)
         areas.append(
@@ -201,7 +172,6 @@ def efficiency(
         sensitive_area=areas,
         meta={
             "reference_lens": {
-                "pixel_um": 84.6,
                 "focal_mm": 10.0,
                 "pupil_mm": 2.0,
                 "conjugate_mm": 20.0,

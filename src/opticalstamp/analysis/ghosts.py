@@ -14,17 +14,14 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..design import Design
-from ..raytrace.kernel import STATUS_NAMES, launch
-from ..raytrace.sampling import DEFENSIVE_SHARE, Source, hole_targets, site_index
-from ..raytrace.stack import pixel_center, reverse_path
+from ..raytrace.kernel import STATUS_NAMES
+from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 from ..raytrace.tally import (
     OWN_PATH,
     Estimate,
     KeyedSums,
     PathRegistry,
     estimate,
-    is_own_path,
-    object_plane,
     ratio_estimate,
 )
 
@@ -72,72 +69,6 @@ class GhostResult:
         return asdict(self)
 
 
-PILOT_RAYS = 1 << 18
-
-
-def pixel_source(design: Design, row: int, k: int) -> Source:
-    """The sensitive area of used pixel (row, k) as a Lambertian virtual source."""
-    cx, cy = pixel_center(design, row, k)
-    s = design.sensor
-    return Source(cx, cy, s.sensitive_width_um, s.sensitive_height_um)
-
-
-def acceptance(design: Design, n0: float, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
-    """Pixel angular response (0 or 1) for invariant directions s in the medium n0."""
-    cut = design.sensor.acceptance_half_angle_deg
-    if cut >= 90.0:
-        return np.ones(sx.shape)
-    return (sx * sx + sy * sy <= (n0 * np.sin(np.radians(cut))) ** 2).astype(np.float64)
-
-
-def allocate_holes(
-    design: Design,
-    path,
-    src: Source,
-    row: int,
-    k: int,
-    seed: int,
-    fresnel: bool,
-    rse_own: float = 1e-3,
-    rse_ghost: float = 1e-2,
-) -> np.ndarray:
-    """Weights over the first mask's holes for importance sampling (from a pilot run).
-
-    A pilot of 2^18 rays (its own random stream, geometric table q) measures, for each
-    first-mask hole j, the sums S_j of the squared own-path and ghost weights. Within each
-    tally, holes get samples in proportion to sqrt(S_j) (the variance-minimising
-    allocation); the split a between the two tallies minimises the rays needed to reach
-    both relative standard errors, predicted by reweighting the pilot:
-    E'[w'^2] = sum_j (q_j / q'_j) S_j / N.
-    """
-    m0 = int(path.slabs[path.first_mask_slab, 2])
-    n_sites = path.lattice.n_rows * (path.lattice.k_hi - path.lattice.k_lo + 1)
-    s1 = np.zeros((2, n_sites))
-    s2 = np.zeros((2, n_sites))
-    n0 = path.slabs[0, 1]
-    for b in launch(path, src, PILOT_RAYS, seed, stream=1, fresnel=fresnel):
-        w = b.w * acceptance(design, n0, b.sx, b.sy)
-        site = site_index(path, b.hole_row[:, m0], b.hole_k[:, m0])
-        g = (~is_own_path(b, row, k)).astype(np.int64)
-        np.add.at(s1, (g, site), w)
-        np.add.at(s2, (g, site), w * w)
-    q = hole_targets(path, src).q_per_area * path.hole_area(m0)
-    alloc = [np.sqrt(s) / np.sqrt(s).sum() if s.sum() > 0 else None for s in s2]
-    if alloc[1] is None or alloc[0] is None:
-        return alloc[0] if alloc[1] is None else alloc[1]
-    best, best_n = 0.5, np.inf
-    for a in np.linspace(0.05, 0.95, 19):
-        qn = DEFENSIVE_SHARE * q + (1 - DEFENSIVE_SHARE) * (a * alloc[0] + (1 - a) * alloc[1])
-        need = 0.0
-        for t, rse in ((0, rse_own), (1, rse_ghost)):
-            m1 = s1[t].sum() / PILOT_RAYS
-            m2 = (q / qn * s2[t]).sum() / PILOT_RAYS
-            need = max(need, (m2 / m1**2 - 1) / rse**2)
-        if need < best_n:
-            best, best_n = a, need
-    return best * alloc[0] + (1 - best) * alloc[1]
-
-
 def _schedule(n_rays: int | None, max_rays: int) -> list[int]:
     if n_rays is not None:
         return [n_rays]
@@ -163,6 +94,8 @@ def analyse_ghosts(
     detector_half_um: float = 500.0,
     chunk: int = 1 << 21,
     progress: bool = False,
+    sampling: Sampling | None = None,
+    tracer: PixelTracer | None = None,
 ) -> GhostResult:
     """Etendue of the own and ghost paths of one pixel, and where ghost light comes from.
 
@@ -176,15 +109,20 @@ def analyse_ghosts(
         schedule independent of ``chunk``) or ``max_rays``
     detector_half_um : half width of the square virtual detector (paper Fig. 4) centred
         on the pixel's axis; ghost etendue landing inside it is reported per Z
+    sampling : Sampling, replaces ``n_rays``, ``rse_own``, ``rse_ghost``, ``max_rays``,
+        ``seed``, ``fresnel`` and ``chunk`` (its ray count, where None, is ``n_rays``)
+    tracer : PixelTracer of this design whose pilot runs to reuse (other analyses of the
+        same pixel share them); the sampling is still this call's
     """
-    path = reverse_path(design)
+    if sampling is None:
+        sampling = Sampling(n_rays, seed, fresnel, chunk, rse_own, rse_ghost, max_rays)
+    sampling = sampling.or_rays(n_rays)
+    tr = tracer_for(design, sampling, tracer)
     row, k = pixel
-    src = pixel_source(design, row, k)
+    src = tr.source(pixel)
     cx, cy = src.x, src.y
-    weights = allocate_holes(design, path, src, row, k, seed, fresnel, rse_own, rse_ghost)
-    n_obj = design.index(design.object_medium)
-    n0 = path.slabs[0, 1]
-    registry = PathRegistry(path.n_masks, row, k)
+    n0 = tr.n0
+    registry = PathRegistry(tr.path.n_masks, row, k)
     own = OWN_PATH
     sums = KeyedSums()
     zs = [float(z) for z in z_mm]
@@ -193,34 +131,23 @@ def analyse_ghosts(
     inside = np.zeros(len(zs))
     inside2 = np.zeros(len(zs))
     nearest = np.full((len(zs), 0), np.inf)  # per Z and path slot
-    ledger = np.zeros((path.slabs.shape[0], 4), np.int64)
+    ledger = np.zeros((tr.path.slabs.shape[0], 4), np.int64)
     done = 0
-    for end in _schedule(n_rays, max_rays):
-        for b in launch(
-            path,
-            src,
-            end - done,
-            seed,
-            fresnel=fresnel,
-            first_id=done,
-            chunk=chunk,
-            progress=progress,
-            hole_weights=weights,
-        ):
+    for end in _schedule(sampling.n_rays, sampling.max_rays):
+        for pb in tr.trace(pixel, end - done, first_id=done, progress=progress):
+            b, w = pb.rays, pb.w
             ledger += b.ledger
             codes = registry.ids(b)
             theta = np.degrees(np.arcsin(np.sqrt(b.sx**2 + b.sy**2) / n0))
-            w = b.w * acceptance(design, n0, b.sx, b.sy)
             slot = sums.add(codes, w, theta)
             g = (codes != own) & (w > 0)
             for iz, z in enumerate(zs):
-                xo, yo = object_plane(b, z * 1000.0, n_obj)
-                dist = np.hypot(xo[g] - cx, yo[g] - cy)
+                dx, dy = pb.offsets(z * 1000.0)
+                dx, dy = dx[g], dy[g]
+                dist = np.hypot(dx, dy)
                 ib = np.minimum((dist / DISTANCE_BIN_UM).astype(np.int64), nbins)
                 np.add.at(hist[iz], ib, w[g])
-                box = (np.abs(xo[g] - cx) <= detector_half_um) & (
-                    np.abs(yo[g] - cy) <= detector_half_um
-                )
+                box = (np.abs(dx) <= detector_half_um) & (np.abs(dy) <= detector_half_um)
                 wb = w[g][box]
                 np.add.at(inside, np.full(wb.size, iz), wb)
                 np.add.at(inside2, np.full(wb.size, iz), wb * wb)
@@ -232,13 +159,14 @@ def analyse_ghosts(
         n = done
         e_own = _path_estimate(sums, own, n)
         e_gh = _ghost_estimate(sums, own, n)
-        if n_rays is None and e_own.rse <= rse_own and (e_gh.value > 0 and e_gh.rse <= rse_ghost):
+        rse_ok = e_own.rse <= sampling.rse_own and e_gh.value > 0 and e_gh.rse <= sampling.rse_ghost
+        if sampling.n_rays is None and rse_ok:
             break
     n = done
     e_own = _path_estimate(sums, own, n)
     e_gh = _ghost_estimate(sums, own, n)
     frac = ratio_estimate(e_own, e_gh, n)
-    names = list(path.mask_names)
+    names = list(tr.path.mask_names)
     paths = []
     for code, sl in sums.keys.items():
         if code == own:
@@ -277,15 +205,15 @@ def analyse_ghosts(
         }
     led = {
         name: {st: int(ledger[i, j]) for j, st in enumerate(STATUS_NAMES) if ledger[i, j]}
-        for i, name in enumerate(_plane_names(design, path))
+        for i, name in enumerate(_plane_names(tr.path))
     }
     return GhostResult(
         design=design.name,
         fingerprint=design.fingerprint(),
         pixel={"row": "AB"[row], "k": k, "x_um": cx, "y_um": cy},
-        seed=seed,
+        seed=sampling.seed,
         n_rays=n,
-        fresnel=fresnel,
+        fresnel=sampling.fresnel,
         etendue_own_um2sr=e_own.value,
         etendue_own_se=e_own.se,
         etendue_ghost_um2sr=e_gh.value,
@@ -328,7 +256,7 @@ def _weighted_quantile(h: np.ndarray, q: float) -> float | None:
     return (i + 0.5) * DISTANCE_BIN_UM
 
 
-def _plane_names(design: Design, path) -> list[str]:
+def _plane_names(path) -> list[str]:
     out = []
     for i in range(path.slabs.shape[0]):
         m = int(path.slabs[i, 2])

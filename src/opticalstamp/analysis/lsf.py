@@ -20,16 +20,14 @@ matters: h_P(phi) = sum_m LSF(phi + m P). Both ways to get it are here:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
 
-from ..design import Design
-from ..raytrace.kernel import launch
-from ..raytrace.stack import lattice_of, reverse_path
-from ..raytrace.tally import is_own_path
-from .ghosts import acceptance, allocate_holes, pixel_source
+from ..design import Design, square_holes
+from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
+from ..raytrace.stack import lattice_of
 
 #: Target width of the bins of a folded LSF (um); each period gets round(P / this) bins.
 FOLD_BIN_UM = 0.5
@@ -107,41 +105,41 @@ def traced_folded_lsf(
     n_batches: int = 16,
     chunk: int = 1 << 20,
     progress: bool = False,
+    sampling: Sampling | None = None,
+    tracer: PixelTracer | None = None,
 ) -> FoldedLSF:
-    """Fold each row's traced LSF onto every period at every Z (one trace per row)."""
+    """Fold each row's traced LSF onto every period at every Z (one trace per row).
+
+    ``sampling`` replaces ``n_rays``, ``seed``, ``fresnel`` and ``chunk`` (its ray count,
+    where None, is ``n_rays``; rounded up to a multiple of ``n_batches``). ``tracer``: a
+    PixelTracer of this design whose pilot runs to reuse (other analyses of the same
+    pixels share them); the sampling is still this call's.
+    """
+    if sampling is None:
+        sampling = Sampling(n_rays, seed, fresnel, chunk)
+    sampling = sampling.or_rays(n_rays)
+    n_rays = int(np.ceil(sampling.n_rays / n_batches)) * n_batches
+    sampling = replace(sampling, n_rays=n_rays)
+    tr = tracer_for(design, sampling, tracer)
     zs = np.asarray(z_mm, dtype=np.float64)
     per = np.asarray(periods_um, dtype=np.float64)
     nb = _bins(per)
-    n_rays = int(np.ceil(n_rays / n_batches)) * n_batches
-    path = reverse_path(design)
-    n_obj = design.index(design.object_medium)
-    n0 = path.slabs[0, 1]
     h = [np.zeros((design.sensor.rows, n_batches, zs.size, int(n))) for n in nb]
     rows = []
     for row, k in row_pixels(design):
-        src = pixel_source(design, row, k)
+        src = tr.source((row, k))
         rows.append((src.x, src.y))
-        weights = allocate_holes(design, path, src, row, k, seed, fresnel, 1e-3, 1e-2)
         out = np.zeros((per.size, n_batches, zs.size, int(nb.max())))
-        for b in launch(
-            path,
-            src,
-            n_rays,
-            seed,
-            fresnel=fresnel,
-            hole_weights=weights,
-            chunk=chunk,
-            progress=progress,
-        ):
-            w = b.w * acceptance(design, n0, b.sx, b.sy)
+        for pb in tr.trace((row, k), progress=progress):
+            b, w = pb.rays, pb.w
             if not ghosts:
-                w = w * is_own_path(b, row, k)
+                w = w * pb.own
             batch = (b.ids % n_batches).astype(np.int64)
-            _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, n_obj, per, nb, out)
+            _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, tr.n_obj, per, nb, out)
         for p in range(per.size):
             # each batch holds n_rays / n_batches samples: scale so batches sum to the mean
             h[p][row] = out[p, :, :, : nb[p]] / n_rays
-    return FoldedLSF(zs, per, rows, h, "trace", n_rays, ghosts, fresnel)
+    return FoldedLSF(zs, per, rows, h, "trace", n_rays, ghosts, sampling.fresnel)
 
 
 # -- paraxial closed form ------------------------------------------------------------------
@@ -348,13 +346,21 @@ def traced_maps(
     coarse_bin_um: float = 500.0,
     coarse_half_um: tuple[float, float] = (10_000.0, 45_000.0),
     progress: bool = False,
+    sampling: Sampling | None = None,
+    tracer: PixelTracer | None = None,
 ) -> TracedMaps:
-    """Own-path maps (fine) and ghost maps (coarse) of pixel (row, 0) at every Z."""
+    """Own-path maps (fine) and ghost maps (coarse) of pixel (row, 0) at every Z.
+
+    ``sampling`` replaces ``n_rays``, ``seed`` and ``fresnel`` (its ray count, where None,
+    is ``n_rays``). ``tracer``: a PixelTracer of this design whose pilot runs to reuse
+    (other analyses of the same pixel share them); the sampling is still this call's.
+    """
+    if sampling is None:
+        sampling = Sampling(n_rays, seed, fresnel)
+    sampling = sampling.or_rays(n_rays)
+    tr = tracer_for(design, sampling, tracer)
     zs = np.asarray(z_mm, dtype=np.float64)
-    path = reverse_path(design)
-    n_obj = design.index(design.object_medium)
-    n0 = path.slabs[0, 1]
-    src = pixel_source(design, row, 0)
+    src = tr.source((row, 0))
     if half_um is None:
         half_um = _own_half_width(design, float(zs.max()))
     nf = int(np.ceil(2 * half_um / fine_bin_um))
@@ -364,23 +370,19 @@ def traced_maps(
     coarse_lo = np.array([-ncy * coarse_bin_um / 2, -ncx * coarse_bin_um / 2])
     fine = np.zeros((zs.size, nf, nf))
     coarse = np.zeros((zs.size, ncy, ncx))
-    weights = allocate_holes(design, path, src, row, 0, seed, fresnel, 1e-3, 1e-2)
-    for b in launch(
-        path, src, n_rays, seed, fresnel=fresnel, hole_weights=weights, progress=progress
-    ):
-        w = b.w * acceptance(design, n0, b.sx, b.sy)
-        own = is_own_path(b, row, 0)
+    for pb in tr.trace((row, 0), progress=progress):
+        b = pb.rays
         _maps(
             b.x,
             b.y,
             b.sx,
             b.sy,
-            w,
-            own,
+            pb.w,
+            pb.own,
             src.x,
             src.y,
             zs * 1000.0,
-            n_obj,
+            tr.n_obj,
             fine_lo,
             fine_bin_um,
             coarse_lo,
@@ -390,13 +392,13 @@ def traced_maps(
         )
     return TracedMaps(
         zs,
-        fine / n_rays,
+        fine / sampling.n_rays,
         fine_lo,
         fine_bin_um,
-        coarse / n_rays,
+        coarse / sampling.n_rays,
         (float(coarse_lo[0]), float(coarse_lo[1])),
         coarse_bin_um,
-        n_rays,
+        sampling.n_rays,
     )
 
 
@@ -404,15 +406,7 @@ def _own_half_width(design: Design, z_mm: float) -> float:
     """Half width (um) enclosing the own-path spot at z_mm (paraxial bound + 20 % margin).
 
     For circular holes the bound of the circumscribed squares is used."""
-    sq = design
-    if any(m.shape == "circle" for m in design.masks):
-        slabs = design.model_dump(mode="json", exclude_none=True)["slabs"]
-        for sl in slabs:
-            if "mask_top" in sl:
-                sl["mask_top"]["shape"] = "square"
-        from ..design import design_from_dict
-
-        sq = design_from_dict(design.model_dump(mode="json", exclude_none=True) | {"slabs": slabs})
+    sq = square_holes(design)
     lo, hi = paraxial_support(sq, z_mm, 0)
     lo_y, hi_y = paraxial_support(sq, z_mm, 1)
     return 1.2 * max(abs(lo), abs(hi), abs(lo_y), abs(hi_y)) + 10.0

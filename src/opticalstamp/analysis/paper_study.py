@@ -13,8 +13,9 @@ from types import MappingProxyType
 
 import numpy as np
 
-from ..design import Design
-from .efficiency import reference_etendue, reference_f_number, with_changes
+from ..design import Design, with_unstated
+from ..raytrace.stack import output_pitch
+from .efficiency import reference_etendue, reference_f_number
 from .ghosts import analyse_ghosts
 from .rmtf import rmtf
 
@@ -32,30 +33,6 @@ DEFAULT_FACTORS = MappingProxyType(
         "glass_index": (1.52, 1.46),
     }
 )
-
-
-def study_variant(design: Design, combo: dict) -> Design:
-    """The design with one combination of the study's factors applied."""
-    slabs = []
-    for sl in design.model_dump(mode="json", exclude_none=True)["slabs"]:
-        if sl["medium"] != "air" and sl["medium"] != 1.0:
-            sl["medium"] = combo["glass_index"]
-        if "mask_top" in sl:
-            m = sl["mask_top"]
-            size = m.get("size_um", m.get("width_um"))
-            m.pop("width_um", None)
-            m.pop("height_um", None)
-            m["shape"], m["size_um"] = combo["hole_shape"], size
-        slabs.append(sl)
-    a = combo["sensitive_um"]
-    return with_changes(
-        design,
-        {
-            "slabs": slabs,
-            "reference_gap": {"medium": combo["gap_medium"]},
-            "sensor": {"sensitive_width_um": a, "sensitive_height_um": a},
-        },
-    )
 
 
 @dataclass(frozen=True)
@@ -94,7 +71,7 @@ def parameter_study(
     """
     fac = dict(DEFAULT_FACTORS if factors is None else factors)
     names = list(fac)
-    g_ref = reference_etendue()
+    g_ref = reference_etendue(output_pitch(design))
     f_ref = reference_f_number()
     rows = []
     combos = list(itertools.product(*(fac[n] for n in names)))
@@ -105,7 +82,13 @@ def parameter_study(
         it = tqdm(combos, desc="parameter study", unit="design")
     for values in it:
         combo = dict(zip(names, values, strict=True))
-        d = study_variant(design, combo)
+        d = with_unstated(
+            design,
+            hole_shape=combo["hole_shape"],
+            sensitive_um=combo["sensitive_um"],
+            gap_medium=combo["gap_medium"],
+            glass_index=combo["glass_index"],
+        )
         g = analyse_ghosts(d, seed=seed, n_rays=n_rays, fresnel=combo["fresnel"])
         r = rmtf(d, dpi=(200.0,), seed=seed, n_rays=n_rays, fresnel=combo["fresnel"])
         tot = g.etendue_own_um2sr + g.etendue_ghost_um2sr

@@ -22,7 +22,9 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..design import Design
+from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import lattice_of
+from ..units import period_of_dpi
 from ..validate import check_memory
 from .lsf import FoldedLSF, paraxial_folded_lsf, traced_folded_lsf
 
@@ -31,12 +33,6 @@ PAPER_DPI = (100.0, 150.0, 200.0, 247.0)
 DEFAULT_Z_MM = tuple(np.round(np.arange(0.0, 4.5001, 0.25), 2))
 
 
-def period_of_dpi(dpi: float) -> float:
-    """Chart period (um) of a 'dpi' chart: one black and one white bar of 25400/dpi um."""
-    return 2 * 25400.0 / dpi
-
-
-# -- RMTF ----------------------------------------------------------------------------------
 def chart_correlation(h: np.ndarray) -> np.ndarray:
     """C[..., v] = sum_phi h[..., phi] f[(phi + v) mod n] for the 50 % square wave f.
 
@@ -207,6 +203,7 @@ def rmtf(
     dof_threshold: float = 0.3,
     dof_dpi: float = 200.0,
     progress: bool = False,
+    tracer: PixelTracer | None = None,
 ) -> RMTFResult:
     """RMTF of paper Eq. 1 for bar charts of the given dpi versus Z, and depth of field.
 
@@ -218,6 +215,8 @@ def rmtf(
     window_um : width of the chart window over which Imax and Imin are taken
     shift_step_um : step of the chart shifts over one period
     dof_threshold, dof_dpi : depth of field = largest Z with RMTF(dof_dpi) >= threshold
+    tracer : a :class:`~opticalstamp.raytrace.pixel.PixelTracer` of this design whose
+        pilot runs are reused (analyses of one report share one)
     """
     dpis = [float(d) for d in dpi]
     if dof_dpi not in dpis:
@@ -239,6 +238,7 @@ def rmtf(
             ghosts=ghosts,
             fresnel=fresnel,
             progress=progress,
+            tracer=tracer,
         )
     elif method == "paraxial":
         lsf = paraxial_folded_lsf(design, z_mm=zs, periods_um=periods)

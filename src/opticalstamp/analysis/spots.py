@@ -16,10 +16,9 @@ import numpy as np
 
 from ..design import Design
 from ..raytrace.kernel import launch
+from ..raytrace.pixel import PixelTracer, Sampling, acceptance, tracer_for
 from ..raytrace.sampling import Source
-from ..raytrace.stack import forward_path, lattice_of, reverse_path
-from ..raytrace.tally import is_own_path, object_plane
-from .ghosts import acceptance, allocate_holes, pixel_source
+from ..raytrace.stack import forward_path, lattice_of
 
 CELL_UM = 84.6  # the 300-dpi grid of paper Fig. 5
 
@@ -93,6 +92,8 @@ def spots(
     ghosts: bool = True,
     chunk: int = 1 << 21,
     progress: bool = False,
+    sampling: Sampling | None = None,
+    tracer: PixelTracer | None = None,
 ) -> SpotResult:
     """Responsivity maps of one pixel at each object distance (paper Fig. 5).
 
@@ -101,23 +102,26 @@ def spots(
     z_mm : object distances above the reference plane (mm)
     bin_um : map pixel size (um)
     ghosts : include ghost paths in the maps and the centre-cell fraction
+    sampling : Sampling, replaces ``n_rays``, ``seed``, ``fresnel`` and ``chunk`` (its ray
+        count, where None, is ``n_rays``)
+    tracer : PixelTracer of this design whose pilot runs to reuse (other analyses of the
+        same pixel share them); the sampling is still this call's
     """
-    path = reverse_path(design)
+    if sampling is None:
+        sampling = Sampling(n_rays, seed, fresnel, chunk)
+    sampling = sampling.or_rays(n_rays)
+    n_rays = sampling.n_rays
+    tr = tracer_for(design, sampling, tracer)
     row, k = pixel
-    src = pixel_source(design, row, k)
-    n_obj = design.index(design.object_medium)
-    n0 = path.slabs[0, 1]
-    weights = allocate_holes(design, path, src, row, k, seed, fresnel, 1e-3, 1e-2)
+    src = tr.source(pixel)
     zs = [float(z) for z in z_mm]
     # map half-widths from the own-path support of a pilot (its own random stream)
     half = np.zeros(len(zs))
-    for b in launch(path, src, 1 << 18, seed, stream=2, fresnel=fresnel, hole_weights=weights):
-        o = is_own_path(b, row, k)
+    for pb in tr.trace(pixel, 1 << 18, stream=2):
+        o = pb.own
         for iz, z in enumerate(zs):
-            xo, yo = object_plane(b, z * 1000, n_obj)
-            half[iz] = max(
-                half[iz], np.abs(xo[o] - src.x).max(initial=0), np.abs(yo[o] - src.y).max(initial=0)
-            )
+            dx, dy = pb.offsets(z * 1000)
+            half[iz] = max(half[iz], np.abs(dx[o]).max(initial=0), np.abs(dy[o]).max(initial=0))
     half = np.ceil((1.25 * half + 3 * bin_um) / CELL_UM * 2 + 1) * CELL_UM / 2
     edges = [np.arange(-h, h + bin_um / 2, bin_um) for h in half]
     maps = [np.zeros((e.size - 1, e.size - 1)) for e in edges]
@@ -125,24 +129,13 @@ def spots(
     hi = np.full((len(zs), 2), -np.inf)
     inside = np.zeros(len(zs))
     total = np.zeros(1)
-    for b in launch(
-        path,
-        src,
-        n_rays,
-        seed,
-        fresnel=fresnel,
-        hole_weights=weights,
-        chunk=chunk,
-        progress=progress,
-    ):
-        w = b.w * acceptance(design, n0, b.sx, b.sy)
-        o = is_own_path(b, row, k)
+    for pb in tr.trace(pixel, progress=progress):
+        w, o = pb.w, pb.own
         if not ghosts:
             w = w * o
         np.add.at(total, np.zeros(w.size, np.int64), w)
         for iz, z in enumerate(zs):
-            xo, yo = object_plane(b, z * 1000, n_obj)
-            dx, dy = xo - src.x, yo - src.y
+            dx, dy = pb.offsets(z * 1000)
             lo[iz] = np.minimum(lo[iz], [dx[o].min(initial=np.inf), dy[o].min(initial=np.inf)])
             hi[iz] = np.maximum(hi[iz], [dx[o].max(initial=-np.inf), dy[o].max(initial=-np.inf)])
             e = edges[iz]
@@ -173,11 +166,11 @@ def spots(
     return SpotResult(
         design.name,
         design.fingerprint(),
-        seed,
+        sampling.seed,
         n_rays,
         {"row": "AB"[row], "k": k, "x_um": src.x, "y_um": src.y},
         out,
-        {"ghosts": ghosts, "fresnel": fresnel, "bin_um": bin_um},
+        {"ghosts": ghosts, "fresnel": sampling.fresnel, "bin_um": bin_um},
     )
 
 

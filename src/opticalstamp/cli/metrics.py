@@ -135,7 +135,8 @@ def efficiency(
     lines = [
         f"design {d.name}: etendue of one pixel {r.etendue_um2sr:.4g} +- {r.etendue_se:.2g}"
         f" um^2 sr (own path {r.etendue_own_um2sr:.4g})",
-        f"reference lens (F {r.reference_f_number:g}, 84.6 um pixel): "
+        f"reference lens (F {r.reference_f_number:g}, "
+        f"{r.meta['reference_lens']['pixel_um']:.1f} um pixel): "
         f"{r.reference_etendue_um2sr:.4g} um^2 sr",
         f"ratio 1/{1 / r.ratio:.1f} (own path only 1/{1 / r.ratio_own:.1f}); working F-number "
         f"{r.working_f_number:.1f} ({r.working_f_number_own:.1f}); paper: 1/36, F 60",
@@ -170,9 +171,12 @@ def efficiency(
 def diffraction(
     design: DesignOpt = "paper2016",
     slit_um: Annotated[
-        float,
-        typer.Option(help="slit width (um), (0, 10000]", callback=number(0, 1e4, lo_open=True)),
-    ] = 48.0,
+        float | None,
+        typer.Option(
+            help="slit width (um), (0, 10000] (default: the design's object-side hole)",
+            callback=number(0, 1e4, lo_open=True),
+        ),
+    ] = None,
     wavelength_um: Annotated[str, typer.Option(help="wavelengths (um), comma-separated")] = (
         "0.4,0.7"
     ),
@@ -180,26 +184,31 @@ def diffraction(
         float, typer.Option(help="point source distance Z (mm), 0 to 100", callback=number(0, 100))
     ] = 1.0,
     gap_um: Annotated[
-        float,
+        float | None,
         typer.Option(
-            help="air-equivalent source gap above Z=0 (um), 0 to 1e6", callback=number(0, 1e6)
+            help="air-equivalent source gap above Z=0 (um), 0 to 1e6 (default: the design's)",
+            callback=number(0, 1e6),
         ),
-    ] = 1000.0,
+    ] = None,
     next_um: Annotated[
-        float,
+        float | None,
         typer.Option(
-            help="air-equivalent distance to the next layer (um), (0, 1e6]",
+            help="air-equivalent distance to the next layer (um), (0, 1e6] (default: the design's)",
             callback=number(0, 1e6, lo_open=True),
         ),
-    ] = 1000.0 / 1.52,
+    ] = None,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:
     """Fresnel diffraction of a slit (paper Fig. 6) and the design's per-layer budget."""
-    from ..analysis.diffraction import diffraction_budget, slit_case
+    from ..analysis.diffraction import design_slit_case, diffraction_budget, slit_case
 
     d = open_design(design)
     waves = float_list(wavelength_um, "--wavelength-um", 0.2, 2.0)
+    own = design_slit_case(d, z_mm=z, wavelengths_um=waves)  # the design's layer 1
+    slit_um = own.slit_um if slit_um is None else slit_um
+    gap_um = own.r1_um - z * 1000.0 if gap_um is None else gap_um
+    next_um = own.r2_um if next_um is None else next_um
     r = slit_case(slit_um=slit_um, z_mm=z, gap_um=gap_um, r2_um=next_um, wavelengths_um=waves)
     b = diffraction_budget(d, z_mm=z, wavelengths_um=waves)
     data = r.to_dict() | {"budget": b}

@@ -8,6 +8,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
+from ..units import pitch_of_dpi, um_to_mm
 from ..validate import check_output_path
 from .common import (
     DesignOpt,
@@ -52,7 +53,7 @@ def _height(spec: str | None, z: float | None, doc_shape, dpi: float, seed: int)
         if not 0 <= z <= 10:
             fail(f"--z: must lie in [0, 10] mm (got {z:g})")
         return None
-    h_mm, w_mm = doc_shape[0] * 25.4 / dpi, doc_shape[1] * 25.4 / dpi
+    h_mm, w_mm = (um_to_mm(n * pitch_of_dpi(dpi)) for n in doc_shape[:2])
     try:
         return load_height_map(spec, h_mm, w_mm, seed)
     except HeightMapError as err:

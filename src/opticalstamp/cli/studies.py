@@ -113,17 +113,18 @@ def search(
     plot: PlotOpt = None,
 ) -> None:
     """Search hole sizes and gaps for ghost-free, bright, deep designs (paper §3)."""
+    from ..design import scale_to_dpi, structural_variants
     from ..io.files import provenance, save_dataset
-    from ..studies.search import base_for_dpi, search_dataset
     from ..studies.search import search as run
+    from ..studies.search import search_dataset
 
     _check_dask(dask)
     d = open_design(design)
     merged = d.sensor.row_pitch_um / d.sensor.rows
     # 300 dpi is 84.67 um; the paper's sensor is 84.6 um (600-dpi pixels of 42.3): within
     # 1 % counts as the same resolution
-    base = d if abs(25400.0 / dpi / merged - 1) < 0.01 else base_for_dpi(d, dpi)
-    from ..studies.search import merged_front, structural_variants
+    base = d if abs(25400.0 / dpi / merged - 1) < 0.01 else scale_to_dpi(d, dpi)
+    from ..studies.search import merged_front
 
     if layers or stagger:
         try:

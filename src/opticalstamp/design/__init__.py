@@ -1,5 +1,6 @@
-"""What a scanner is: the design model and its validation, design files, materials and
-presets. The first stage: it imports nothing else of opticalstamp but ``validate``."""
+"""What a scanner is: the design model and its validation, design files, materials,
+derived designs (variants) and presets. The first stage: it imports nothing else of
+opticalstamp but ``validate``."""
 
 from .model import (
     A4_WIDTH_UM,
@@ -14,6 +15,21 @@ from .model import (
     load_design,
     preset_names,
 )
+from .variants import (
+    drop_mask,
+    one_row,
+    replace,
+    scale_to_dpi,
+    square_holes,
+    stack_params,
+    structural_variants,
+    with_glass_index,
+    with_hole_shape,
+    with_layers,
+    with_sensitive_area,
+    with_stack,
+    with_unstated,
+)
 
 __all__ = [
     "A4_WIDTH_UM",
@@ -24,7 +40,20 @@ __all__ = [
     "Sensor",
     "Slab",
     "design_from_dict",
+    "drop_mask",
     "format_validation_error",
     "load_design",
+    "one_row",
     "preset_names",
+    "replace",
+    "scale_to_dpi",
+    "square_holes",
+    "stack_params",
+    "structural_variants",
+    "with_glass_index",
+    "with_hole_shape",
+    "with_layers",
+    "with_sensitive_area",
+    "with_stack",
+    "with_unstated",
 ]

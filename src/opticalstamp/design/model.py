@@ -1,6 +1,7 @@
 """Scanner design: sensor + stack of slabs and masks + reference gap + wavelength.
 
-Designs are frozen, validated pydantic models. Lengths are in micrometres (keys name
+Designs are frozen, validated pydantic models, immutable all the way down (the slabs are a
+tuple); derive one from another with :mod:`.variants`. Lengths are in micrometres (keys name
 their unit). The stack is listed from the sensor (z = 0) upward; each slab may carry
 an absorbing aperture-array mask on its top face. The hole lattice of every mask is the
 lattice of used pixels (one hole above each used pixel, paper section 3), shifted by the
@@ -207,7 +208,7 @@ class Design(_Frozen):
         Number, Field(ge=WAVELENGTH_RANGE_UM[0], le=WAVELENGTH_RANGE_UM[1])
     ] = 0.55
     sensor: Sensor = Sensor()
-    slabs: Annotated[list[Slab], Field(min_length=1)]
+    slabs: Annotated[tuple[Slab, ...], Field(min_length=1)]
     reference_gap: Gap = Gap()
     object_medium: Medium = "air"
 

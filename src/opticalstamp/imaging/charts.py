@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..units import mm_to_um, period_of_dpi, pitch_of_dpi
+
 KINDS = ("bars", "edge", "text", "lines")
 
 TEXT = (
@@ -27,7 +29,7 @@ TEXT = (
 def _px(dpi: float) -> float:
     if not 10 <= dpi <= 10_000:
         raise ValueError(f"dpi must lie in [10, 10000] (got {dpi})")
-    return 25400.0 / dpi
+    return pitch_of_dpi(dpi)
 
 
 def bar_chart(
@@ -42,7 +44,7 @@ def bar_chart(
 ) -> np.ndarray:
     """Blocks of black (0) and white (1) bars of equal width, one block per chart dpi."""
     px = _px(dpi)
-    periods = [2 * 25400.0 / d for d in chart_dpi]
+    periods = [period_of_dpi(d) for d in chart_dpi]
     width = 2 * margin_mm + len(periods) * block_mm + (len(periods) - 1) * gap_mm
     nx = int(round(width * 1000 / px))
     ny = int(round((height_mm + 2 * margin_mm) * 1000 / px))
@@ -86,7 +88,7 @@ def text_chart(
     size = max(6, int(round(points / 72 * dpi)))
     font = ImageFont.load_default(size=size)
     line_h = int(size * 1.35)
-    m = int(round(margin_mm / 25.4 * dpi))
+    m = int(round(mm_to_um(margin_mm) / pitch_of_dpi(dpi)))
     width = max(int(font.getlength(t)) for t in lines) + 2 * m
     height = line_h * len(lines) + 2 * m
     im = Image.new("L", (width, height), 255)

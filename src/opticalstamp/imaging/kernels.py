@@ -27,6 +27,7 @@ from ..analysis.lsf import (
     traced_maps,
 )
 from ..design import Design
+from ..raytrace.pixel import PixelTracer, Sampling
 
 
 @dataclass(frozen=True)
@@ -157,20 +158,15 @@ def scan_kernels(
         raise ValueError(f"kernel source must be auto, paraxial or trace (got {source!r})")
     if source == "paraxial" and not rect:
         raise ValueError("paraxial kernels need rectangular holes (this design has circles)")
+    rays = n_rays if source == "trace" else min(n_rays, 1 << 20)
+    sampling = Sampling(rays, seed, fresnel)
+    tracer = PixelTracer(design, sampling)  # one reverse path for every row
     out = []
     for row in range(design.sensor.rows):
-        need_trace = source == "trace" or ghosts
         maps = None
-        if need_trace:
-            rays = n_rays if source == "trace" else min(n_rays, 1 << 20)
+        if source == "trace" or ghosts:
             maps = traced_maps(
-                design,
-                z_mm=zs,
-                row=row,
-                n_rays=rays,
-                seed=seed,
-                fresnel=fresnel,
-                progress=progress,
+                design, z_mm=zs, row=row, sampling=sampling, tracer=tracer, progress=progress
             )
         if source == "trace":
             ks = traced_kernels(maps, ghosts=ghosts)

@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from ..units import UM_PER_MM, dpi_of_period, pitch_of_dpi
+
 #: width (um) of the envelope window that sets the local bar threshold (> 2 periods of
 #: the coarsest paper chart, 508 um)
 ENVELOPE_UM = 1200.0
@@ -56,7 +58,7 @@ def measure_rmtf(
     if not dpi or dpi <= 0:
         raise ValueError(f"dpi must be > 0 (got {dpi})")
     p = _profile(image, axis, rows)
-    px_um = 25400.0 / dpi
+    px_um = pitch_of_dpi(dpi)
     win = max(3, int(round(ENVELOPE_UM / px_um)))
     hi = ndimage.maximum_filter1d(p, win, mode="nearest")
     lo = ndimage.minimum_filter1d(p, win, mode="nearest")
@@ -93,7 +95,7 @@ def measure_rmtf(
         out.append(
             {
                 "period_um": period,
-                "dpi": 2 * 25400.0 / period,
+                "dpi": dpi_of_period(period),
                 "start_px": float(c[s]),
                 "stop_px": float(c[e]),
                 "n_periods": (e - s) / 2,
@@ -268,7 +270,7 @@ def sfr(
             "hold one clean edge"
         )
     keep = f_px <= 1.0  # up to the sampling frequency
-    f_mm = f_px[keep] * dpi / 25.4
+    f_mm = f_px[keep] / pitch_of_dpi(dpi) * UM_PER_MM
     s = s[keep]
     below = np.flatnonzero(s < 0.5)
     if below.size and below[0] > 0:
@@ -284,7 +286,7 @@ def sfr(
         "sfr": s,
         "mtf50_cy_per_mm": mtf50,
         "sfr_at_dpi": at,
-        "nyquist_cy_per_mm": dpi / 25.4 / 2,
+        "nyquist_cy_per_mm": UM_PER_MM / pitch_of_dpi(dpi) / 2,
         "oversample": oversample,
     }
 

@@ -30,7 +30,8 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy import ndimage, signal
 
 from ..design import Design
-from ..raytrace.stack import lattice_of
+from ..raytrace.stack import lattice_of, output_pitch
+from ..units import dpi_of_pitch, pitch_of_dpi
 from ..validate import check_seed
 from .heightmap import Z_RANGE_MM, check_range
 from .heightmap import sample as sample_height
@@ -73,12 +74,6 @@ class ScanResult:
     row_delay_lines: int
     z_levels_mm: list[float]
     meta: dict = field(default_factory=dict)
-
-
-def output_pitch(design: Design) -> float:
-    """Column and line pitch of the merged output (um): row pitch / rows."""
-    lat = lattice_of(design)
-    return lat.pitch / design.sensor.rows
 
 
 def _illumination(settings: ScanSettings, x_um: np.ndarray) -> np.ndarray:
@@ -210,7 +205,7 @@ def simulate_scan(
             raise ValueError(f"z_mm must lie in {list(Z_RANGE_MM)} (got {z_mm})")
     else:
         check_range(np.asarray(height_map), "height_map")
-    p = 25400.0 / doc_dpi
+    p = pitch_of_dpi(doc_dpi)
     h_um, w_um = doc.shape[0] * p, doc.shape[1] * p
     lat = lattice_of(design)
     n_rows = design.sensor.rows
@@ -314,7 +309,7 @@ def simulate_scan(
         whites = [a[..., 0] for a in whites]
     return ScanResult(
         image=image,
-        dpi=25400.0 / pitch,
+        dpi=dpi_of_pitch(pitch),
         pitch_um=pitch,
         raw=raw,
         dark=darks,

@@ -194,3 +194,9 @@ def pixel_center(design: Design, row: int = 0, k: int = 0) -> tuple[float, float
     """Centre (x, y) of used pixel ``k`` of ``row`` (0 = A, 1 = B)."""
     x, y = lattice_of(design).centers(row, k)
     return float(x), float(y)
+
+
+def output_pitch(design: Design) -> float:
+    """Pitch (um) of the merged output line and of its lines: the row pitch over the
+    number of staggered rows (84.6 um for the paper's prototype, 300 dpi)."""
+    return lattice_of(design).pitch / design.sensor.rows

@@ -5,11 +5,14 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from ..design import Design, load_design
 from ..analysis.ghosts import analyse_ghosts
-from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
-from .html import page
 from ..analysis.spots import psf, spots
+from ..design import Design, load_design
+from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
+from ..raytrace.pixel import PixelTracer
+from ..raytrace.stack import output_pitch
+from ..units import dpi_of_pitch
+from .html import page
 
 Z_MM = (0.0, 1.0, 2.0, 3.0, 4.0)
 CONCEPTS = ("fig1b", "fig1c", "fig1d", "three-layer-single-row", "paper2016")
@@ -34,8 +37,19 @@ def build_report(
 
     out = Path(out_dir)
     t0 = time.perf_counter()
-    g = analyse_ghosts(design, z_mm=Z_MM, seed=seed, fresnel=fresnel, progress=progress)
-    sp = spots(design, z_mm=Z_MM, seed=seed, n_rays=n_rays, fresnel=fresnel, progress=progress)
+    tracer = PixelTracer(design)  # one pilot per pixel for every traced analysis below
+    g = analyse_ghosts(
+        design, z_mm=Z_MM, seed=seed, fresnel=fresnel, progress=progress, tracer=tracer
+    )
+    sp = spots(
+        design,
+        z_mm=Z_MM,
+        seed=seed,
+        n_rays=n_rays,
+        fresnel=fresnel,
+        progress=progress,
+        tracer=tracer,
+    )
     psfs = [
         psf(
             design,
@@ -46,7 +60,7 @@ def build_report(
             fresnel=fresnel,
             progress=progress,
         )
-        for x in (0.0, 42.3)
+        for x in (0.0, output_pitch(design) / 2)  # a pixel's axis and half a pitch off
     ]
     concepts = []
     for name in CONCEPTS:
@@ -60,7 +74,7 @@ def build_report(
                 "nearest_ghost_um_z0": c.landing["0"]["nearest_um"],
             }
         )
-    quality = _quality(design, g, seed=seed, fresnel=fresnel, progress=progress)
+    quality = _quality(design, g, seed=seed, fresnel=fresnel, progress=progress, tracer=tracer)
     scans = _scans(design, seed=seed)
     study = _search_and_tolerance(design, seed=seed)
     figs = {
@@ -116,13 +130,16 @@ def build_report(
     return data
 
 
-def _quality(design: Design, g, *, seed: int, fresnel: bool, progress: bool) -> dict:
+def _quality(
+    design: Design, g, *, seed: int, fresnel: bool, progress: bool, tracer: PixelTracer
+) -> dict:
     """RMTF and depth of field, chart profiles, efficiency, diffraction, parameter study."""
     import numpy as np
 
-    from ..analysis.diffraction import diffraction_budget, slit_case
+    from ..analysis.diffraction import design_slit_case, diffraction_budget
     from ..analysis.efficiency import efficiency
-    from ..imaging.measure import measure_rmtf
+    from ..analysis.lsf import traced_folded_lsf
+    from ..analysis.paper_study import parameter_study
     from ..analysis.rmtf import (
         DEFAULT_Z_MM,
         PAPER_DPI,
@@ -131,30 +148,35 @@ def _quality(design: Design, g, *, seed: int, fresnel: bool, progress: bool) -> 
         rmtf,
         rmtf_from_lsf,
     )
-    from ..analysis.lsf import traced_folded_lsf
-    from ..analysis.paper_study import parameter_study
+    from ..imaging.measure import measure_rmtf
 
     dpis = list(PAPER_DPI)
     periods = [period_of_dpi(d) for d in dpis]
     zs = np.asarray(DEFAULT_Z_MM)
     lsf = traced_folded_lsf(
-        design, z_mm=zs, periods_um=periods, seed=seed, fresnel=fresnel, progress=progress
+        design,
+        z_mm=zs,
+        periods_um=periods,
+        seed=seed,
+        fresnel=fresnel,
+        progress=progress,
+        tracer=tracer,
     )
     res = rmtf_from_lsf(lsf, design, dpi=dpis, seed=seed)
-    own = rmtf(design, dpi=dpis, z_mm=zs, ghosts=False, seed=seed, fresnel=fresnel)
+    own = rmtf(design, dpi=dpis, z_mm=zs, ghosts=False, seed=seed, fresnel=fresnel, tracer=tracer)
     rect = all(m.shape != "circle" for m in design.masks)
     par = rmtf(design, dpi=dpis, z_mm=zs, method="paraxial") if rect else own
     # Fig. 12 analogue: the merged line's waveform for the 200-dpi chart at 0.5 and 3.5 mm,
     # and the RMTF measured back from it as from an image
     ip = dpis.index(200.0)
     profiles = []
-    px_um = 25400.0 / 300.0 / 4  # waveform drawn at 4 samples per 300-dpi pixel
+    px_um = output_pitch(design) / 4  # waveform drawn at 4 samples per output pixel
     for z in (0.5, 3.5):
         iz = int(np.argmin(np.abs(zs - z)))
         shift = res.meta["best_shift_um"]["200"][iz]
         x, sig = chart_waveform(lsf, design, ip, iz, shift)
         img = np.repeat(sig / sig.max(), 4)[None, :].repeat(8, axis=0)
-        blocks = measure_rmtf(img, 25400.0 / px_um)
+        blocks = measure_rmtf(img, dpi_of_pitch(px_um))
         profiles.append(
             {
                 "z_mm": float(zs[iz]),
@@ -172,7 +194,7 @@ def _quality(design: Design, g, *, seed: int, fresnel: bool, progress: bool) -> 
         "rmtf_paraxial": par,
         "profiles": profiles,
         "efficiency_result": efficiency(design, seed=seed, fresnel=fresnel, ghosts=g),
-        "slit_result": slit_case(),
+        "slit_result": design_slit_case(design),
         "budget": diffraction_budget(design),
         "study_result": parameter_study(design, seed=seed, progress=progress),
     }
@@ -182,10 +204,10 @@ def _scans(design: Design, *, seed: int) -> dict:
     """Simulated scans of the built-in charts (paper Figs. 8, 9, 12) and their measures."""
     import numpy as np
 
+    from ..analysis.rmtf import rmtf
     from ..imaging.charts import bar_chart, line_chart, text_chart
     from ..imaging.heightmap import shape_map
     from ..imaging.measure import measure_rmtf
-    from ..analysis.rmtf import rmtf
     from ..imaging.ocr import OCRUnavailable, character_error_rate, recognise, tesseract_available
     from ..imaging.scan import ScanSettings, simulate_scan
 
@@ -266,7 +288,7 @@ def _search_and_tolerance(design: Design, *, seed: int) -> dict:
     rect = all(m.shape != "circle" for m in design.masks)
     if not rect:
         return {"search": None, "tolerance": None, "search_result": None, "tolerance_result": None}
-    dpi = 25400.0 / (design.sensor.row_pitch_um / design.sensor.rows)
+    dpi = dpi_of_pitch(output_pitch(design))
     sr = search(design, dpi=dpi, population=24, generations=10, seed=seed, ghost_rays=1 << 16)
     tr = tolerance(design, samples=200, seed=seed, spec="dof>=2.2,ghost<=0.2")
     out["search"] = sr.to_dict()

@@ -5,9 +5,10 @@ from __future__ import annotations
 import html
 
 from ..design import Design
+from ..raytrace.stack import output_pitch
 
 
-def _scans_html(s: dict) -> str:
+def _scans_html(s: dict, pitch_um: float) -> str:
     sfr = [[x["z_mm"], x["axis"], x["mtf50_cy_per_mm"], x["sfr100"], x["sfr200"]] for x in s["sfr"]]
     ocr = "".join(f"<li>Z = {o['z_mm']:g} mm: CER {o['cer']:.3f}</li>" for o in s["ocr"])
     ocr_p = (
@@ -21,7 +22,7 @@ def _scans_html(s: dict) -> str:
     ]
     return f"""<h2>Simulated scans (paper Figs. 8, 9, 12)</h2>
 <p>Built-in charts at 1200 dpi through the scan simulation ({html.escape(s["settings"])}):
-the document moves one 84.6 um line per period, the rows are merged with the line delay,
+the document moves one {pitch_um:.1f} um line per period, the rows are merged with the line delay,
 and dark/white shading correction is applied. See <code>opticalstamp scan</code>.</p>
 <img src="scan_text.png">{ocr_p}
 <img src="scan_bars.png"><img src="scan_profiles.png">
@@ -109,6 +110,7 @@ def _fmt(v) -> str:
 
 def page(design: Design, d: dict) -> str:
     g, sp = d["ghosts"], d["spots"]
+    pitch_um = output_pitch(design)
     ghost_rows = [
         [
             " / ".join(f"{h['mask']}: {h['row']} {h['dk']:+d}" for h in p["holes"]),
@@ -215,7 +217,7 @@ lands inside the virtual detector (&plusmn;{
                 "extent y (um)",
                 "FWHM x (um)",
                 "FWHM y (um)",
-                "fraction in centre 84.6 um cell",
+                f"fraction in centre {pitch_um:.1f} um cell",
             ],
         )
     }
@@ -237,7 +239,7 @@ lands inside the virtual detector (&plusmn;{
     }
 <img src="psf_x0.png"><img src="psf_x42.png">
 {_quality_html(d)}
-{_scans_html(d["scans"])}
+{_scans_html(d["scans"], pitch_um)}
 {_search_html(d["search"], d["tolerance"])}
 <p>Generated in {d["elapsed_s"]:.1f} s.</p>
 </body></html>
@@ -343,7 +345,8 @@ this waveform as from an image agrees with the computed one.</p>
 {_table(prof, ["Z (mm)", "chart shift (um)", "RMTF computed", "RMTF measured from waveform"])}
 <img src="chart_profiles.png">
 <h2>Light efficiency (paper Fig. 13)</h2>
-<p>Reference: 1:1 lens, f = 10 mm, 2 mm pupil, 20 mm conjugates, 84.6 um pixel:
+<p>Reference: 1:1 lens, f = 10 mm, 2 mm pupil, 20 mm conjugates, a pixel of the
+design's output pitch ({e["meta"]["reference_lens"]["pixel_um"]:.1f} um; the paper's 84.6 um):
 {e["reference_etendue_um2sr"]:.4g} um&sup2;sr (working F {e["reference_f_number"]:g}).</p>
 {_table(eff_rows, ["light", "etendue (um2 sr)", "ratio", "1/ratio", "working F"])}
 <p>Effect of the sensitive-area size (the paper expects 4x the light from 4x the area):</p>

@@ -25,42 +25,10 @@ from ..analysis.efficiency import reference_etendue
 from ..analysis.ghosts import analyse_ghosts
 from ..analysis.lsf import FoldedLSF, paraxial_etendue, paraxial_folded_lsf
 from ..analysis.rmtf import DEFAULT_Z_MM, depth_of_field, period_of_dpi, rmtf_curves
-from ..design import Design, design_from_dict
+from ..design import Design
+from ..raytrace.stack import output_pitch
 
 GHOST_Z_MM = (0.0, 1.0, 2.0, 3.0, 4.0)
-
-
-def stack_params(design: Design) -> dict:
-    """Hole sizes (um, object side first) and slab thicknesses (um, sensor first)."""
-    masks = design.masks[::-1]
-    return {
-        "holes_um": [float(min(m.hole_width_um, m.hole_height_um)) for m in masks],
-        "thicknesses_um": [float(sl.thickness_um) for sl in design.slabs],
-        "reference_gap_um": float(design.reference_gap.thickness_um),
-    }
-
-
-def with_stack(
-    design: Design, holes_um=None, thicknesses_um=None, offsets_um=None, name: str | None = None
-) -> Design:
-    """The design with new square hole sizes (object side first), slab thicknesses
-    (sensor first) and per-mask (dx, dy) misregistration (object side first)."""
-    data = design.model_dump(mode="json", exclude_none=True)
-    mask_idx = [i for i, sl in enumerate(data["slabs"]) if "mask_top" in sl][::-1]
-    for j, i in enumerate(mask_idx):
-        m = data["slabs"][i]["mask_top"]
-        if holes_um is not None:
-            m.pop("width_um", None)
-            m.pop("height_um", None)
-            m["size_um"] = float(holes_um[j])
-        if offsets_um is not None:
-            m["offset_x_um"], m["offset_y_um"] = (float(v) for v in offsets_um[j])
-    if thicknesses_um is not None:
-        for sl, t in zip(data["slabs"], thicknesses_um, strict=True):
-            sl["thickness_um"] = float(t)
-    if name:
-        data["name"] = name
-    return design_from_dict(data, f"variant of {design.name}")
 
 
 def rmtf_with_background(
@@ -108,8 +76,8 @@ def evaluate_design(
         "etendue_ghost_um2sr": ghost,
         "ghost_fraction": ghost / tot if tot > 0 else 0.0,
         # useful light: the own path (ghost light is crosstalk, not signal)
-        "efficiency_ratio": own / reference_etendue(),
-        "efficiency_ratio_total": tot / reference_etendue(),
+        "efficiency_ratio": own / reference_etendue(output_pitch(design)),
+        "efficiency_ratio_total": tot / reference_etendue(output_pitch(design)),
         "dof_mm": depth_of_field(zs, curve, dof_threshold),
         "rmtf_at": at,
         "nearest_ghost_mm": near,

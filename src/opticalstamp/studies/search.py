@@ -23,39 +23,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..design import Design, design_from_dict
+from ..design import Design, design_from_dict, stack_params, with_stack
 from ..io.journal import journal_lock
 from ..validate import InputError, check_number, check_seed
-from .evaluate import evaluate_design, stack_params, with_stack
+from .evaluate import evaluate_design
 from .runner import run_tasks, task_key
-
-
-def base_for_dpi(design: Design, dpi: float) -> Design:
-    """The design's sensor and stack scaled so the merged pixel pitch is 25.4 mm / dpi
-    (pixel pitch, sensitive area, row pitch, stagger and holes; plate thicknesses kept)."""
-    s = design.sensor
-    lat_pitch = s.row_pitch_um / s.rows
-    k = 25400.0 / dpi / lat_pitch
-    data = design.model_dump(mode="json", exclude_none=True)
-    sens = data["sensor"]
-    for key in (
-        "pixel_pitch_um",
-        "sensitive_width_um",
-        "sensitive_height_um",
-        "row_pitch_um",
-        "row_b_offset_x_um",
-        "row_b_offset_y_um",
-    ):
-        if key in sens:
-            sens[key] = sens[key] * k
-    for sl in data["slabs"]:
-        m = sl.get("mask_top")
-        if m:
-            for key in ("size_um", "width_um", "height_um"):
-                if key in m:
-                    m[key] = round(m[key] * k, 1)
-    data["name"] = f"{design.name} at {dpi:g} dpi"
-    return design_from_dict(data, f"{design.name} scaled to {dpi:g} dpi")
 
 
 @dataclass(frozen=True)
@@ -191,7 +163,8 @@ def search(
     """NSGA-II search of hole sizes and thicknesses; returns every evaluation and the front.
 
     ``design`` gives the sensor, the glass, the number and order of slabs and masks and
-    the reference gap (scale it to another resolution with :func:`base_for_dpi`).
+    the reference gap (scale it to another resolution with
+    :func:`~opticalstamp.design.variants.scale_to_dpi`).
     ``pinned``: {"hole0": 48, "t2": 1000, ...} fixes variables (holes object side first,
     thicknesses sensor first).
     """
@@ -409,42 +382,6 @@ def search_dataset(res: SearchResult, design: Design, seed: int):
             "layer_order": "holes: object side first; slabs: sensor first",
         },
     )
-
-
-def structural_variants(design: Design, layers=(3,), stagger=("yes",)) -> dict[str, Design]:
-    """Bases that differ in the number of mask layers and the stagger pattern.
-
-    ``layers``: how many masks to keep, dropping masks from the middle of the stack
-    outward (3 -> 2 keeps the object-side and sensor-side masks, as the paper's Fig. 1c/d);
-    ``stagger``: "yes" keeps the two staggered rows, "no" puts every pixel in one row at
-    the merged pitch (paper Fig. 1c), with the same resolution.
-    """
-    out = {}
-    n_masks = len(design.masks)
-    for n in layers:
-        if not 1 <= n <= n_masks:
-            raise ValueError(f"layers: between 1 and {n_masks} (got {n})")
-        for st in stagger:
-            if st not in ("yes", "no"):
-                raise ValueError(f"stagger: yes or no (got {st!r})")
-            data = design.model_dump(mode="json", exclude_none=True)
-            idx = [i for i, sl in enumerate(data["slabs"]) if "mask_top" in sl]
-            keep = {idx[0], idx[-1]} if n >= 2 else {idx[-1]}
-            middle = [i for i in idx if i not in keep]
-            keep |= set(middle[: max(0, n - len(keep))])
-            for i in idx:
-                if i not in keep:
-                    del data["slabs"][i]["mask_top"]
-            s = data["sensor"]
-            if st == "no" and s.get("rows", 2) == 2:
-                s["rows"] = 1
-                s["row_pitch_um"] = s["row_pitch_um"] / 2
-                s.pop("row_b_offset_x_um", None)
-                s.pop("row_b_offset_y_um", None)
-            name = f"{design.name}, {n} layers, {'staggered' if st == 'yes' else 'one row'}"
-            data["name"] = name
-            out[name] = design_from_dict(data, name)
-    return out
 
 
 def merged_front(results: dict[str, SearchResult]) -> list[dict]:

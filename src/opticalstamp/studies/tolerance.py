@@ -24,10 +24,10 @@ from types import MappingProxyType
 
 import numpy as np
 
-from ..design import Design, design_from_dict
+from ..design import Design, design_from_dict, stack_params, with_stack
 from ..raytrace.stack import lattice_of
 from ..validate import check_seed
-from .evaluate import evaluate_design, stack_params, with_stack
+from .evaluate import evaluate_design
 from .runner import run_tasks, task_key
 
 DEFAULT_SIGMAS = MappingProxyType(
@@ -62,15 +62,18 @@ def draw_errors(design: Design, index: int, seed: int, sigmas: dict) -> dict:
 
 def apply_errors(design: Design, errors: dict) -> Design:
     """The design built with the given errors (masks object side first, slabs sensor
-    first; the tilt lengthens the first slab at the array's end)."""
+    first; the tilt lengthens the first slab at the array's end). Misregistration errors
+    add to the design's own mask offsets."""
     p = stack_params(design)
-    n_m = len(design.masks)
     holes = [max(1.0, h + errors.get(f"hole{i}", 0.0)) for i, h in enumerate(p["holes_um"])]
     ts = [max(1.0, t + errors.get(f"t{j}", 0.0)) for j, t in enumerate(p["thicknesses_um"])]
     lat = lattice_of(design)
     half_len = max(abs(lat.k_lo), abs(lat.k_hi)) * lat.pitch
     ts[0] = max(1.0, ts[0] + half_len * math.tan(math.radians(errors.get("tilt", 0.0))))
-    offs = [(errors.get(f"dx{i}", 0.0), errors.get(f"dy{i}", 0.0)) for i in range(n_m)]
+    offs = [
+        (dx + errors.get(f"dx{i}", 0.0), dy + errors.get(f"dy{i}", 0.0))
+        for i, (dx, dy) in enumerate(p["offsets_um"])
+    ]
     return with_stack(design, holes_um=holes, thicknesses_um=ts, offsets_um=offs)
 
 

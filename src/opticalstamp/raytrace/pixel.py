@@ -1,0 +1,362 @@
+"""A used pixel as a reverse-traced source: the one preamble of every traced analysis.
+
+Every traced analysis of a pixel (ghost paths, spots, folded line-spread functions, the
+scan's responsivity maps) does the same: the stack from the sensor up
+(:func:`~opticalstamp.raytrace.stack.reverse_path`), the pixel's sensitive area as a
+Lambertian virtual source (paper Fig. 4, :func:`pixel_source`), a pilot run that weights
+the first mask's holes for importance sampling (:func:`allocate_holes`), the launch, the
+pixel's angular response (:func:`acceptance`) and the own-path test. :class:`PixelTracer`
+does it once, for all of them; its batches (:class:`PixelBatch`) carry what the analyses
+tally. :class:`Sampling` is the one value that says how many rays, which random streams,
+whether Fresnel losses apply and what precision the pilot aims at.
+
+The pilot of a pixel depends on the design, the pixel, the seed, the Fresnel option and
+the two precision targets, never on the ray count or the chunk size. A tracer keeps each
+pilot it computes; analyses that are handed the same tracer (``tracer=``) reuse it, so a
+report that runs several analyses of one pixel runs its pilot once.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..design import Design
+from ..validate import InputError, check_number, check_seed
+from .kernel import RayBatch, launch
+from .sampling import DEFENSIVE_SHARE, Source, hole_targets, site_index
+from .stack import Path, lattice_of, pixel_center, reverse_path
+from .tally import is_own_path, object_plane
+
+#: Rays of the pilot run of :func:`allocate_holes` (its own random stream, 1).
+PILOT_RAYS = 1 << 18
+
+
+def pixel_source(design: Design, row: int, k: int) -> Source:
+    """The sensitive area of used pixel (row, k) as a Lambertian virtual source.
+
+    Parameters
+    ----------
+    design : Design
+    row, k : the pixel's row (0 = A, 1 = B) and index (k = 0 is mid-array)
+
+    Returns
+    -------
+    Source
+        A rectangle centred on the pixel's axis, of the sensitive area's size.
+    """
+    cx, cy = pixel_center(design, row, k)
+    s = design.sensor
+    return Source(cx, cy, s.sensitive_width_um, s.sensitive_height_um)
+
+
+def acceptance(design: Design, n0: float, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
+    """Pixel angular response (0 or 1) for invariant directions s in the medium n0.
+
+    Parameters
+    ----------
+    design : Design, whose sensor gives the acceptance half-angle (deg, in the medium n0)
+    n0 : refractive index of the medium next to the pixel
+    sx, sy : invariant directions n0 sin(theta) (cos phi, sin phi) of the rays
+
+    Returns
+    -------
+    np.ndarray
+        1.0 where the ray is inside the acceptance cone, else 0.0 (float64, shape of sx).
+    """
+    cut = design.sensor.acceptance_half_angle_deg
+    if cut >= 90.0:
+        return np.ones(sx.shape)
+    return (sx * sx + sy * sy <= (n0 * np.sin(np.radians(cut))) ** 2).astype(np.float64)
+
+
+def allocate_holes(
+    design: Design,
+    path: Path,
+    src: Source,
+    row: int,
+    k: int,
+    seed: int,
+    fresnel: bool,
+    rse_own: float = 1e-3,
+    rse_ghost: float = 1e-2,
+) -> np.ndarray:
+    """Weights over the first mask's holes for importance sampling (from a pilot run).
+
+    A pilot of 2^18 rays (its own random stream, geometric table q) measures, for each
+    first-mask hole j, the sums S_j of the squared own-path and ghost weights. Within each
+    tally, holes get samples in proportion to sqrt(S_j) (the variance-minimising
+    allocation); the split a between the two tallies minimises the rays needed to reach
+    both relative standard errors, predicted by reweighting the pilot:
+    E'[w'^2] = sum_j (q_j / q'_j) S_j / N.
+
+    Parameters
+    ----------
+    design : Design
+    path : the design's reverse path
+    src : the pixel as a source (:func:`pixel_source`)
+    row, k : the pixel
+    seed, fresnel : random seed (the pilot uses stream 1) and Fresnel losses
+    rse_own, rse_ghost : relative standard errors the allocation aims at
+
+    Returns
+    -------
+    np.ndarray or None
+        One weight per lattice site (see :func:`~opticalstamp.raytrace.sampling.site_index`);
+        None where the pilot saw no light at all (the geometric table is then used).
+    """
+    m0 = int(path.slabs[path.first_mask_slab, 2])
+    n_sites = path.lattice.n_rows * (path.lattice.k_hi - path.lattice.k_lo + 1)
+    s1 = np.zeros((2, n_sites))
+    s2 = np.zeros((2, n_sites))
+    n0 = path.slabs[0, 1]
+    for b in launch(path, src, PILOT_RAYS, seed, stream=1, fresnel=fresnel):
+        w = b.w * acceptance(design, n0, b.sx, b.sy)
+        site = site_index(path, b.hole_row[:, m0], b.hole_k[:, m0])
+        g = (~is_own_path(b, row, k)).astype(np.int64)
+        np.add.at(s1, (g, site), w)
+        np.add.at(s2, (g, site), w * w)
+    q = hole_targets(path, src).q_per_area * path.hole_area(m0)
+    alloc = [np.sqrt(s) / np.sqrt(s).sum() if s.sum() > 0 else None for s in s2]
+    if alloc[1] is None or alloc[0] is None:
+        return alloc[0] if alloc[1] is None else alloc[1]
+    best, best_n = 0.5, np.inf
+    for a in np.linspace(0.05, 0.95, 19):
+        qn = DEFENSIVE_SHARE * q + (1 - DEFENSIVE_SHARE) * (a * alloc[0] + (1 - a) * alloc[1])
+        need = 0.0
+        for t, rse in ((0, rse_own), (1, rse_ghost)):
+            m1 = s1[t].sum() / PILOT_RAYS
+            m2 = (q / qn * s2[t]).sum() / PILOT_RAYS
+            need = max(need, (m2 / m1**2 - 1) / rse**2)
+        if need < best_n:
+            best, best_n = a, need
+    return best * alloc[0] + (1 - best) * alloc[1]
+
+
+def _integer(value: object, name: str, lo: int, hi: float) -> int:
+    if isinstance(value, np.integer):
+        value = int(value)
+    return int(check_number(value, name, lo, hi, integer=True))
+
+
+@dataclass(frozen=True)
+class Sampling:
+    """How a traced analysis samples its pixel: one value instead of six parameters.
+
+    Parameters
+    ----------
+    n_rays : rays to trace; None: the analysis's default (for
+        :func:`~opticalstamp.analysis.ghosts.analyse_ghosts`: until ``rse_own`` and
+        ``rse_ghost`` are reached, at most ``max_rays``). 1 to 1e12.
+    seed : random seed, 0 to 2^63 - 1 (the rays are stream 0, the pilot stream 1)
+    fresnel : apply Fresnel transmission losses (unpolarised)
+    chunk : rays per traced chunk: bounds memory, never changes a result
+    rse_own, rse_ghost : relative standard errors, in (0, 1), that the pilot's hole
+        allocation aims at for the own path and the ghost paths (and that a
+        precision-driven run stops at)
+    max_rays : most rays of a precision-driven run
+
+    Raises
+    ------
+    InputError
+        For a value out of its range or of the wrong type, naming the field.
+    """
+
+    n_rays: int | None = None
+    seed: int = 0
+    fresnel: bool = False
+    chunk: int = 1 << 21
+    rse_own: float = 1e-3
+    rse_ghost: float = 1e-2
+    max_rays: int = 1 << 27
+
+    def __post_init__(self) -> None:
+        if self.n_rays is not None:
+            object.__setattr__(self, "n_rays", _integer(self.n_rays, "n_rays", 1, 1e12))
+        object.__setattr__(self, "seed", int(check_seed(self.seed)))
+        if not isinstance(self.fresnel, bool | np.bool_):
+            raise InputError(f"fresnel: expected true or false (got {self.fresnel!r})")
+        object.__setattr__(self, "fresnel", bool(self.fresnel))
+        object.__setattr__(self, "chunk", _integer(self.chunk, "chunk", 1, 1 << 30))
+        object.__setattr__(self, "max_rays", _integer(self.max_rays, "max_rays", 1, 1e12))
+        for name in ("rse_own", "rse_ghost"):
+            value = getattr(self, name)
+            value = float(value) if isinstance(value, np.floating) else value
+            check_number(value, name, 0.0, 1.0, lo_open=True, hi_open=True)
+            object.__setattr__(self, name, float(value))
+
+    def or_rays(self, n_rays: int | None) -> Sampling:
+        """This sampling, with ``n_rays`` as its ray count where it has none."""
+        return self if self.n_rays is not None else replace(self, n_rays=n_rays)
+
+    @property
+    def pilot_key(self) -> tuple:
+        """What a pixel's pilot allocation depends on, besides the design and the pixel."""
+        return (self.seed, self.fresnel, self.rse_own, self.rse_ghost)
+
+
+@dataclass(frozen=True)
+class PixelBatch:
+    """One chunk of rays traced from a pixel to the object side of the stack.
+
+    Attributes
+    ----------
+    rays : the traced rays that left the stack, in launch order
+    w : (n,) weights (etendue, um^2 sr) with the pixel's angular response applied
+    own : (n,) bool, whether each ray passed the pixel's own hole in every mask
+    x0, y0 : the pixel's axis (um)
+    n_obj : refractive index of the object medium
+    """
+
+    rays: RayBatch
+    w: np.ndarray
+    own: np.ndarray
+    x0: float
+    y0: float
+    n_obj: float
+
+    def offsets(self, z_um: float) -> tuple[np.ndarray, np.ndarray]:
+        """(dx, dy) from the pixel's axis where the rays meet the object plane z_um (um).
+
+        ``z_um`` is measured above the reference plane.
+        """
+        xo, yo = object_plane(self.rays, z_um, self.n_obj)
+        return xo - self.x0, yo - self.y0
+
+
+class PixelTracer:
+    """Reverse tracer of a design's used pixels, with each pixel's pilot computed once.
+
+    Parameters
+    ----------
+    design : Design
+    sampling : Sampling, how to sample (default: ``Sampling()``)
+
+    Notes
+    -----
+    The pilot allocations (:func:`allocate_holes`) are kept per pixel and per
+    :attr:`Sampling.pilot_key` in a memo that :meth:`with_sampling` shares: tracers made
+    from one another reuse each other's pilots where they agree, and compute a new one
+    where they do not. Nothing is kept at module level: the memo lives as long as the
+    tracers that share it.
+    """
+
+    def __init__(self, design: Design, sampling: Sampling | None = None) -> None:
+        self.design = design
+        self.sampling = Sampling() if sampling is None else sampling
+        self.path = reverse_path(design)
+        self.n0 = float(self.path.slabs[0, 1])
+        self.n_obj = float(design.index(design.object_medium))
+        self._pilots: dict[tuple, np.ndarray | None] = {}
+
+    def with_sampling(self, sampling: Sampling) -> PixelTracer:
+        """A tracer of the same design under ``sampling``, sharing this one's pilots."""
+        other = copy.copy(self)  # shallow: the path and the memo of pilots are shared
+        other.sampling = sampling
+        return other
+
+    def source(self, pixel: tuple[int, int]) -> Source:
+        """Used pixel (row, k) as a Lambertian virtual source; InputError if none."""
+        row, k = pixel
+        lat = lattice_of(self.design)
+        if not (0 <= row < self.design.sensor.rows and lat.k_lo <= k <= lat.k_hi):
+            raise InputError(
+                f"pixel: no used pixel ({row}, {k}); rows 0 to {self.design.sensor.rows - 1},"
+                f" k {lat.k_lo} to {lat.k_hi}"
+            )
+        return pixel_source(self.design, row, k)
+
+    def hole_weights(self, pixel: tuple[int, int]) -> np.ndarray | None:
+        """The pixel's first-mask hole weights under this sampling (read-only).
+
+        Computed by :func:`allocate_holes` on first use, then reused by every tracer that
+        shares this one's pilots and agrees on :attr:`Sampling.pilot_key`.
+        """
+        row, k = int(pixel[0]), int(pixel[1])
+        s = self.sampling
+        key = (row, k, *s.pilot_key)
+        if key not in self._pilots:
+            src = self.source(pixel)
+            w = allocate_holes(
+                self.design, self.path, src, row, k, s.seed, s.fresnel, s.rse_own, s.rse_ghost
+            )
+            if w is not None:  # None: no light reaches the object side in the pilot
+                w.flags.writeable = False
+            self._pilots[key] = w
+        return self._pilots[key]
+
+    def trace(
+        self,
+        pixel: tuple[int, int],
+        n_rays: int | None = None,
+        *,
+        first_id: int = 0,
+        stream: int = 0,
+        progress: bool = False,
+    ) -> Iterator[PixelBatch]:
+        """Trace rays first_id ... first_id + n_rays - 1 of the pixel, chunk by chunk.
+
+        Parameters
+        ----------
+        pixel : (row, k), the used pixel
+        n_rays : rays to trace (default: the sampling's ``n_rays``)
+        first_id : index of the first ray (a run continued in steps stays one stream)
+        stream : random stream (0: the analyses' rays; 1 is the pilot's)
+        progress : show a progress bar
+
+        Yields
+        ------
+        PixelBatch
+            The rays of each chunk that left the stack, with accepted weights and the
+            own-path mask.
+        """
+        s = self.sampling
+        n = s.n_rays if n_rays is None else n_rays
+        if n is None:
+            raise InputError("n_rays: a ray count is needed to trace")
+        row, k = pixel
+        src = self.source(pixel)
+        weights = self.hole_weights(pixel)
+        for b in launch(
+            self.path,
+            src,
+            n,
+            s.seed,
+            stream=stream,
+            fresnel=s.fresnel,
+            first_id=first_id,
+            chunk=s.chunk,
+            progress=progress,
+            hole_weights=weights,
+        ):
+            w = b.w * acceptance(self.design, self.n0, b.sx, b.sy)
+            yield PixelBatch(b, w, is_own_path(b, row, k), src.x, src.y, self.n_obj)
+
+
+def tracer_for(
+    design: Design, sampling: Sampling, tracer: PixelTracer | None = None
+) -> PixelTracer:
+    """The tracer an analysis of ``design`` uses: ``tracer``'s pilots under ``sampling``.
+
+    Parameters
+    ----------
+    design : Design
+    sampling : Sampling of this analysis
+    tracer : a tracer of the same design whose pilots to share, or None (a new tracer)
+
+    Raises
+    ------
+    InputError
+        If ``tracer`` traces another design.
+    """
+    if tracer is None:
+        return PixelTracer(design, sampling)
+    if tracer.design is not design and tracer.design.fingerprint() != design.fingerprint():
+        raise InputError(
+            f"tracer: traces design {tracer.design.name!r}, not {design.name!r} "
+            "(its pilots would not fit)"
+        )
+    return tracer.with_sampling(sampling)
