@@ -16,6 +16,7 @@ import numpy as np
 from ..design import Design
 from ..raytrace.kernel import STATUS_NAMES
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
+from ..raytrace.stack import output_pitch
 from ..raytrace.tally import (
     OWN_PATH,
     Estimate,
@@ -28,7 +29,6 @@ from ..raytrace.tally import (
 #: Ray-count schedule of the precision-driven run: checks after 2^20, 2^21, ... rays.
 FIRST_CHECK = 1 << 20
 #: Width of the bins of ghost light over distance from the pixel's axis (um).
-DISTANCE_BIN_UM = 84.6
 
 
 @dataclass(frozen=True)
@@ -127,6 +127,7 @@ def analyse_ghosts(
     sums = KeyedSums()
     zs = [float(z) for z in z_mm]
     nbins = 400
+    bin_um = output_pitch(design)  # landing distances in output pixels (84.6 um: paper)
     hist = np.zeros((len(zs), nbins + 1))
     inside = np.zeros(len(zs))
     inside2 = np.zeros(len(zs))
@@ -145,7 +146,7 @@ def analyse_ghosts(
                 dx, dy = pb.offsets(z * 1000.0)
                 dx, dy = dx[g], dy[g]
                 dist = np.hypot(dx, dy)
-                ib = np.minimum((dist / DISTANCE_BIN_UM).astype(np.int64), nbins)
+                ib = np.minimum((dist / bin_um).astype(np.int64), nbins)
                 np.add.at(hist[iz], ib, w[g])
                 box = (np.abs(dx) <= detector_half_um) & (np.abs(dy) <= detector_half_um)
                 wb = w[g][box]
@@ -194,10 +195,10 @@ def analyse_ghosts(
         h = hist[iz] / n
         nz = np.flatnonzero(h)
         landing[_zkey(z)] = {
-            "bin_um": DISTANCE_BIN_UM,
+            "bin_um": bin_um,
             "etendue_by_distance_um2sr": h.tolist(),
             "nearest_um": _finite(nearest[iz].min(initial=np.inf)),
-            "median_um": _weighted_quantile(h, 0.5),
+            "median_um": _weighted_quantile(h, 0.5, bin_um),
             "within_detector_um2sr": e_in.value,
             "within_detector_se": e_in.se,
             "detector_half_um": detector_half_um,
@@ -247,13 +248,13 @@ def _ghost_estimate(sums: KeyedSums, own: int, n: int) -> Estimate:
     return estimate(float(sums.s1[keep].sum()), float(sums.s2[keep].sum()), n)
 
 
-def _weighted_quantile(h: np.ndarray, q: float) -> float | None:
+def _weighted_quantile(h: np.ndarray, q: float, bin_um: float) -> float | None:
     tot = h.sum()
     if tot <= 0:
         return None
     c = np.cumsum(h) / tot
     i = int(np.searchsorted(c, q))
-    return (i + 0.5) * DISTANCE_BIN_UM
+    return (i + 0.5) * bin_um
 
 
 def _plane_names(path) -> list[str]:

@@ -169,6 +169,42 @@ class RMTFResult:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    def to_dataset(self):
+        """The curves as an xarray Dataset on coordinates ``dpi`` and ``z_mm``.
+
+        Variables ``rmtf`` (max over chart shifts, paper Eq. 1), ``rmtf_se``, ``rmtf_mean``,
+        ``rmtf_min`` (dpi, z_mm), ``period_um`` and ``dof_mm`` (dpi); the method, ghosts,
+        Fresnel setting, seed and design in the attributes.
+        """
+        import xarray as xr
+
+        keys = [_key(d) for d in self.dpi]
+
+        def grid(table: dict) -> np.ndarray:
+            return np.array([table[k] for k in keys], dtype=np.float64)
+
+        dims = ("dpi", "z_mm")
+        return xr.Dataset(
+            {
+                "rmtf": (dims, grid(self.rmtf_max)),
+                "rmtf_se": (dims, grid(self.rmtf_max_se)),
+                "rmtf_mean": (dims, grid(self.rmtf_mean)),
+                "rmtf_min": (dims, grid(self.rmtf_min)),
+                "period_um": ("dpi", np.asarray(self.periods_um, dtype=np.float64)),
+                "dof_mm": ("dpi", np.array([self.dof_mm.get(k, np.nan) for k in keys])),
+            },
+            coords={"dpi": np.asarray(self.dpi, dtype=np.float64), "z_mm": self.z_mm},
+            attrs={
+                "design": self.design,
+                "fingerprint": self.fingerprint,
+                "seed": self.seed,
+                "method": self.method,
+                "ghosts": int(self.ghosts),
+                "fresnel": int(self.fresnel),
+                "dof_threshold": self.dof_threshold,
+            },
+        )
+
 
 def _key(dpi: float) -> str:
     return f"{dpi:g}"

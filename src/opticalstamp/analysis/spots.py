@@ -18,9 +18,7 @@ from ..design import Design
 from ..raytrace.kernel import launch
 from ..raytrace.pixel import PixelTracer, Sampling, acceptance, tracer_for
 from ..raytrace.sampling import Source
-from ..raytrace.stack import forward_path, lattice_of
-
-CELL_UM = 84.6  # the 300-dpi grid of paper Fig. 5
+from ..raytrace.stack import forward_path, lattice_of, output_pitch
 
 
 @dataclass(frozen=True)
@@ -122,7 +120,8 @@ def spots(
         for iz, z in enumerate(zs):
             dx, dy = pb.offsets(z * 1000)
             half[iz] = max(half[iz], np.abs(dx[o]).max(initial=0), np.abs(dy[o]).max(initial=0))
-    half = np.ceil((1.25 * half + 3 * bin_um) / CELL_UM * 2 + 1) * CELL_UM / 2
+    cell_um = output_pitch(design)  # the output pixel grid of paper Fig. 5 (84.6 um)
+    half = np.ceil((1.25 * half + 3 * bin_um) / cell_um * 2 + 1) * cell_um / 2
     edges = [np.arange(-h, h + bin_um / 2, bin_um) for h in half]
     maps = [np.zeros((e.size - 1, e.size - 1)) for e in edges]
     lo = np.full((len(zs), 2), np.inf)
@@ -143,7 +142,7 @@ def spots(
             iy = np.floor((dy - e[0]) / bin_um).astype(np.int64)
             ok = (ix >= 0) & (ix < e.size - 1) & (iy >= 0) & (iy < e.size - 1)
             np.add.at(maps[iz], (iy[ok], ix[ok]), w[ok])
-            cell = (np.abs(dx) <= CELL_UM / 2) & (np.abs(dy) <= CELL_UM / 2)
+            cell = (np.abs(dx) <= cell_um / 2) & (np.abs(dy) <= cell_um / 2)
             np.add.at(inside, np.full(int(cell.sum()), iz), w[cell])
     out = []
     for iz, z in enumerate(zs):
@@ -170,7 +169,7 @@ def spots(
         n_rays,
         {"row": "AB"[row], "k": k, "x_um": src.x, "y_um": src.y},
         out,
-        {"ghosts": ghosts, "fresnel": sampling.fresnel, "bin_um": bin_um},
+        {"ghosts": ghosts, "fresnel": sampling.fresnel, "bin_um": bin_um, "cell_um": cell_um},
     )
 
 

@@ -12,6 +12,7 @@ from ..units import pitch_of_dpi, um_to_mm
 from ..validate import check_output_path
 from .common import (
     DesignOpt,
+    FresnelOpt,
     JsonOpt,
     SeedOpt,
     command,
@@ -79,6 +80,7 @@ def _settings(
     surround: float,
     illuminance: float,
     exposure: float,
+    fresnel: bool,
 ):
     from pydantic import ValidationError
 
@@ -98,6 +100,7 @@ def _settings(
             kernel=kernel,
             speed_error=speed_error,
             surround=surround,
+            fresnel=fresnel,
         )
     except ValidationError as err:
         e = err.errors()[0]
@@ -167,6 +170,7 @@ def scan(
     surround: Annotated[
         float, typer.Option(help="reflectance outside the page, 0 to 1", callback=number(0, 1))
     ] = 0.0,
+    fresnel: FresnelOpt = False,
 ) -> None:
     """Simulate the scanner's output for a document at a float height (paper Figs. 8, 9)."""
     import json
@@ -176,7 +180,9 @@ def scan(
 
     png, tif, sidecar = _scan_outputs(output)
     d = open_design(design)
-    st = _settings(illumination, kernel, speed_error, surround, illuminance_lux, exposure_ms)
+    st = _settings(
+        illumination, kernel, speed_error, surround, illuminance_lux, exposure_ms, fresnel
+    )
     doc, use = _document(image, dpi, color)
     hm = _height(height_map, z, doc.shape, use, seed)
     try:

@@ -59,6 +59,7 @@ class ScanSettings(BaseModel):
     white_reference: float = Field(1.0, gt=0, le=1)
     kernel: str = Field("auto", pattern="^(auto|paraxial|trace)$")
     kernel_rays: int = Field(1 << 22, ge=1 << 14, le=1 << 30)
+    fresnel: bool = False  # Fresnel transmission losses in the traced kernels
 
 
 @dataclass(frozen=True)
@@ -230,6 +231,7 @@ def simulate_scan(
         ghosts=ghosts,
         n_rays=st.kernel_rays,
         seed=seed,
+        fresnel=st.fresnel,
         progress=progress,
     )
     n_ch = doc.shape[2]

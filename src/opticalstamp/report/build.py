@@ -75,7 +75,7 @@ def build_report(
             }
         )
     quality = _quality(design, g, seed=seed, fresnel=fresnel, progress=progress, tracer=tracer)
-    scans = _scans(design, seed=seed)
+    scans = _scans(design, seed=seed, fresnel=fresnel)
     study = _search_and_tolerance(design, seed=seed)
     figs = {
         "ghosts.png": plotting.plot_ghosts(g),
@@ -200,7 +200,7 @@ def _quality(
     }
 
 
-def _scans(design: Design, *, seed: int) -> dict:
+def _scans(design: Design, *, seed: int, fresnel: bool) -> dict:
     """Simulated scans of the built-in charts (paper Figs. 8, 9, 12) and their measures."""
     import numpy as np
 
@@ -212,7 +212,8 @@ def _scans(design: Design, *, seed: int) -> dict:
     from ..imaging.scan import ScanSettings, simulate_scan
 
     dpi = 1200.0
-    page = ScanSettings(surround=1.0)  # the charts are printed on a larger white page
+    # the charts are printed on a larger white page; Fresnel losses as in the analyses
+    page = ScanSettings(surround=1.0, fresnel=fresnel)
     text, truth = text_chart(dpi)
     res: dict = {"text_panels": [], "ocr": [], "profiles": [], "bar_panels": []}
     for z in (0.5, 1.5, 2.5):

@@ -68,7 +68,9 @@ def _search_html(s: dict | None, t: dict | None) -> str:
 {s["meta"]["budget_mm"]:g} mm, diffraction spill below {s["meta"]["max_spill"]:g}; a compact
 run, `opticalstamp search` runs 480). This design: efficiency 1/{1 / ref["efficiency_ratio"]:.0f},
 depth of field {ref["dof_mm"]:.2f} mm, dominated by {ref.get("dominated_by", 0)} of the designs
-found.</p>
+found. Every design here is evaluated by the {html.escape(s["meta"]["estimator"])}: its depth
+of field can differ from the exact trace of the RMTF section (the Fresnel setting of the
+report does not apply).</p>
 {
         _table(
             front,
@@ -86,8 +88,8 @@ found.</p>
 <h2>Tolerancing (paper §5)</h2>
 <p>{t["n_samples"]} Monte Carlo samples: misregistration {t["sigmas"]["misregistration_um"]:g}
 um, holes {t["sigmas"]["hole_um"]:g} um, plates and gaps {t["sigmas"]["thickness_um"]:g} um,
-tilt {t["sigmas"]["tilt_deg"]:g} deg (1 sigma). Yield for {html.escape(t["spec"])}:
-{t["yield"]:.1%}.</p>
+tilt {t["sigmas"]["tilt_deg"]:g} deg (1 sigma), each evaluated by the
+{html.escape(t["meta"]["estimator"])}. Yield for {html.escape(t["spec"])}: {t["yield"]:.1%}.</p>
 {_table(rm, ["Z (mm)", "RMTF 5 %", "median", "95 %", "nominal"])}
 {_table(sens, ["error", "sigma", "DOF change (mm)", "RMTF@2mm change", "ghost change"])}
 <img src="tolerance.png">

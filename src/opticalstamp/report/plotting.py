@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..analysis.ghosts import GhostResult
-from ..analysis.spots import CELL_UM, PSF, SpotResult
+from ..analysis.spots import PSF, SpotResult
 
 
 def _subplots(*args, figsize=None, layout=None, **kw):
@@ -19,7 +19,9 @@ def _subplots(*args, figsize=None, layout=None, **kw):
 
 
 def plot_spots(res: SpotResult):
-    """Responsivity maps on the 84.6 um grid, one panel per Z (paper Fig. 5)."""
+    """Responsivity maps on the output pixel grid (84.6 um for the paper's prototype), one
+    panel per Z (paper Fig. 5)."""
+    cell = res.meta["cell_um"]
     n = len(res.spots)
     fig, axes = _subplots(1, n, figsize=(2.6 * n, 3.0), squeeze=False)
     half = max(s.x_edges_um[-1] for s in res.spots)
@@ -33,7 +35,7 @@ def plot_spots(res: SpotResult):
             interpolation="nearest",
         )
         ax.set_facecolor("black")
-        grid = np.arange(-np.ceil(half / CELL_UM) - 0.5, np.ceil(half / CELL_UM) + 1) * CELL_UM
+        grid = np.arange(-np.ceil(half / cell) - 0.5, np.ceil(half / cell) + 1) * cell
         for g in grid:
             ax.axvline(g, color="tab:red", lw=0.4, alpha=0.7)
             ax.axhline(g, color="tab:red", lw=0.4, alpha=0.7)
@@ -47,7 +49,7 @@ def plot_spots(res: SpotResult):
     axes[0][0].set_ylabel("y (um)", fontsize=8)
     fig.suptitle(
         f"{res.design}: spots of pixel {res.pixel['row']}{res.pixel['k']} on the "
-        f"object plane (grid {CELL_UM} um)",
+        f"object plane (grid {cell:.1f} um)",
         fontsize=9,
     )
     return fig

@@ -26,7 +26,7 @@ import numpy as np
 from ..design import Design, design_from_dict, stack_params, with_stack
 from ..io.journal import journal_lock
 from ..validate import InputError, check_number, check_seed
-from .evaluate import evaluate_design
+from .evaluate import SURROGATE, evaluate_design
 from .runner import run_tasks, task_key
 
 
@@ -298,6 +298,7 @@ def search(
         pareto=front,
         reference=reference,
         meta={
+            "estimator": SURROGATE,
             "dof_dpi": dof_dpi,
             "budget_mm": budget_mm,
             "near_mm": near_mm,

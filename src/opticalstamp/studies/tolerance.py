@@ -27,7 +27,7 @@ import numpy as np
 from ..design import Design, design_from_dict, stack_params, with_stack
 from ..raytrace.stack import lattice_of
 from ..validate import check_seed
-from .evaluate import evaluate_design
+from .evaluate import SURROGATE, evaluate_design
 from .runner import run_tasks, task_key
 
 DEFAULT_SIGMAS = MappingProxyType(
@@ -273,7 +273,7 @@ def tolerance(
         sensitivity=table,
         spec=spec or "",
         yield_fraction=yld,
-        meta={"ghost_rays": ghost_rays},
+        meta={"ghost_rays": ghost_rays, "estimator": SURROGATE},
     )
 
 
