@@ -14,6 +14,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "opticalstamp"
 ORDER = (
     "validate",
     "units",
+    "defaults",
     "design",
     "io",
     "raytrace",

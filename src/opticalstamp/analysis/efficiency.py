@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..defaults import RSE_GHOST, RSE_OWN
 from ..design import Design, with_sensitive_area
 from ..raytrace.stack import output_pitch
 from .ghosts import GhostResult, analyse_ghosts
@@ -93,8 +94,8 @@ def efficiency(
     object_radii_mm=(1.0, 5.0, 10.0),
     seed: int = 0,
     fresnel: bool = False,
-    rse_own: float = 1e-3,
-    rse_ghost: float = 1e-2,
+    rse_own: float = RSE_OWN,
+    rse_ghost: float = RSE_GHOST,
     area_scales=(1.0, 2.0),
     reference: dict | None = None,
     ghosts: GhostResult | None = None,

@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..defaults import DETECTOR_HALF_UM, RSE_GHOST, RSE_OWN
 from ..design import Design
 from ..raytrace.kernel import STATUS_NAMES
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
@@ -86,12 +87,12 @@ def analyse_ghosts(
     pixel: tuple[int, int] = (0, 0),
     z_mm: tuple[float, ...] = (0.0,),
     n_rays: int | None = None,
-    rse_own: float = 1e-3,
-    rse_ghost: float = 1e-2,
+    rse_own: float = RSE_OWN,
+    rse_ghost: float = RSE_GHOST,
     max_rays: int = 1 << 27,
     seed: int = 0,
     fresnel: bool = False,
-    detector_half_um: float = 500.0,
+    detector_half_um: float = DETECTOR_HALF_UM,
     chunk: int = 1 << 21,
     progress: bool = False,
     sampling: Sampling | None = None,

@@ -21,16 +21,25 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..defaults import (
+    DOF_DPI,
+    DOF_THRESHOLD,
+    PAPER_CHART_DPI,
+    RAYS_LSF,
+    SHIFT_STEP_UM,
+    WINDOW_UM,
+    Z_GRID_MM,
+)
 from ..design import Design
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import lattice_of
 from ..units import period_of_dpi
-from ..validate import check_memory
+from ..validate import check_memory, parse_grid
 from .lsf import FoldedLSF, paraxial_folded_lsf, traced_folded_lsf
 
 #: The paper's chart periods (um) and their names in dpi (one bar = one dot).
-PAPER_DPI = (100.0, 150.0, 200.0, 247.0)
-DEFAULT_Z_MM = tuple(np.round(np.arange(0.0, 4.5001, 0.25), 2))
+PAPER_DPI = PAPER_CHART_DPI
+DEFAULT_Z_MM = parse_grid(Z_GRID_MM, "z_mm", 0.0, 100.0)
 
 
 def chart_correlation(h: np.ndarray) -> np.ndarray:
@@ -64,7 +73,11 @@ def merged_pixels(design: Design, window_um: float) -> list[np.ndarray]:
 
 
 def rmtf_curves(
-    lsf: FoldedLSF, design: Design, *, window_um: float = 5000.0, shift_step_um: float = 1.0
+    lsf: FoldedLSF,
+    design: Design,
+    *,
+    window_um: float = WINDOW_UM,
+    shift_step_um: float = SHIFT_STEP_UM,
 ) -> dict:
     """RMTF max / mean / min over chart shifts, per period and Z, with standard errors.
 
@@ -108,7 +121,7 @@ def chart_waveform(
     period_index: int,
     z_index: int,
     shift_um: float,
-    window_um: float = 5000.0,
+    window_um: float = WINDOW_UM,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Pixel x (um) and signals (um^2 sr; white = the etendue) of the merged line for a
     chart shifted by ``shift_um`` (paper Fig. 12 c, d), sorted by x."""
@@ -125,7 +138,7 @@ def chart_waveform(
     return x[order], s[order]
 
 
-def depth_of_field(z_mm: np.ndarray, rmtf: np.ndarray, threshold: float = 0.3) -> float:
+def depth_of_field(z_mm: np.ndarray, rmtf: np.ndarray, threshold: float = DOF_THRESHOLD) -> float:
     """Largest Z (mm) up to which RMTF stays >= threshold, interpolated linearly.
 
     0 if RMTF starts below the threshold; the last Z if it never drops below.
@@ -232,12 +245,12 @@ def rmtf(
     method: str = "trace",
     ghosts: bool = True,
     fresnel: bool = False,
-    n_rays: int = 1 << 21,
+    n_rays: int = RAYS_LSF,
     seed: int = 0,
-    window_um: float = 5000.0,
-    shift_step_um: float = 1.0,
-    dof_threshold: float = 0.3,
-    dof_dpi: float = 200.0,
+    window_um: float = WINDOW_UM,
+    shift_step_um: float = SHIFT_STEP_UM,
+    dof_threshold: float = DOF_THRESHOLD,
+    dof_dpi: float = DOF_DPI,
     progress: bool = False,
     tracer: PixelTracer | None = None,
 ) -> RMTFResult:
@@ -298,10 +311,10 @@ def rmtf_from_lsf(
     *,
     dpi,
     seed: int = 0,
-    window_um: float = 5000.0,
-    shift_step_um: float = 1.0,
-    dof_threshold: float = 0.3,
-    dof_dpi: float = 200.0,
+    window_um: float = WINDOW_UM,
+    shift_step_um: float = SHIFT_STEP_UM,
+    dof_threshold: float = DOF_THRESHOLD,
+    dof_dpi: float = DOF_DPI,
 ) -> RMTFResult:
     """RMTF and depth of field from folded LSFs (periods in the order of ``dpi``)."""
     dpis = [float(d) for d in dpi]

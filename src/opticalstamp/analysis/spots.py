@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..defaults import RAYS_MAP
 from ..design import Design
 from ..raytrace.kernel import launch
 from ..raytrace.pixel import PixelTracer, Sampling, acceptance, tracer_for
@@ -83,7 +84,7 @@ def spots(
     *,
     z_mm=(0.0, 1.0, 2.0, 3.0, 4.0),
     pixel: tuple[int, int] = (0, 0),
-    n_rays: int = 1 << 22,
+    n_rays: int = RAYS_MAP,
     seed: int = 0,
     fresnel: bool = False,
     bin_um: float = 2.0,
@@ -250,7 +251,7 @@ def psf(
     x_obj_um: float = 0.0,
     y_obj_um: float = 0.0,
     z_mm: float = 1.0,
-    n_rays: int = 1 << 22,
+    n_rays: int = RAYS_MAP,
     seed: int = 0,
     fresnel: bool = False,
     window_um: float = 400.0,

@@ -10,6 +10,7 @@ from typing import Annotated
 
 import typer
 
+from ..defaults import DETECTOR_HALF_UM, RAYS_MAP, RSE_GHOST, RSE_OWN
 from ..design import Design, load_design
 from ..validate import (
     InputError,
@@ -181,10 +182,10 @@ def ghosts(
     z: Annotated[str, typer.Option(help="object distances (mm), comma-separated")] = "0",
     rse_own: Annotated[
         float, typer.Option(help="target relative SE, own path", callback=_fraction)
-    ] = 1e-3,
+    ] = RSE_OWN,
     rse_ghost: Annotated[
         float, typer.Option(help="target relative SE, ghosts", callback=_fraction)
-    ] = 1e-2,
+    ] = RSE_GHOST,
     row: Annotated[str, typer.Option(help="pixel row, A or B")] = "A",
     detector_um: Annotated[
         float,
@@ -192,7 +193,7 @@ def ghosts(
             help="half width of the virtual detector on the object plane (um), (0, 1e6]",
             callback=number(0, 1e6, lo_open=True),
         ),
-    ] = 500.0,
+    ] = DETECTOR_HALF_UM,
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
@@ -261,7 +262,7 @@ def spots(
     r = run(
         d,
         z_mm=float_list(z, "--z", 0.0, 100.0),
-        n_rays=ray_count(rays, 1 << 22),
+        n_rays=ray_count(rays, RAYS_MAP),
         seed=seed,
         fresnel=fresnel,
         ghosts=not no_ghosts,
@@ -312,7 +313,7 @@ def psf(
         x_obj_um=x_obj,
         y_obj_um=y_obj,
         z_mm=z,
-        n_rays=ray_count(rays, 1 << 22),
+        n_rays=ray_count(rays, RAYS_MAP),
         seed=seed,
         fresnel=fresnel,
         progress=not as_json,

@@ -7,6 +7,15 @@ from typing import Annotated
 
 import typer
 
+from ..defaults import (
+    DOF_DPI,
+    DOF_THRESHOLD,
+    PAPER_CHART_DPI,
+    RAYS_LSF,
+    SHIFT_STEP_UM,
+    WINDOW_UM,
+    Z_GRID_MM,
+)
 from .common import (
     DesignOpt,
     FresnelOpt,
@@ -36,12 +45,10 @@ def rmtf(
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
     rays: RaysOpt = None,
-    dpi: Annotated[str, typer.Option(help="chart resolutions (dpi), comma-separated")] = (
-        "100,150,200,247"
+    dpi: Annotated[str, typer.Option(help="chart resolutions (dpi), comma-separated")] = ",".join(
+        f"{v:g}" for v in PAPER_CHART_DPI
     ),
-    z: Annotated[str, typer.Option(help="object distances (mm), or START:STOP:STEP")] = (
-        "0:4.5:0.25"
-    ),
+    z: Annotated[str, typer.Option(help="object distances (mm), or START:STOP:STEP")] = Z_GRID_MM,
     ghosts: Annotated[bool, typer.Option("--ghosts/--no-ghosts", help="count ghost light")] = True,
     method: Annotated[str, typer.Option(help="trace (exact) or paraxial (closed form)")] = "trace",
     window_um: Annotated[
@@ -49,24 +56,24 @@ def rmtf(
         typer.Option(
             help="chart window for Imax/Imin (um), (0, 1e6]", callback=number(0, 1e6, lo_open=True)
         ),
-    ] = 5000.0,
+    ] = WINDOW_UM,
     shift_um: Annotated[
         float,
         typer.Option(
             help="chart shift step (um), (0, 1000]", callback=number(0, 1000, lo_open=True)
         ),
-    ] = 1.0,
+    ] = SHIFT_STEP_UM,
     threshold: Annotated[
         float,
         typer.Option(
             help="RMTF threshold of the depth of field, (0, 1)",
             callback=number(0, 1, lo_open=True, hi_open=True),
         ),
-    ] = 0.3,
+    ] = DOF_THRESHOLD,
     dof_dpi: Annotated[
         float,
         typer.Option(help="chart dpi of the depth of field, 1 to 5000", callback=number(1, 5000)),
-    ] = 200.0,
+    ] = DOF_DPI,
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
@@ -88,7 +95,7 @@ def rmtf(
         method=method,
         ghosts=ghosts,
         fresnel=fresnel,
-        n_rays=ray_count(rays, 1 << 21),
+        n_rays=ray_count(rays, RAYS_LSF),
         seed=seed,
         window_um=window_um,
         shift_step_um=shift_um,

@@ -7,6 +7,15 @@ from typing import Annotated
 
 import typer
 
+from ..defaults import (
+    DOF_DPI,
+    SEARCH_BUDGET_MM,
+    SEARCH_GENERATIONS,
+    SEARCH_NEAR_MM,
+    SEARCH_POPULATION,
+    TOLERANCE_SAMPLES,
+    TOLERANCE_SIGMAS,
+)
 from ..validate import check_number
 from .common import (
     DesignOpt,
@@ -46,8 +55,26 @@ def _check_dask(address: str | None) -> None:
         fail(f"--dask: expected tcp://HOST:PORT (got {address!r})")
 
 
-def _journal(out: Path | None) -> Path | None:
-    return None if out is None else out.with_name(out.name + ".journal.jsonl")
+def _layer_counts(value: str | None) -> tuple[int, ...] | None:
+    if value is None:
+        return None
+    try:
+        counts = tuple(int(v) for v in value.split(","))
+    except ValueError:
+        msg = f"expected comma-separated integers such as 2,3 (got {value!r})"
+        raise typer.BadParameter(msg) from None
+    if any(not 1 <= n <= 16 for n in counts):
+        raise typer.BadParameter(f"numbers of layers must lie in [1, 16] (got {value!r})")
+    return counts
+
+
+def _staggers(value: str | None) -> tuple[str, ...] | None:
+    if value is None:
+        return None
+    styles = tuple(v.strip() for v in value.split(","))
+    if any(v not in ("yes", "no") for v in styles):
+        raise typer.BadParameter(f"expected yes, no or yes,no (got {value!r})")
+    return styles
 
 
 def _pins(text: str | None) -> dict:
@@ -74,17 +101,17 @@ def search(
     seed: SeedOpt = 0,
     dof_dpi: Annotated[
         float, typer.Option(help="chart dpi of the depth of field, 50 to 2400", callback=_DPI)
-    ] = 200.0,
+    ] = DOF_DPI,
     budget_mm: Annotated[
         float,
         typer.Option(help="total stack thickness budget (mm), 0.2 to 20", callback=number(0.2, 20)),
-    ] = 2.5,
+    ] = SEARCH_BUDGET_MM,
     near_mm: Annotated[
         float,
         typer.Option(
             help="no ghost light within this distance (mm), 0 to 100", callback=number(0, 100)
         ),
-    ] = 1.0,
+    ] = SEARCH_NEAR_MM,
     max_ghost: Annotated[
         float | None,
         typer.Option(help="bound on the ghost fraction, 0 to 1", callback=number(0, 1)),
@@ -94,17 +121,21 @@ def search(
         typer.Option(
             help="designs per generation, 4 to 1000", callback=number(4, 1000, integer=True)
         ),
-    ] = 32,
+    ] = SEARCH_POPULATION,
     generations: Annotated[
         int,
         typer.Option(help="NSGA-II generations, 1 to 1000", callback=number(1, 1000, integer=True)),
-    ] = 15,
+    ] = SEARCH_GENERATIONS,
     pin: Annotated[str | None, typer.Option(help="fixed variables, e.g. hole0=48,t2=1000")] = None,
     layers: Annotated[
-        str | None, typer.Option(help="also search other numbers of mask layers, e.g. 2,3")
+        str | None,
+        typer.Option(
+            help="also search other numbers of mask layers, e.g. 2,3", callback=_layer_counts
+        ),
     ] = None,
     stagger: Annotated[
-        str | None, typer.Option(help="stagger patterns to search: yes, no or yes,no")
+        str | None,
+        typer.Option(help="stagger patterns to search: yes, no or yes,no", callback=_staggers),
     ] = None,
     workers: WorkersOpt = None,
     dask: DaskOpt = None,
@@ -113,54 +144,44 @@ def search(
     plot: PlotOpt = None,
 ) -> None:
     """Search hole sizes and gaps for ghost-free, bright, deep designs (paper §3)."""
-    from ..design import scale_to_dpi, structural_variants
     from ..io.files import provenance, save_dataset
-    from ..studies.search import search as run
-    from ..studies.search import search_dataset
+    from ..studies.search import (
+        merged_front,
+        search_base,
+        search_dataset,
+        search_variants,
+        variant_path,
+    )
 
     _check_dask(dask)
     d = open_design(design)
-    merged = d.sensor.row_pitch_um / d.sensor.rows
-    # 300 dpi is 84.67 um; the paper's sensor is 84.6 um (600-dpi pixels of 42.3): within
-    # 1 % counts as the same resolution
-    base = d if abs(25400.0 / dpi / merged - 1) < 0.01 else scale_to_dpi(d, dpi)
-    from ..studies.search import merged_front
-
-    if layers or stagger:
-        try:
-            n_l = [int(v) for v in (layers or str(len(base.masks))).split(",")]
-            sts = [v.strip() for v in (stagger or "yes").split(",")]
-            bases = structural_variants(base, layers=n_l, stagger=sts)
-        except ValueError as err:
-            fail(f"--layers/--stagger: {err}")
-    else:
-        bases = {base.name: base}
-    results = {}
-    for i, (name, b) in enumerate(bases.items()):
-        out_i = output
-        if output is not None and len(bases) > 1:
-            out_i = output.with_name(f"{output.stem}.v{i}{output.suffix}")
-        try:
-            results[name] = run(
-                b,
-                dpi=dpi,
-                dof_dpi=dof_dpi,
-                budget_mm=budget_mm,
-                near_mm=near_mm,
-                max_ghost=max_ghost,
-                population=population,
-                generations=generations,
-                seed=seed,
-                pinned=_pins(pin),
-                workers=workers,
-                dask_address=dask,
-                journal=_journal(out_i),
-                progress=not as_json,
+    base = search_base(d, dpi)
+    try:
+        results = search_variants(
+            d,
+            dpi=dpi,
+            layers=layers,
+            stagger=stagger,
+            results_path=output,
+            dof_dpi=dof_dpi,
+            budget_mm=budget_mm,
+            near_mm=near_mm,
+            max_ghost=max_ghost,
+            population=population,
+            generations=generations,
+            seed=seed,
+            pinned=_pins(pin),
+            workers=workers,
+            dask_address=dask,
+            progress=not as_json,
+        )
+    except (ValueError, OSError) as err:
+        fail(str(err))
+    if output is not None:
+        for i, res in enumerate(results.values()):
+            save_dataset(
+                search_dataset(res, res.design, seed), variant_path(output, i, len(results))
             )
-        except (ValueError, OSError) as err:
-            fail(str(err))
-        if out_i is not None:
-            save_dataset(search_dataset(results[name], b, seed), out_i)
     r = next(iter(results.values()))
     data = r.to_dict() | {"provenance": provenance(base, seed)}
     if len(results) > 1:
@@ -210,24 +231,24 @@ def tolerance(
     misregistration_um: Annotated[
         float,
         typer.Option(help="sigma of x/y misregistration (um), 0 to 100", callback=number(0, 100)),
-    ] = 3.0,
+    ] = TOLERANCE_SIGMAS["misregistration_um"],
     hole_um: Annotated[
         float, typer.Option(help="sigma of the hole sizes (um), 0 to 100", callback=number(0, 100))
-    ] = 1.0,
+    ] = TOLERANCE_SIGMAS["hole_um"],
     thickness_um: Annotated[
         float,
         typer.Option(help="sigma of plates and gaps (um), 0 to 1000", callback=number(0, 1000)),
-    ] = 10.0,
+    ] = TOLERANCE_SIGMAS["thickness_um"],
     tilt_deg: Annotated[
         float, typer.Option(help="sigma of the stack tilt (deg), 0 to 5", callback=number(0, 5))
-    ] = 0.02,
+    ] = TOLERANCE_SIGMAS["tilt_deg"],
     samples: Annotated[
         int,
         typer.Option(help="Monte Carlo samples, 1 to 1e6", callback=number(1, 1e6, integer=True)),
-    ] = 1000,
+    ] = TOLERANCE_SAMPLES,
     dpi: Annotated[
         float, typer.Option(help="chart dpi of the RMTF, 50 to 2400", callback=_DPI)
-    ] = 200.0,
+    ] = DOF_DPI,
     z: Annotated[str, typer.Option(help="distances of the RMTF (mm)")] = "0.5,1,2,3,3.5",
     spec: Annotated[str | None, typer.Option(help="e.g. dof>=2.2,ghost<=0.2,rmtf@2>=0.35")] = (
         None
@@ -240,6 +261,7 @@ def tolerance(
 ) -> None:
     """Monte Carlo of assembly errors: RMTF, DOF, efficiency, ghosts, sensitivity, yield."""
     from ..io.files import provenance, save_dataset
+    from ..studies.search import journal_of
     from ..studies.tolerance import parse_spec, tolerance_dataset
     from ..studies.tolerance import tolerance as run
 
@@ -267,7 +289,7 @@ def tolerance(
             seed=seed,
             workers=workers,
             dask_address=dask,
-            journal=_journal(output),
+            journal=journal_of(output),
             progress=not as_json,
         )
     except (ValueError, OSError) as err:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..defaults import RSE_GHOST, RSE_OWN
 from ..design import Design
 from ..validate import InputError, check_number, check_seed
 from .kernel import RayBatch, launch
@@ -81,8 +82,8 @@ def allocate_holes(
     k: int,
     seed: int,
     fresnel: bool,
-    rse_own: float = 1e-3,
-    rse_ghost: float = 1e-2,
+    rse_own: float = RSE_OWN,
+    rse_ghost: float = RSE_GHOST,
 ) -> np.ndarray:
     """Weights over the first mask's holes for importance sampling (from a pilot run).
 
@@ -169,8 +170,8 @@ class Sampling:
     seed: int = 0
     fresnel: bool = False
     chunk: int = 1 << 21
-    rse_own: float = 1e-3
-    rse_ghost: float = 1e-2
+    rse_own: float = RSE_OWN
+    rse_ghost: float = RSE_GHOST
     max_rays: int = 1 << 27
 
     def __post_init__(self) -> None:

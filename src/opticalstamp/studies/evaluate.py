@@ -25,6 +25,7 @@ from ..analysis.efficiency import reference_etendue
 from ..analysis.ghosts import analyse_ghosts
 from ..analysis.lsf import FoldedLSF, paraxial_etendue, paraxial_folded_lsf
 from ..analysis.rmtf import DEFAULT_Z_MM, depth_of_field, period_of_dpi, rmtf_curves
+from ..defaults import WINDOW_UM
 from ..design import Design
 from ..raytrace.stack import output_pitch
 
@@ -41,7 +42,7 @@ def rmtf_with_background(
     dpi: float,
     z_mm,
     ghost_um2sr: float,
-    window_um: float = 5000.0,
+    window_um: float = WINDOW_UM,
     shift_step_um: float = 2.0,
 ) -> np.ndarray:
     """Max-over-shifts RMTF vs Z: paraxial own path plus a uniform ghost background."""

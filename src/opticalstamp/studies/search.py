@@ -20,14 +20,28 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from ..design import Design, design_from_dict, stack_params, with_stack
+from ..defaults import SEARCH_BUDGET_MM, SEARCH_GENERATIONS, SEARCH_NEAR_MM, SEARCH_POPULATION
+from ..design import (
+    Design,
+    design_from_dict,
+    scale_to_dpi,
+    stack_params,
+    structural_variants,
+    with_stack,
+)
 from ..io.journal import journal_lock
+from ..raytrace.stack import output_pitch
+from ..units import pitch_of_dpi
 from ..validate import InputError, check_number, check_seed
 from .evaluate import SURROGATE, evaluate_design
 from .runner import run_tasks, task_key
+
+#: a base whose output pitch is within this of 25.4 mm / dpi is searched as it is
+SAME_RESOLUTION = 0.01
 
 
 @dataclass(frozen=True)
@@ -74,6 +88,7 @@ class SearchResult:
     pareto: list[dict]
     reference: dict | None  # the base design's own evaluation
     meta: dict = field(default_factory=dict)
+    design: Design | None = field(default=None, repr=False)  # the searched base
 
     def to_dict(self) -> dict:
         target = self.reference["dof_mm"] if self.reference else None
@@ -144,12 +159,12 @@ def search(
     *,
     dpi: float = 300.0,
     dof_dpi: float = 200.0,
-    budget_mm: float = 2.5,
-    near_mm: float = 1.0,
+    budget_mm: float = SEARCH_BUDGET_MM,
+    near_mm: float = SEARCH_NEAR_MM,
     max_ghost: float | None = None,
     max_spill: float = 0.25,
-    population: int = 24,
-    generations: int = 10,
+    population: int = SEARCH_POPULATION,
+    generations: int = SEARCH_GENERATIONS,
     seed: int = 0,
     pinned: dict | None = None,
     space: SearchSpace | None = None,
@@ -291,6 +306,7 @@ def search(
             dom = np.all(pts >= p, axis=1) & np.any(pts > p, axis=1)
             reference["dominated_by"] = int(dom.sum())
     return SearchResult(
+        design=design,
         base=design.name,
         dpi=dpi,
         seed=seed,
@@ -383,6 +399,72 @@ def search_dataset(res: SearchResult, design: Design, seed: int):
             "layer_order": "holes: object side first; slabs: sensor first",
         },
     )
+
+
+def search_base(design: Design, dpi: float) -> Design:
+    """The design to search at ``dpi``: itself when its output pitch is within
+    SAME_RESOLUTION of 25.4 mm / dpi (300 dpi is 84.67 um; the paper's sensor gives 84.6 um),
+    else the design scaled to that resolution (:func:`~opticalstamp.design.scale_to_dpi`)."""
+    if abs(pitch_of_dpi(dpi) / output_pitch(design) - 1) < SAME_RESOLUTION:
+        return design
+    return scale_to_dpi(design, dpi)
+
+
+def variant_path(path: Path | None, index: int, n_variants: int) -> Path | None:
+    """Where variant ``index`` of ``n_variants`` keeps its results: ``path`` itself for a
+    single search, ``STEM.vINDEX.SUFFIX`` beside it for several."""
+    if path is None or n_variants == 1:
+        return path
+    return path.with_name(f"{path.stem}.v{index}{path.suffix}")
+
+
+def journal_of(results_path: Path | None) -> Path | None:
+    """The journal of a results file: ``RESULTS.journal.jsonl`` beside it."""
+    return (
+        None
+        if results_path is None
+        else results_path.with_name(results_path.name + ".journal.jsonl")
+    )
+
+
+def search_variants(
+    design: Design,
+    *,
+    dpi: float = 300.0,
+    layers: tuple[int, ...] | None = None,
+    stagger: tuple[str, ...] | None = None,
+    results_path: Path | None = None,
+    **options,
+) -> dict[str, SearchResult]:
+    """Search the design at ``dpi`` and, with ``layers``/``stagger``, its structural
+    variants (numbers of mask layers, staggered or one row), one :func:`search` each.
+
+    Parameters
+    ----------
+    design : the base design (resolved at ``dpi`` by :func:`search_base`)
+    layers, stagger : structural variants (:func:`~opticalstamp.design.structural_variants`);
+        both None: the base only
+    results_path : where the results will be saved; each variant journals beside its own
+        :func:`variant_path` (``.journal.jsonl``), so an interrupted study resumes
+    options : passed to :func:`search` (budget, constraints, pins, seed, workers, ...)
+
+    Returns
+    -------
+    dict
+        Results by variant name, in the variants' order (merge with :func:`merged_front`).
+    """
+    base = search_base(design, dpi)
+    if layers or stagger:
+        bases = structural_variants(
+            base, layers=tuple(layers or (len(base.masks),)), stagger=tuple(stagger or ("yes",))
+        )
+    else:
+        bases = {base.name: base}
+    out = {}
+    for i, (name, b) in enumerate(bases.items()):
+        path = variant_path(results_path, i, len(bases))
+        out[name] = search(b, dpi=dpi, journal=journal_of(path), **options)
+    return out
 
 
 def merged_front(results: dict[str, SearchResult]) -> list[dict]:

@@ -20,19 +20,17 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
-from types import MappingProxyType
 
 import numpy as np
 
+from ..defaults import DOF_DPI, TOLERANCE_SAMPLES, TOLERANCE_SIGMAS
 from ..design import Design, design_from_dict, stack_params, with_stack
 from ..raytrace.stack import lattice_of
 from ..validate import check_seed
 from .evaluate import SURROGATE, evaluate_design
 from .runner import run_tasks, task_key
 
-DEFAULT_SIGMAS = MappingProxyType(
-    {"misregistration_um": 3.0, "hole_um": 1.0, "thickness_um": 10.0, "tilt_deg": 0.02}
-)
+DEFAULT_SIGMAS = TOLERANCE_SIGMAS
 SPEC_RE = re.compile(r"^(dof|ghost|efficiency|rmtf@[0-9.]+)(>=|<=)(-?[0-9.]+)$")
 
 
@@ -170,9 +168,9 @@ class ToleranceResult:
 def tolerance(
     design: Design,
     *,
-    samples: int = 1000,
+    samples: int = TOLERANCE_SAMPLES,
     sigmas: dict | None = None,
-    dpi: float = 200.0,
+    dpi: float = DOF_DPI,
     z_mm=(0.5, 1.0, 2.0, 3.0, 3.5),
     spec: str | None = None,
     seed: int = 0,
