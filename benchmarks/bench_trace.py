@@ -14,7 +14,7 @@ import numba
 
 from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.design import load_design
-from opticalstamp.raytrace.kernel import launch
+from opticalstamp.raytrace.launch import launch
 from opticalstamp.raytrace.pixel import pixel_source
 from opticalstamp.raytrace.stack import reverse_path
 

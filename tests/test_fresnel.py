@@ -13,7 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from opticalstamp.raytrace.kernel import TRANSMITTED, trace_rays
+from opticalstamp.raytrace.kernel import TRANSMITTED
+from opticalstamp.raytrace.launch import trace_rays
 from opticalstamp.raytrace.stack import Lattice, Path
 
 N_GLASS = 1.52

@@ -19,7 +19,7 @@ from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.analysis.rmtf import rmtf
 from opticalstamp.analysis.spots import spots
 from opticalstamp.design import design_from_dict, load_design
-from opticalstamp.raytrace.kernel import RayBatch, launch
+from opticalstamp.raytrace.launch import RayBatch, launch
 from opticalstamp.raytrace.pixel import pixel_source
 from opticalstamp.raytrace.stack import reverse_path
 from opticalstamp.raytrace.tally import OWN_PATH, PathRegistry, is_own_path

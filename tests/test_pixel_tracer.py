@@ -14,7 +14,7 @@ from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.analysis.lsf import traced_folded_lsf, traced_maps
 from opticalstamp.analysis.spots import spots
 from opticalstamp.design import load_design
-from opticalstamp.raytrace.kernel import launch
+from opticalstamp.raytrace.launch import launch
 from opticalstamp.raytrace.pixel import (
     PixelTracer,
     Sampling,

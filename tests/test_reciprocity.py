@@ -17,7 +17,7 @@ from helpers import Tally, assert_agree, preset_dict
 from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.analysis.spots import spots
 from opticalstamp.design import design_from_dict, load_design
-from opticalstamp.raytrace.kernel import launch
+from opticalstamp.raytrace.launch import launch
 from opticalstamp.raytrace.pixel import pixel_source
 from opticalstamp.raytrace.sampling import Source
 from opticalstamp.raytrace.stack import forward_path, pixel_center, reverse_path

@@ -9,7 +9,8 @@ import pytest
 from helpers import Tally, assert_agree
 from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.design import design_from_dict, load_design
-from opticalstamp.raytrace.kernel import ESCAPED, TIR, launch
+from opticalstamp.raytrace.kernel import ESCAPED, TIR
+from opticalstamp.raytrace.launch import launch
 from opticalstamp.raytrace.pixel import allocate_holes, pixel_source
 from opticalstamp.raytrace.sampling import Source
 from opticalstamp.raytrace.stack import forward_path, reverse_path

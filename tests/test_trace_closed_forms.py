@@ -18,7 +18,8 @@ from helpers import (
 )
 from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.design import design_from_dict, load_design
-from opticalstamp.raytrace.kernel import ABSORBED, ESCAPED, TIR, TRANSMITTED, launch, trace_rays
+from opticalstamp.raytrace.kernel import ABSORBED, ESCAPED, TIR, TRANSMITTED
+from opticalstamp.raytrace.launch import launch, trace_rays
 from opticalstamp.raytrace.pixel import pixel_source
 from opticalstamp.raytrace.sampling import Source, site_index
 from opticalstamp.raytrace.stack import Lattice, Path, forward_path, reverse_path

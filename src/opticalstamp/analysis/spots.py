@@ -16,7 +16,7 @@ import numpy as np
 
 from ..defaults import RAYS_MAP
 from ..design import Design
-from ..raytrace.kernel import launch
+from ..raytrace.launch import launch
 from ..raytrace.pixel import PixelTracer, Sampling, acceptance, tracer_for
 from ..raytrace.sampling import Source
 from ..raytrace.stack import forward_path, lattice_of, output_pitch

@@ -27,7 +27,7 @@ import numpy as np
 from ..defaults import RSE_GHOST, RSE_OWN
 from ..design import Design
 from ..validate import InputError, check_number, check_seed
-from .kernel import RayBatch, launch
+from .launch import RayBatch, launch
 from .sampling import DEFENSIVE_SHARE, Source, hole_targets, site_index
 from .stack import Path, lattice_of, pixel_center, reverse_path
 from .tally import is_own_path, object_plane

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernel import RayBatch
+from .launch import RayBatch
 
 
 @dataclass(frozen=True)
