@@ -108,3 +108,26 @@ def test_search_resolution_follows_the_design(paper):
     d600 = scale_to_dpi(paper, 600)
     assert dpi_of_pitch(output_pitch(d600)) == pytest.approx(600.0)
     assert output_pitch(d600) == pytest.approx(25400.0 / 600.0)
+
+
+def test_the_study_row_that_is_the_design_shows_the_headline_numbers(paper):
+    from opticalstamp.analysis.paper_study import parameter_study
+    from opticalstamp.analysis.rmtf import rmtf
+
+    own = {
+        "hole_shape": ("square",),
+        "sensitive_um": (42.3,),
+        "gap_medium": ("air",),
+        "fresnel": (False,),
+        "glass_index": (1.52,),
+    }
+    g = analyse_ghosts(paper, n_rays=RAYS)
+    r = rmtf(paper, dpi=(200.0,), n_rays=RAYS)
+    st = parameter_study(
+        paper, factors=own, n_rays=1 << 16, known={(paper.fingerprint(), False): (g, r)}
+    )
+    (row,) = st.rows
+    assert row["source"] == "headline"
+    assert row["dof_mm"] == r.dof_mm["200"] and row["ghost_fraction"] == g.ghost_fraction
+    (fresh,) = parameter_study(paper, factors=own, n_rays=1 << 16).rows
+    assert fresh["source"] == "study" and fresh["dof_mm"] != row["dof_mm"]
