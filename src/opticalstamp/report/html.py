@@ -355,10 +355,12 @@ design's output pitch ({e["meta"]["reference_lens"]["pixel_um"]:.1f} um; the pap
 {_table(area_rows, ["side (um)", "area ratio", "own-path gain", "total gain", "ghost fraction"])}
 <img src="efficiency.png">
 <h2>Diffraction (paper Fig. 6)</h2>
-<p>Slit {df["slit_um"]:g} um at layer 1, point source at Z = {df["z_mm"]:g} mm
-(R1 = {df["r1_um"]:.0f} um), observed at layer 2 (R2 = {df["r2_um"]:.0f} um air-equivalent):
-geometric edge X = {df["geometric_edge_um"]:.2f} um (paper: 32 um); paper: about 7 %
-outside.</p>
+<p>This design's object-side hole as a slit: {df["slit_um"]:g} um in
+{html.escape(df["budget"]["layers"][0]["layer"])}, point source at Z = {df["z_mm"]:g} mm
+(R1 = {df["r1_um"]:.0f} um), observed at {html.escape(df["budget"]["layers"][0]["next"])}
+(R2 = {df["r2_um"]:.0f} um air-equivalent): geometric edge X =
+{df["geometric_edge_um"]:.2f} um. (The paper's Fig. 6, for its 48 um slit at R1 2000 um
+and R2 658 um: an edge of 32 um and about 7 % of the light outside it.)</p>
 {_table(slit_rows, ["wavelength (um)", "Fresnel number", "fraction outside the edge"])}
 <img src="diffraction.png">
 <p>Per-layer budget of this design (2-D holes, point source on the axis at

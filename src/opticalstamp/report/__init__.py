@@ -1,0 +1,1 @@
+"""The main job's output: figures (matplotlib) and the HTML page of ``opticalstamp report``."""
