@@ -115,51 +115,134 @@ def traced_folded_lsf(
     PixelTracer of this design whose pilot runs to reuse (other analyses of the same
     pixels share them); the sampling is still this call's.
     """
+    s = _lsf_sampling(sampling, n_rays, seed, fresnel, chunk, n_batches)
+    (lsf,) = _traced_folds(design, (ghosts,), z_mm, periods_um, s, n_batches, progress, tracer)
+    return lsf
+
+
+def traced_folded_lsf_pair(
+    design: Design,
+    *,
+    z_mm,
+    periods_um,
+    n_rays: int = 1 << 21,
+    seed: int = 0,
+    fresnel: bool = False,
+    n_batches: int = 16,
+    chunk: int = 1 << 20,
+    progress: bool = False,
+    sampling: Sampling | None = None,
+    tracer: PixelTracer | None = None,
+) -> tuple[FoldedLSF, FoldedLSF]:
+    """All light and the own path alone, folded from one trace per row.
+
+    The parameters are those of :func:`traced_folded_lsf`. Each ray is folded twice:
+    with its weight, and with its weight where it followed the own path (the tracer's
+    own-path mask, :attr:`~opticalstamp.raytrace.pixel.PixelBatch.own`) and 0 elsewhere.
+
+    Returns
+    -------
+    (FoldedLSF, FoldedLSF)
+        Own and ghost light, and the own path only: bit for bit what
+        ``traced_folded_lsf(..., ghosts=True)`` and ``(..., ghosts=False)`` return for
+        the same arguments, for the cost of one trace.
+    """
+    s = _lsf_sampling(sampling, n_rays, seed, fresnel, chunk, n_batches)
+    both, own = _traced_folds(
+        design, (True, False), z_mm, periods_um, s, n_batches, progress, tracer
+    )
+    return both, own
+
+
+def _lsf_sampling(
+    sampling: Sampling | None, n_rays: int, seed: int, fresnel: bool, chunk: int, n_batches: int
+) -> Sampling:
+    """The sampling of a folded LSF, its ray count rounded up to a multiple of n_batches."""
     if sampling is None:
         sampling = Sampling(n_rays, seed, fresnel, chunk)
     sampling = sampling.or_rays(n_rays)
-    n_rays = int(np.ceil(sampling.n_rays / n_batches)) * n_batches
-    sampling = replace(sampling, n_rays=n_rays)
+    return replace(sampling, n_rays=int(np.ceil(sampling.n_rays / n_batches)) * n_batches)
+
+
+def _traced_folds(
+    design: Design,
+    kinds: tuple[bool, ...],
+    z_mm,
+    periods_um,
+    sampling: Sampling,
+    n_batches: int,
+    progress: bool,
+    tracer: PixelTracer | None,
+) -> list[FoldedLSF]:
+    """One trace per row, folded once per entry of ``kinds`` (True: ghost light too)."""
+    n_rays = sampling.n_rays
     tr = tracer_for(design, sampling, tracer)
     zs = np.asarray(z_mm, dtype=np.float64)
     per = np.asarray(periods_um, dtype=np.float64)
     nb = _bins(per)
-    h = [np.zeros((design.sensor.rows, n_batches, zs.size, int(n))) for n in nb]
+    hs = [[np.zeros((design.sensor.rows, n_batches, zs.size, int(n))) for n in nb] for _ in kinds]
     rows = []
     for row, k in row_pixels(design):
         src = tr.source((row, k))
         rows.append((src.x, src.y))
-        out = np.zeros((per.size, n_batches, zs.size, int(nb.max())))
+        outs = [np.zeros((per.size, n_batches, zs.size, int(nb.max()))) for _ in kinds]
         for pb in tr.trace((row, k), progress=progress):
-            b, w = pb.rays, pb.w
-            if not ghosts:
-                w = w * pb.own
+            b = pb.rays
             batch = (b.ids % n_batches).astype(np.int64)
-            _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, tr.n_obj, per, nb, out)
-        for p in range(per.size):
-            # each batch holds n_rays / n_batches samples: scale so batches sum to the mean
-            h[p][row] = out[p, :, :, : nb[p]] / n_rays
-    return FoldedLSF(zs, per, rows, h, "trace", n_rays, ghosts, sampling.fresnel)
+            for ghosts, out in zip(kinds, outs, strict=True):
+                w = pb.w if ghosts else pb.w * pb.own
+                _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, tr.n_obj, per, nb, out)
+        for h, out in zip(hs, outs, strict=True):
+            for p in range(per.size):
+                # each batch holds n_rays / n_batches samples: scale so batches sum to the mean
+                h[p][row] = out[p, :, :, : nb[p]] / n_rays
+    return [
+        FoldedLSF(zs, per, rows, h, "trace", n_rays, ghosts, sampling.fresnel)
+        for ghosts, h in zip(kinds, hs, strict=True)
+    ]
 
 
 # -- paraxial closed form ------------------------------------------------------------------
-def _planes(design: Design, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Reduced heights d (um), half widths and offsets of the pixel and the masks; D_top."""
-    if any(m.shape == "circle" for m in design.masks):
-        raise ValueError("paraxial closed form needs rectangular holes (shape square/rectangle)")
-    s = design.sensor
-    d, half, off = [0.0], [(s.sensitive_width_um, s.sensitive_height_um)[axis] / 2], [0.0]
-    red = 0.0
-    for sl in design.slabs:
-        red += sl.thickness_um / design.index(sl.medium)
-        m = sl.mask_top
-        if m is not None:
-            d.append(red)
-            half.append((m.hole_width_um, m.hole_height_um)[axis] / 2)
-            off.append((m.offset_x_um, m.offset_y_um)[axis])
-    gap = design.reference_gap
-    red += gap.thickness_um / design.index(gap.medium)
-    return np.array(d), np.array(half), np.array(off), red
+@dataclass(frozen=True)
+class _Axis:
+    """One axis of the paraxial model, read from the design once.
+
+    ``d`` (um): reduced heights of the pixel (0) and of each mask; ``half``, ``off``: their
+    half widths and offsets along the axis; ``top``: the reduced height of the reference
+    plane; ``n_obj``: the object medium's index.
+    """
+
+    d: np.ndarray
+    half: np.ndarray
+    off: np.ndarray
+    top: float
+    n_obj: float
+
+    @classmethod
+    def of(cls, design: Design, axis: int) -> _Axis:
+        if any(m.shape == "circle" for m in design.masks):
+            raise ValueError(
+                "paraxial closed form needs rectangular holes (shape square/rectangle)"
+            )
+        s = design.sensor
+        d, half, off = [0.0], [(s.sensitive_width_um, s.sensitive_height_um)[axis] / 2], [0.0]
+        red = 0.0
+        for sl in design.slabs:
+            red += sl.thickness_um / design.index(sl.medium)
+            m = sl.mask_top
+            if m is not None:
+                d.append(red)
+                half.append((m.hole_width_um, m.hole_height_um)[axis] / 2)
+                off.append((m.offset_x_um, m.offset_y_um)[axis])
+        gap = design.reference_gap
+        red += gap.thickness_um / design.index(gap.medium)
+        n_obj = design.index(design.object_medium)
+        return cls(np.array(d), np.array(half), np.array(off), red, n_obj)
+
+    def levers(self, z_mm: float) -> np.ndarray:
+        """Distance (reduced, um) from each plane up to the object plane at z_mm (> 0)."""
+        big_d = self.top + z_mm * 1000.0 / self.n_obj
+        return big_d - self.d
 
 
 def paraxial_profile(design: Design, z_mm: float, u_um: np.ndarray, axis: int = 0) -> np.ndarray:
@@ -168,19 +251,15 @@ def paraxial_profile(design: Design, z_mm: float, u_um: np.ndarray, axis: int = 
     ``u_um`` is measured from the pixel's axis along x (axis 0) or y (axis 1).
     The integral of r over U is the own path's 1-D etendue G (um), the same at every Z.
     """
-    d, half, off, top = _planes(design, axis)
-    big_d = top + z_mm * 1000.0 / design.index(design.object_medium)
-    lev = big_d - d  # > 0: distance from each plane up to the object plane
+    return _profile(_Axis.of(design, axis), z_mm, u_um)
+
+
+def _profile(ax: _Axis, z_mm: float, u_um: np.ndarray) -> np.ndarray:
+    lev = ax.levers(z_mm)
     u = np.asarray(u_um, dtype=np.float64)[..., None]
-    lo = ((u - off - half) / lev).max(axis=-1)
-    hi = ((u - off + half) / lev).min(axis=-1)
+    lo = ((u - ax.off - ax.half) / lev).max(axis=-1)
+    hi = ((u - ax.off + ax.half) / lev).min(axis=-1)
     return np.maximum(hi - lo, 0.0)
-
-
-def _levers(design: Design, z_mm: float, axis: int):
-    d, half, off, top = _planes(design, axis)
-    big_d = top + z_mm * 1000.0 / design.index(design.object_medium)
-    return big_d - d, half, off  # lever > 0: from each plane up to the object plane
 
 
 def paraxial_support(design: Design, z_mm: float, axis: int = 0) -> tuple[float, float]:
@@ -189,47 +268,52 @@ def paraxial_support(design: Design, z_mm: float, axis: int = 0) -> tuple[float,
     r(U) > 0 where every lower limit (U - o_i - h_i) / L_i stays below every upper
     limit (U - o_j + h_j) / L_j; each pair is a linear inequality in U.
     """
-    lev, half, off = _levers(design, z_mm, axis)
-    lo, hi = -np.inf, np.inf
-    for i in range(lev.size):
-        for j in range(lev.size):
-            a = 1 / lev[i] - 1 / lev[j]
-            rhs = (off[i] + half[i]) / lev[i] - (off[j] - half[j]) / lev[j]
-            if abs(a) < 1e-15:
-                continue
-            if a > 0:
-                hi = min(hi, rhs / a)
-            else:
-                lo = max(lo, rhs / a)
+    return _support(_Axis.of(design, axis), z_mm)
+
+
+def _pairs(ax: _Axis, z_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Levers L and a[i, j] = 1/L_i - 1/L_j, with where |a| is large enough to divide by."""
+    lev = ax.levers(z_mm)
+    inv = 1 / lev
+    a = inv[:, None] - inv[None, :]
+    return lev, a, np.abs(a) >= 1e-15
+
+
+def _support(ax: _Axis, z_mm: float) -> tuple[float, float]:
+    lev, a, ok = _pairs(ax, z_mm)
+    rhs = ((ax.off + ax.half) / lev)[:, None] - ((ax.off - ax.half) / lev)[None, :]
+    r = rhs[ok] / a[ok]
+    up = a[ok] > 0
+    hi = min(np.inf, r[up].min(initial=np.inf))
+    lo = max(-np.inf, r[~up].max(initial=-np.inf))
     return (float(lo), float(hi)) if lo < hi else (0.0, 0.0)
 
 
-def _kinks(design: Design, z_mm: float, axis: int) -> np.ndarray:
+def _kinks(ax: _Axis, z_mm: float) -> np.ndarray:
     """Every U where the piecewise-linear profile can bend, within its support."""
-    lev, half, off = _levers(design, z_mm, axis)
-    lo, hi = paraxial_support(design, z_mm, axis)
-    pts = [lo, hi]
-    for i in range(lev.size):
-        for j in range(lev.size):
-            a = 1 / lev[i] - 1 / lev[j]
-            if i == j or abs(a) < 1e-15:
-                continue
-            for si in (-1, 1):
-                for sj in (-1, 1):
-                    u = ((off[i] + si * half[i]) / lev[i] - (off[j] + sj * half[j]) / lev[j]) / a
-                    if lo <= u <= hi:
-                        pts.append(u)
-    return np.unique(np.array(pts))
+    lev, a, ok = _pairs(ax, z_mm)
+    lo, hi = _support(ax, z_mm)
+    pts = [np.array([lo, hi])]
+    for si in (-1, 1):
+        for sj in (-1, 1):
+            u = ((ax.off + si * ax.half) / lev)[:, None] - ((ax.off + sj * ax.half) / lev)[None, :]
+            u = u[ok] / a[ok]
+            pts.append(u[(lo <= u) & (u <= hi)])
+    return np.unique(np.concatenate(pts))
 
 
 def paraxial_cumulative(design: Design, z_mm: float, u_um: np.ndarray, axis: int = 0):
     """Exact integral of r from -inf to U (r is linear between kinks)."""
-    k = _kinks(design, z_mm, axis)
-    rk = paraxial_profile(design, z_mm, k, axis)
+    return _cumulative(_Axis.of(design, axis), z_mm, u_um)
+
+
+def _cumulative(ax: _Axis, z_mm: float, u_um: np.ndarray) -> np.ndarray:
+    k = _kinks(ax, z_mm)
+    rk = _profile(ax, z_mm, k)
     cum = np.concatenate([[0.0], np.cumsum(np.diff(k) * (rk[1:] + rk[:-1]) / 2)])
     u = np.clip(np.asarray(u_um, dtype=np.float64), k[0], k[-1])
     i = np.clip(np.searchsorted(k, u, side="right") - 1, 0, k.size - 1)
-    return cum[i] + (u - k[i]) * (rk[i] + paraxial_profile(design, z_mm, u, axis)) / 2
+    return cum[i] + (u - k[i]) * (rk[i] + _profile(ax, z_mm, u)) / 2
 
 
 def paraxial_etendue_1d(design: Design, axis: int = 0) -> float:
@@ -253,6 +337,7 @@ def paraxial_folded_lsf(design: Design, *, z_mm, periods_um) -> FoldedLSF:
     per = np.asarray(periods_um, dtype=np.float64)
     nb = _bins(per)
     g_y = paraxial_etendue_1d(design, 1)
+    ax = _Axis.of(design, 0)
     lat = lattice_of(design)
     rows = [(float(lat.row_x[r]), float(lat.row_y[r])) for r in range(design.sensor.rows)]
     h = []
@@ -260,10 +345,10 @@ def paraxial_folded_lsf(design: Design, *, z_mm, periods_um) -> FoldedLSF:
         du = p / n
         arr = np.zeros((len(rows), 1, zs.size, int(n)))
         for iz, z in enumerate(zs):
-            lo, hi = paraxial_support(design, float(z), 0)
+            lo, hi = _support(ax, float(z))
             m0, m1 = int(np.floor(lo / p)) - 1, int(np.ceil(hi / p)) + 1
             edges = np.arange(m0, m1)[:, None] * p + np.arange(n + 1)[None, :] * du
-            cum = paraxial_cumulative(design, float(z), edges, 0)
+            cum = _cumulative(ax, float(z), edges)
             folded = (np.diff(cum, axis=1) * g_y).sum(axis=0)
             arr[:, 0, iz] = folded
         h.append(arr)
@@ -355,51 +440,103 @@ def traced_maps(
     is ``n_rays``). ``tracer``: a PixelTracer of this design whose pilot runs to reuse
     (other analyses of the same pixel share them); the sampling is still this call's.
     """
+    (maps,) = traced_map_sets(
+        design,
+        z_sets=[z_mm],
+        row=row,
+        n_rays=n_rays,
+        seed=seed,
+        fresnel=fresnel,
+        fine_bin_um=fine_bin_um,
+        half_um=half_um,
+        coarse_bin_um=coarse_bin_um,
+        coarse_half_um=coarse_half_um,
+        progress=progress,
+        sampling=sampling,
+        tracer=tracer,
+    )
+    return maps
+
+
+def traced_map_sets(
+    design: Design,
+    *,
+    z_sets,
+    row: int = 0,
+    n_rays: int = 1 << 22,
+    seed: int = 0,
+    fresnel: bool = False,
+    fine_bin_um: float = 4.0,
+    half_um: float | None = None,
+    coarse_bin_um: float = 500.0,
+    coarse_half_um: tuple[float, float] = (10_000.0, 45_000.0),
+    progress: bool = False,
+    sampling: Sampling | None = None,
+    tracer: PixelTracer | None = None,
+) -> list[TracedMaps]:
+    """:func:`traced_maps` for several sets of Z from one trace of the pixel.
+
+    Parameters
+    ----------
+    z_sets : sequence of sequences of object distances (mm)
+    others : as :func:`traced_maps`; where ``half_um`` is None, each set's fine grid
+        covers the own-path spot at that set's largest Z
+
+    Returns
+    -------
+    list of TracedMaps
+        One per set, bit for bit what ``traced_maps(z_mm=z_sets[i], ...)`` returns: the
+        same rays are binned onto each set's grids.
+    """
     if sampling is None:
         sampling = Sampling(n_rays, seed, fresnel)
     sampling = sampling.or_rays(n_rays)
     tr = tracer_for(design, sampling, tracer)
-    zs = np.asarray(z_mm, dtype=np.float64)
     src = tr.source((row, 0))
-    if half_um is None:
-        half_um = _own_half_width(design, float(zs.max()))
-    nf = int(np.ceil(2 * half_um / fine_bin_um))
-    fine_lo = -nf * fine_bin_um / 2
     ncy = int(np.ceil(2 * coarse_half_um[0] / coarse_bin_um))
     ncx = int(np.ceil(2 * coarse_half_um[1] / coarse_bin_um))
     coarse_lo = np.array([-ncy * coarse_bin_um / 2, -ncx * coarse_bin_um / 2])
-    fine = np.zeros((zs.size, nf, nf))
-    coarse = np.zeros((zs.size, ncy, ncx))
+    sets = []  # per set: Z (mm), fine grid start, fine and coarse tallies
+    for z_mm in z_sets:
+        zs = np.asarray(z_mm, dtype=np.float64)
+        half = _own_half_width(design, float(zs.max())) if half_um is None else half_um
+        nf = int(np.ceil(2 * half / fine_bin_um))
+        fine_lo = -nf * fine_bin_um / 2
+        sets.append((zs, fine_lo, np.zeros((zs.size, nf, nf)), np.zeros((zs.size, ncy, ncx))))
     for pb in tr.trace((row, 0), progress=progress):
         b = pb.rays
-        _maps(
-            b.x,
-            b.y,
-            b.sx,
-            b.sy,
-            pb.w,
-            pb.own,
-            src.x,
-            src.y,
-            zs * 1000.0,
-            tr.n_obj,
+        for zs, fine_lo, fine, coarse in sets:
+            _maps(
+                b.x,
+                b.y,
+                b.sx,
+                b.sy,
+                pb.w,
+                pb.own,
+                src.x,
+                src.y,
+                zs * 1000.0,
+                tr.n_obj,
+                fine_lo,
+                fine_bin_um,
+                coarse_lo,
+                coarse_bin_um,
+                fine,
+                coarse,
+            )
+    return [
+        TracedMaps(
+            zs,
+            fine / sampling.n_rays,
             fine_lo,
             fine_bin_um,
-            coarse_lo,
+            coarse / sampling.n_rays,
+            (float(coarse_lo[0]), float(coarse_lo[1])),
             coarse_bin_um,
-            fine,
-            coarse,
+            sampling.n_rays,
         )
-    return TracedMaps(
-        zs,
-        fine / sampling.n_rays,
-        fine_lo,
-        fine_bin_um,
-        coarse / sampling.n_rays,
-        (float(coarse_lo[0]), float(coarse_lo[1])),
-        coarse_bin_um,
-        sampling.n_rays,
-    )
+        for zs, fine_lo, fine, coarse in sets
+    ]
 
 
 def _own_half_width(design: Design, z_mm: float) -> float:

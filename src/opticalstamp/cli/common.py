@@ -349,12 +349,28 @@ def report(
         ),
     ] = Path("report"),
     fresnel: FresnelOpt = False,
+    quick: Annotated[
+        bool,
+        typer.Option(
+            "--quick",
+            help="a first look in seconds: fewer rays, distances and scan pixels; no "
+            "parameter study, design search, tolerance study or OCR (the page says so)",
+        ),
+    ] = False,
 ) -> None:
     """Run every analysis and write JSON, PNG figures and one HTML page."""
     from ..report.build import build_report
 
     d = open_design(design)
-    build_report(d, out, seed=seed, n_rays=ray_count(rays, 1 << 22), fresnel=fresnel, progress=True)
+    build_report(
+        d,
+        out,
+        seed=seed,
+        n_rays=ray_count(rays, 1 << 22),
+        fresnel=fresnel,
+        progress=True,
+        quick=quick,
+    )
     typer.echo(f"wrote {out / 'index.html'} and {out / 'report.json'}")
 
 

@@ -259,7 +259,7 @@ def ocr_eval(
 ) -> None:
     """Scan a text image at each Z, read it with Tesseract, report the character error rate."""
     from ..imaging.ocr import OCRUnavailable, character_error_rate, recognise, require_tesseract
-    from ..imaging.scan import simulate_scan
+    from ..imaging.scan import prepare_kernels, simulate_scan
     from ..io.files import linear_to_srgb, provenance
 
     d = open_design(design)
@@ -274,9 +274,13 @@ def ocr_eval(
         require_tesseract()  # before the scans, not after the first
     except OCRUnavailable as err:
         fail(str(err))
+    try:  # the kernels of every Z from one trace per pixel row
+        kernels = prepare_kernels(d, z_mm=zs, seed=seed)
+    except ValueError as err:
+        fail(f"{image}: {err}")
     for zz in zs:
         try:
-            r = simulate_scan(doc, use, d, z_mm=zz, seed=seed, noiseless=noiseless)
+            r = simulate_scan(doc, use, d, z_mm=zz, seed=seed, noiseless=noiseless, kernels=kernels)
         except ValueError as err:
             fail(f"{image}: {err}")
         got = recognise(linear_to_srgb(r.image), r.dpi)

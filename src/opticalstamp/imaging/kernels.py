@@ -16,7 +16,8 @@ map (0.5 mm bins) of etendue per bin, applied to a block-averaged document.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -24,10 +25,10 @@ from ..analysis.lsf import (
     TracedMaps,
     paraxial_cumulative,
     paraxial_support,
-    traced_maps,
+    traced_map_sets,
 )
 from ..design import Design
-from ..raytrace.pixel import PixelTracer, Sampling
+from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 
 
 @dataclass(frozen=True)
@@ -51,9 +52,13 @@ class ScanKernel:
     cum_y: np.ndarray
     cum_x: np.ndarray
     scale: np.ndarray
-    ghost: np.ndarray | None
-    ghost_lo_um: tuple[float, float]
-    ghost_bin_um: float
+    ghost: np.ndarray | None = None
+    ghost_lo_um: tuple[float, float] = (0.0, 0.0)
+    ghost_bin_um: float = 1.0
+
+    def without_ghosts(self) -> ScanKernel:
+        """This kernel without its ghost map (and with the coarse grid of none)."""
+        return replace(self, ghost=None, ghost_lo_um=(0.0, 0.0), ghost_bin_um=1.0)
 
     @property
     def own_etendue(self) -> float:
@@ -91,7 +96,7 @@ def paraxial_kernel(design: Design, z_mm: float, bin_um: float = 1.0) -> ScanKer
     edges = lo + np.arange(n + 1) * bin_um
     cy = paraxial_cumulative(design, z_mm, edges, 1)
     cx = paraxial_cumulative(design, z_mm, edges, 0)
-    return ScanKernel(z_mm, lo, bin_um, cy[None, :], cx[None, :], np.ones(1), None, (0.0, 0.0), 1.0)
+    return ScanKernel(z_mm, lo, bin_um, cy[None, :], cx[None, :], np.ones(1))
 
 
 def separable_terms(m: np.ndarray, rank_tol: float = 0.02, max_rank: int = 4):
@@ -116,20 +121,39 @@ def traced_kernels(
         zero = np.zeros((s.size, 1))
         cy = np.hstack([zero, np.cumsum(u, axis=1)])
         cx = np.hstack([zero, np.cumsum(v, axis=1)])
-        out.append(
-            ScanKernel(
-                float(z),
-                maps.fine_lo_um,
-                maps.fine_bin_um,
-                cy,
-                cx,
-                s,
-                maps.ghost[iz] if ghosts else None,
-                maps.coarse_lo_um,
-                maps.coarse_bin_um,
+        k = ScanKernel(float(z), maps.fine_lo_um, maps.fine_bin_um, cy, cx, s)
+        if ghosts:
+            k = replace(
+                k,
+                ghost=maps.ghost[iz],
+                ghost_lo_um=maps.coarse_lo_um,
+                ghost_bin_um=maps.coarse_bin_um,
             )
-        )
+        out.append(k)
     return out
+
+
+def kernel_source(design: Design, source: str = "auto", fresnel: bool = False) -> str:
+    """What ``source`` means for this design: "paraxial" or "trace" (see :func:`scan_kernels`).
+
+    Raises
+    ------
+    ValueError
+        For an unknown source, or "paraxial" with circular holes.
+    """
+    rect = all(m.shape != "circle" for m in design.masks)
+    if source == "auto":
+        source = "paraxial" if rect and not fresnel else "trace"
+    if source not in ("paraxial", "trace"):
+        raise ValueError(f"kernel source must be auto, paraxial or trace (got {source!r})")
+    if source == "paraxial" and not rect:
+        raise ValueError("paraxial kernels need rectangular holes (this design has circles)")
+    return source
+
+
+def _rays(source: str, n_rays: int) -> int:
+    """Rays traced for kernels of this source (ghost maps alone need no more than 2^20)."""
+    return n_rays if source == "trace" else min(n_rays, 1 << 20)
 
 
 def scan_kernels(
@@ -142,50 +166,173 @@ def scan_kernels(
     n_rays: int = 1 << 22,
     seed: int = 0,
     progress: bool = False,
+    tracer: PixelTracer | None = None,
 ) -> list[list[ScanKernel]]:
     """Kernels [row][level] for the used-pixel rows at the distances ``z_mm``.
 
     ``source``: "paraxial" (closed form own path; needs rectangular holes), "trace" (own
     path from the exact tracer, SVD-separated), or "auto" (paraxial where the holes are
     rectangular and Fresnel losses are off, else trace). Ghost maps always come from
-    the tracer (2^20 rays are plenty for 0.5 mm bins).
+    the tracer (2^20 rays are plenty for 0.5 mm bins). ``tracer``: a PixelTracer of this
+    design whose pilot runs to reuse (the kernels are the same with or without it).
     """
-    zs = np.asarray(z_mm, dtype=np.float64)
-    rect = all(m.shape != "circle" for m in design.masks)
-    if source == "auto":
-        source = "paraxial" if rect and not fresnel else "trace"
-    if source not in ("paraxial", "trace"):
-        raise ValueError(f"kernel source must be auto, paraxial or trace (got {source!r})")
-    if source == "paraxial" and not rect:
-        raise ValueError("paraxial kernels need rectangular holes (this design has circles)")
-    rays = n_rays if source == "trace" else min(n_rays, 1 << 20)
-    sampling = Sampling(rays, seed, fresnel)
-    tracer = PixelTracer(design, sampling)  # one reverse path for every row
-    out = []
-    for row in range(design.sensor.rows):
-        maps = None
-        if source == "trace" or ghosts:
-            maps = traced_maps(
-                design, z_mm=zs, row=row, sampling=sampling, tracer=tracer, progress=progress
-            )
-        if source == "trace":
-            ks = traced_kernels(maps, ghosts=ghosts)
-        else:
-            ks = []
-            for iz, z in enumerate(zs):
-                k = paraxial_kernel(design, float(z))
-                if ghosts:
-                    k = ScanKernel(
-                        k.z_mm,
-                        k.lo_um,
-                        k.bin_um,
-                        k.cum_y,
-                        k.cum_x,
-                        k.scale,
-                        maps.ghost[iz],
-                        maps.coarse_lo_um,
-                        maps.coarse_bin_um,
-                    )
-                ks.append(k)
-        out.append(ks)
+    (out,) = _kernel_sets(design, [z_mm], source, ghosts, fresnel, n_rays, seed, progress, tracer)
     return out
+
+
+def _kernel_sets(
+    design: Design,
+    z_sets,
+    source: str,
+    ghosts: bool,
+    fresnel: bool,
+    n_rays: int,
+    seed: int,
+    progress: bool,
+    tracer: PixelTracer | None,
+) -> list[list[list[ScanKernel]]]:
+    """Kernels [set][row][level] for each set of distances, from one trace per row."""
+    source = kernel_source(design, source, fresnel)
+    sampling = Sampling(_rays(source, n_rays), seed, fresnel)
+    tr = tracer_for(design, sampling, tracer)  # one reverse path for every row
+    out = [[] for _ in z_sets]
+    for row in range(design.sensor.rows):
+        maps = [None] * len(z_sets)
+        if z_sets and (source == "trace" or ghosts):
+            maps = traced_map_sets(
+                design, z_sets=z_sets, row=row, sampling=sampling, tracer=tr, progress=progress
+            )
+        for ks, z_mm, m in zip(out, z_sets, maps, strict=True):
+            ks.append(_row_kernels(design, z_mm, source, ghosts, m))
+    return out
+
+
+def _row_kernels(
+    design: Design, z_mm, source: str, ghosts: bool, maps: TracedMaps | None
+) -> list[ScanKernel]:
+    """One row's kernels at each distance, from its traced maps (where traced)."""
+    if source == "trace":
+        return traced_kernels(maps, ghosts=ghosts)
+    ks = []
+    for iz, z in enumerate(np.asarray(z_mm, dtype=np.float64)):
+        k = paraxial_kernel(design, float(z))
+        if ghosts:
+            k = replace(
+                k,
+                ghost=maps.ghost[iz],
+                ghost_lo_um=maps.coarse_lo_um,
+                ghost_bin_um=maps.coarse_bin_um,
+            )
+        ks.append(k)
+    return ks
+
+
+@dataclass(frozen=True)
+class KernelCache:
+    """Scan kernels of one design, built once for several scans (:func:`kernel_cache`).
+
+    Attributes
+    ----------
+    fingerprint : the design's fingerprint
+    source : "paraxial" or "trace", as resolved by :func:`kernel_source`
+    ghosts, fresnel, seed : how the kernels were made
+    n_rays : rays traced per row
+    kernels : kernels [row][level] by the tuple of levels (mm) of a scan
+    """
+
+    fingerprint: str
+    source: str
+    ghosts: bool
+    fresnel: bool
+    n_rays: int
+    seed: int
+    kernels: Mapping[tuple[float, ...], list[list[ScanKernel]]]
+
+    def lookup(
+        self,
+        design: Design,
+        levels,
+        *,
+        source: str = "auto",
+        ghosts: bool = True,
+        fresnel: bool = False,
+        n_rays: int = 1 << 22,
+        seed: int = 0,
+    ) -> list[list[ScanKernel]]:
+        """Kernels [row][level]: what ``scan_kernels(design, levels, ...)`` returns.
+
+        A cache with ghost maps serves scans without them (the maps are dropped).
+
+        Raises
+        ------
+        ValueError
+            Where the cache was made for another design, other settings or other levels.
+        """
+        src = kernel_source(design, source, fresnel)
+        want = {
+            "design": design.fingerprint(),
+            "kernel source": src,
+            "fresnel": fresnel,
+            "rays": _rays(src, n_rays),
+            "seed": seed,
+        }
+        have = {
+            "design": self.fingerprint,
+            "kernel source": self.source,
+            "fresnel": self.fresnel,
+            "rays": self.n_rays,
+            "seed": self.seed,
+        }
+        for name, v in want.items():
+            if have[name] != v:
+                raise ValueError(f"kernels: built for {name} {have[name]!r}, not {v!r}")
+        if ghosts and not self.ghosts:
+            raise ValueError("kernels: built without ghost light, the scan needs it")
+        key = tuple(float(z) for z in levels)
+        if key not in self.kernels:
+            raise ValueError(f"kernels: none built for the levels {list(key)} mm")
+        rows = self.kernels[key]
+        if ghosts or not self.ghosts:
+            return rows
+        return [[k.without_ghosts() for k in ks] for ks in rows]
+
+
+def kernel_cache(
+    design: Design,
+    level_sets,
+    *,
+    source: str = "auto",
+    ghosts: bool = True,
+    fresnel: bool = False,
+    n_rays: int = 1 << 22,
+    seed: int = 0,
+    progress: bool = False,
+    tracer: PixelTracer | None = None,
+) -> KernelCache:
+    """Kernels for the scans at each set of levels, from one trace per row.
+
+    Parameters
+    ----------
+    level_sets : sequence of sequences of distances (mm), one per scan (a scan's levels,
+        :func:`opticalstamp.imaging.scan.scan_levels`); repeated sets are built once
+    others : as :func:`scan_kernels`
+
+    Returns
+    -------
+    KernelCache
+        Whose kernels for each set are bit for bit those of
+        ``scan_kernels(design, levels, ...)``: the same rays are binned onto each set's
+        maps.
+    """
+    keys = list(dict.fromkeys(tuple(float(z) for z in zs) for zs in level_sets))
+    src = kernel_source(design, source, fresnel)
+    sets = _kernel_sets(design, keys, src, ghosts, fresnel, n_rays, seed, progress, tracer)
+    return KernelCache(
+        design.fingerprint(),
+        src,
+        ghosts,
+        fresnel,
+        _rays(src, n_rays),
+        seed,
+        dict(zip(keys, sets, strict=True)),
+    )

@@ -30,12 +30,13 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy import ndimage, signal
 
 from ..design import Design
+from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import lattice_of, output_pitch
 from ..units import dpi_of_pitch, pitch_of_dpi
 from ..validate import check_seed
 from .heightmap import Z_RANGE_MM, check_range
 from .heightmap import sample as sample_height
-from .kernels import ScanKernel, scan_kernels
+from .kernels import KernelCache, ScanKernel, kernel_cache, scan_kernels
 from .sensor import SensorModel, expose, fixed_pattern
 from .separable import box_taps, inside, x_pass, y_pass
 
@@ -157,12 +158,71 @@ def _ghost_signal(blocks: np.ndarray, kern: ScanKernel, centers, x_pix, surround
     return ndimage.map_coordinates(r, [yy, xx], order=1, mode="constant", cval=surround * g.sum())
 
 
-def _levels(z_mm, height_map, step):
+def scan_levels(z_mm: float | None, height_map: np.ndarray | None, z_step_mm: float) -> list[float]:
+    """The distances (mm) whose kernels a scan needs: ``z_mm``, or for a height map every
+    multiple of ``z_step_mm`` from below its lowest to above its highest point."""
     if height_map is None:
         return [float(z_mm)]
-    lo = np.floor(height_map.min() / step) * step
-    hi = np.ceil(height_map.max() / step) * step
-    return [float(v) for v in np.round(np.arange(lo, hi + step / 2, step), 6)]
+    hm = np.asarray(height_map)
+    lo = np.floor(hm.min() / z_step_mm) * z_step_mm
+    hi = np.ceil(hm.max() / z_step_mm) * z_step_mm
+    return [float(v) for v in np.round(np.arange(lo, hi + z_step_mm / 2, z_step_mm), 6)]
+
+
+def _check_z(z_mm: float | None) -> None:
+    if z_mm is None or not Z_RANGE_MM[0] <= z_mm <= Z_RANGE_MM[1]:
+        raise ValueError(f"z_mm must lie in {list(Z_RANGE_MM)} (got {z_mm})")
+
+
+def prepare_kernels(
+    design: Design,
+    *,
+    z_mm=(),
+    height_maps=(),
+    settings: ScanSettings | None = None,
+    seed: int = 0,
+    ghosts: bool = True,
+    progress: bool = False,
+    tracer: PixelTracer | None = None,
+) -> KernelCache:
+    """Kernels for several scans of one design, built once (pass them as ``kernels=``).
+
+    Parameters
+    ----------
+    design : Design
+    z_mm : constant float heights (mm) of the scans to come
+    height_maps : height maps (mm) of the scans to come
+    settings : ScanSettings of those scans (kernel source, rays, Fresnel, Z step)
+    seed : their seed
+    ghosts : whether any of them needs ghost light (a cache with it serves scans
+        without it too)
+    tracer : a PixelTracer of this design whose pilot runs to reuse
+
+    Returns
+    -------
+    KernelCache
+        Each scan gets bit for bit the kernels it would have built itself.
+    """
+    check_seed(seed)
+    st = settings or ScanSettings()
+    sets = []
+    for z in z_mm:
+        _check_z(z)
+        sets.append(scan_levels(z, None, st.z_step_mm))
+    for hm in height_maps:
+        check_range(np.asarray(hm), "height_map")
+        sets.append(scan_levels(None, hm, st.z_step_mm))
+    return kernel_cache(
+        design,
+        sets,
+        source=st.kernel,
+        ghosts=ghosts,
+        fresnel=st.fresnel,
+        n_rays=st.kernel_rays,
+        seed=seed,
+        progress=progress,
+        tracer=tracer,
+    )
 
 
 def simulate_scan(
@@ -178,6 +238,7 @@ def simulate_scan(
     noiseless: bool = False,
     color: bool = False,
     progress: bool = False,
+    kernels: KernelCache | None = None,
 ) -> ScanResult:
     """Simulate the scanner's output for a document at a float height (or height map).
 
@@ -187,6 +248,9 @@ def simulate_scan(
     doc_dpi : the document's sampling (dpi)
     z_mm : constant float height (mm above the reference plane), or None with height_map
     height_map : [y, x] heights (mm) covering the page (any resolution, page aspect)
+    kernels : kernels built beforehand for this scan's levels and settings
+        (:func:`prepare_kernels`); None builds them here. Either way the result is the
+        same; a cache that does not fit raises ValueError.
     """
     check_seed(seed)
     st = settings or ScanSettings()
@@ -202,8 +266,7 @@ def simulate_scan(
     if not color and doc.shape[2] == 3:
         doc = (doc @ np.array([0.2126, 0.7152, 0.0722], np.float32))[..., None]
     if height_map is None:
-        if z_mm is None or not Z_RANGE_MM[0] <= z_mm <= Z_RANGE_MM[1]:
-            raise ValueError(f"z_mm must lie in {list(Z_RANGE_MM)} (got {z_mm})")
+        _check_z(z_mm)
     else:
         check_range(np.asarray(height_map), "height_map")
     p = pitch_of_dpi(doc_dpi)
@@ -223,17 +286,18 @@ def simulate_scan(
         * (1 + st.speed_jitter * rng_lines.standard_normal(n_lines + delay))
     )
     y_line = np.cumsum(step) - step / 2
-    levels = _levels(z_mm, None if height_map is None else np.asarray(height_map), st.z_step_mm)
-    kern = scan_kernels(
-        design,
-        levels,
-        source=st.kernel,
-        ghosts=ghosts,
-        n_rays=st.kernel_rays,
-        seed=seed,
-        fresnel=st.fresnel,
-        progress=progress,
-    )
+    levels = scan_levels(z_mm, height_map, st.z_step_mm)
+    how = {
+        "source": st.kernel,
+        "ghosts": ghosts,
+        "n_rays": st.kernel_rays,
+        "seed": seed,
+        "fresnel": st.fresnel,
+    }
+    if kernels is None:
+        kern = scan_kernels(design, levels, progress=progress, **how)
+    else:
+        kern = kernels.lookup(design, levels, **how)
     n_ch = doc.shape[2]
     duty = st.sensor.exposure_duty
     smear = duty * pitch / (3 if color else 1)

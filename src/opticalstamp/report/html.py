@@ -39,9 +39,10 @@ x (main scan) and y (sub-scan, which adds the motion smear of one line):</p>
 """
 
 
-def _search_html(s: dict | None, t: dict | None) -> str:
+def _search_html(s: dict | None, t: dict | None, quick: bool = False) -> str:
     if s is None:
-        return "<h2>Design search and tolerancing</h2><p>(needs square holes)</p>"
+        why = "left out of this quick report" if quick else "needs square holes"
+        return f"<h2>Design search and tolerancing</h2><p>({why})</p>"
     front = [
         [
             str(p["holes_um"]),
@@ -167,7 +168,7 @@ def page(design: Design, d: dict) -> str:
 <style>body{{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}}
 table{{border-collapse:collapse;margin:.5em 0}}td,th{{border:1px solid #bbb;padding:2px 6px;
 font-size:13px;text-align:right}}img{{max-width:100%}}</style></head><body>
-<h1>opticalstamp report: {html.escape(design.name)}</h1>
+<h1>opticalstamp report: {html.escape(design.name)}</h1>{_quick_html(d)}
 <p>{html.escape(design.description)}</p>
 <p>design fingerprint {prov["design_fingerprint"]}, seed {prov["seed"]},
 opticalstamp {prov["opticalstamp_version"]}, Fresnel losses {"on" if prov["fresnel"] else "off"},
@@ -242,10 +243,75 @@ lands inside the virtual detector (&plusmn;{
 <img src="psf_x0.png"><img src="psf_x42.png">
 {_quality_html(d)}
 {_scans_html(d["scans"], pitch_um)}
-{_search_html(d["search"], d["tolerance"])}
+{_search_html(d["search"], d["tolerance"], d.get("quick", False))}
 <p>Generated in {d["elapsed_s"]:.1f} s.</p>
 </body></html>
 """
+
+
+def _quick_html(d: dict) -> str:
+    """The label of a quick report: what it left out and what it computed with less."""
+    if not d.get("quick"):
+        return ""
+    out = "".join(f"<li>{html.escape(x)}</li>" for x in d["left_out"])
+    less = "".join(f"<li>{html.escape(x)}</li>" for x in d["reduced"])
+    return f"""
+<p style="border:2px solid #c60;padding:.5em"><b>Quick report</b>
+(<code>opticalstamp report --quick</code>): a first look, not the numbers to quote.
+Left out:</p><ul>{out}</ul><p>Computed with less work:</p><ul>{less}</ul>"""
+
+
+def _study_html(st: dict | None) -> str:
+    """The parameter-study section (left out of a quick report)."""
+    if st is None:
+        return """<h2>The paper's unstated parameters</h2>
+<p>(left out of this quick report)</p>"""
+    st_rows = [
+        [
+            x["hole_shape"],
+            x["sensitive_um"],
+            x["gap_medium"],
+            x["fresnel"],
+            x["glass_index"],
+            x["inverse_ratio"],
+            x["working_f_number"],
+            x["dof_mm"],
+            x["rmtf200_at_3_5mm"],
+            x["ghost_fraction"],
+            "yes"
+            if x["consistent_efficiency"] and x["consistent_dof"]
+            else (
+                "F only"
+                if x["consistent_efficiency"]
+                else ("DOF only" if x["consistent_dof"] else "")
+            ),
+        ]
+        for x in st["rows"]
+    ]
+    return f"""<h2>The paper's unstated parameters</h2>
+<p>Every combination of hole shape, sensitive-area size, reference-gap medium, Fresnel
+losses and glass index; consistent with the paper when the working F-number is within
+{st["meta"]["f_tolerance"]:g} of 60 and the depth of field at least
+{st["paper"]["dof_mm"] - st["meta"]["dof_tolerance_mm"]:g} mm.</p>
+{
+        _table(
+            st_rows,
+            [
+                "holes",
+                "sensitive (um)",
+                "gap",
+                "Fresnel",
+                "glass n",
+                "1/ratio",
+                "working F",
+                "DOF (mm)",
+                "RMTF200 at 3.5 mm",
+                "ghost fraction",
+                "consistent with paper",
+            ],
+        )
+    }
+<img src="study.png">"""
 
 
 def _quality_html(d: dict) -> str:
@@ -307,29 +373,6 @@ def _quality_html(d: dict) -> str:
                 ]
             )
     warn = "".join(f"<p><b>warning:</b> {html.escape(w)}</p>" for w in df["budget"]["warnings"])
-    st = d["parameter_study"]
-    st_rows = [
-        [
-            x["hole_shape"],
-            x["sensitive_um"],
-            x["gap_medium"],
-            x["fresnel"],
-            x["glass_index"],
-            x["inverse_ratio"],
-            x["working_f_number"],
-            x["dof_mm"],
-            x["rmtf200_at_3_5mm"],
-            x["ghost_fraction"],
-            "yes"
-            if x["consistent_efficiency"] and x["consistent_dof"]
-            else (
-                "F only"
-                if x["consistent_efficiency"]
-                else ("DOF only" if x["consistent_dof"] else "")
-            ),
-        ]
-        for x in st["rows"]
-    ]
     return f"""<h2>RMTF and depth of field (paper Eq. 1, Fig. 11)</h2>
 <p>Bar charts of {", ".join(f"{k} dpi" for k in keys)} over a {r["window_um"]:g} um window,
 shifted in {r["shift_step_um"]:g} um steps; RMTF is the maximum over shifts ({r["method"]},
@@ -381,28 +424,5 @@ Z = {df["budget"]["z_mm"]:g} mm):</p>
         )
     }
 {warn}
-<h2>The paper's unstated parameters</h2>
-<p>Every combination of hole shape, sensitive-area size, reference-gap medium, Fresnel
-losses and glass index; consistent with the paper when the working F-number is within
-{st["meta"]["f_tolerance"]:g} of 60 and the depth of field at least
-{st["paper"]["dof_mm"] - st["meta"]["dof_tolerance_mm"]:g} mm.</p>
-{
-        _table(
-            st_rows,
-            [
-                "holes",
-                "sensitive (um)",
-                "gap",
-                "Fresnel",
-                "glass n",
-                "1/ratio",
-                "working F",
-                "DOF (mm)",
-                "RMTF200 at 3.5 mm",
-                "ghost fraction",
-                "consistent with paper",
-            ],
-        )
-    }
-<img src="study.png">
+{_study_html(d["parameter_study"])}
 """

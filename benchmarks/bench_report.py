@@ -1,0 +1,123 @@
+"""Wall time of whole `opticalstamp` processes: the report, the quick report, --help and the
+ghost analysis at its default precision.
+
+Run on demand (not in the test suite)::
+
+    python benchmarks/bench_report.py [--runs 3] [--out results.json]
+
+Each command runs ``--runs`` times in a fresh process, as a user starts it (imports, numba's
+cached kernels, process pools and the writing of every file included); the median wall
+time is reported. The report's own section times (report.json ``section_elapsed_s``) of
+its median run are kept too, and the load average before each run, since other work on
+the machine slows every number here. Prints a table and, with ``--out``, writes it as JSON
+with provenance (version, git commit, Python, numba, cores, date).
+
+benchmarks/bench_report.json holds a measurement before and after the report's work was
+arranged to compute nothing twice (report: 51.8 s -> 31.6 s on the 2-core machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+#: name -> arguments after `opticalstamp` ({out}: a fresh output folder)
+COMMANDS = {
+    "report": ["report", "--out", "{out}"],
+    "report-quick": ["report", "--quick", "--out", "{out}"],
+    "help": ["--help"],
+    "ghosts": ["ghosts"],
+}
+
+
+def _exe() -> str:
+    """The `opticalstamp` script of this interpreter's environment."""
+    here = Path(sys.executable).with_name("opticalstamp")
+    return str(here) if here.exists() else (shutil.which("opticalstamp") or "opticalstamp")
+
+
+def run_once(args: list[str], tmp: Path) -> dict:
+    out = tmp / "out"
+    shutil.rmtree(out, ignore_errors=True)
+    cmd = [_exe()] + [a.replace("{out}", str(out)) for a in args]
+    load = os.getloadavg()[0]
+    t = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    run = {"s": time.perf_counter() - t, "load_before": load}
+    rep = out / "report.json"
+    if rep.exists():
+        d = json.loads(rep.read_text())
+        run["sections_s"] = d.get("section_elapsed_s")
+        run["report_elapsed_s"] = d.get("elapsed_s")
+    return run
+
+
+def _git(*args: str) -> str | None:
+    try:
+        res = subprocess.run(["git", *args], capture_output=True, text=True, check=True)
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return res.stdout.strip()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=3, help="runs per command (median)")
+    ap.add_argument("--out", type=Path, help="write the results as JSON here")
+    ap.add_argument("--only", nargs="*", choices=list(COMMANDS), help="these commands only")
+    args = ap.parse_args(argv)
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, cmd in COMMANDS.items():
+            if args.only and name not in args.only:
+                continue
+            runs = [run_once(cmd, Path(tmp)) for _ in range(args.runs)]
+            times = [r["s"] for r in runs]
+            median = sorted(runs, key=lambda r: r["s"])[len(runs) // 2]
+            results[name] = {
+                "median_s": statistics.median(times),
+                "runs_s": times,
+                "load_before": [r["load_before"] for r in runs],
+                "sections_s_of_median_run": median.get("sections_s"),
+            }
+            print(
+                f"{name:16s} median {statistics.median(times):6.2f} s   runs "
+                + ", ".join(f"{t:.2f}" for t in times)
+            )
+    if args.out:
+        import numba
+
+        import opticalstamp as osp
+
+        doc = {
+            "what": "wall time of whole opticalstamp processes (median of runs)",
+            "provenance": {
+                "opticalstamp_version": osp.__version__,
+                "git_commit": _git("rev-parse", "HEAD"),
+                "git_src_dirty": bool(_git("status", "--porcelain", "--", "src")),
+                "python": platform.python_version(),
+                "numba": numba.__version__,
+                "platform": platform.platform(),
+                "cpu_count": os.cpu_count(),
+                "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                "runs": args.runs,
+            },
+            "commands": {k: " ".join(["opticalstamp", *v]) for k, v in COMMANDS.items()},
+            "results": results,
+        }
+        args.out.write_text(json.dumps(doc, indent=2) + "\n")
+        print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

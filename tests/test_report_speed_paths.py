@@ -1,0 +1,126 @@
+"""The report's fast paths give the numbers of the slow ones: scan kernels built once for
+many scans, the all-light and own-path LSFs from one trace, and a quick report that
+writes what it promises and says that it is quick."""
+
+from __future__ import annotations
+
+import html
+import json
+import re
+from dataclasses import fields
+
+import numpy as np
+import pytest
+from PIL import Image
+from typer.testing import CliRunner
+
+from opticalstamp.analysis.lsf import traced_folded_lsf, traced_folded_lsf_pair
+from opticalstamp.analysis.rmtf import rmtf, rmtf_from_lsf
+from opticalstamp.cli.common import app
+from opticalstamp.design import load_design
+from opticalstamp.imaging.charts import bar_chart
+from opticalstamp.imaging.heightmap import shape_map
+from opticalstamp.imaging.kernels import scan_kernels
+from opticalstamp.imaging.scan import ScanSettings, prepare_kernels, scan_levels, simulate_scan
+from opticalstamp.raytrace.pixel import PixelTracer
+
+DPI = 1200.0
+RAYS = 1 << 16
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return load_design("paper2016")
+
+
+@pytest.fixture(scope="module")
+def doc():
+    return bar_chart(DPI, chart_dpi=(200.0,), block_mm=3.0, height_mm=2.0)
+
+
+def _same_kernels(a, b):
+    assert len(a) == len(b)
+    for ra, rb in zip(a, b, strict=True):
+        for ka, kb in zip(ra, rb, strict=True):
+            for f in fields(ka):
+                va, vb = getattr(ka, f.name), getattr(kb, f.name)
+                if isinstance(va, np.ndarray) or isinstance(vb, np.ndarray):
+                    assert va.tobytes() == vb.tobytes(), f.name
+                else:
+                    assert va == vb, f.name
+
+
+@pytest.mark.parametrize("source", ["paraxial", "trace"])
+def test_prepared_kernels_are_those_built_per_scan(paper, doc, source):
+    st = ScanSettings(surround=1.0, kernel=source, kernel_rays=RAYS)
+    hm = shape_map("tilt:0.2:0.9", doc.shape[0] * 25.4 / DPI, doc.shape[1] * 25.4 / DPI)
+    tracer = PixelTracer(paper)  # pilots shared with other analyses change nothing
+    cache = prepare_kernels(
+        paper, z_mm=(0.5, 2.0), height_maps=[hm], settings=st, seed=4, tracer=tracer
+    )
+    for levels in ([0.5], [2.0], scan_levels(None, hm, st.z_step_mm)):
+        for ghosts in (True, False):
+            own = scan_kernels(paper, levels, source=source, ghosts=ghosts, n_rays=RAYS, seed=4)
+            got = cache.lookup(paper, levels, source=source, ghosts=ghosts, n_rays=RAYS, seed=4)
+            _same_kernels(own, got)
+    for kw in ({"z_mm": 0.5}, {"z_mm": 2.0, "ghosts": False}, {"z_mm": None, "height_map": hm}):
+        a = simulate_scan(doc, DPI, paper, seed=4, settings=st, **kw)
+        b = simulate_scan(doc, DPI, paper, seed=4, settings=st, kernels=cache, **kw)
+        assert a.image.tobytes() == b.image.tobytes()
+        assert all(x.tobytes() == y.tobytes() for x, y in zip(a.raw, b.raw, strict=True))
+        assert a.meta == b.meta and a.z_levels_mm == b.z_levels_mm
+
+
+def test_prepared_kernels_refuse_other_scans(paper, doc):
+    st = ScanSettings(kernel_rays=RAYS)
+    cache = prepare_kernels(paper, z_mm=(1.0,), settings=st, seed=1, ghosts=False)
+    simulate_scan(doc, DPI, paper, z_mm=1.0, seed=1, settings=st, ghosts=False, kernels=cache)
+    for kw, msg in (
+        ({"z_mm": 1.5, "seed": 1, "ghosts": False}, "levels"),
+        ({"z_mm": 1.0, "seed": 2, "ghosts": False}, "seed"),
+        ({"z_mm": 1.0, "seed": 1}, "without ghost light"),
+    ):
+        with pytest.raises(ValueError, match=msg):
+            simulate_scan(doc, DPI, paper, settings=st, kernels=cache, **kw)
+    other = load_design("fig1d")
+    with pytest.raises(ValueError, match="design"):
+        simulate_scan(doc, DPI, other, z_mm=1.0, seed=1, settings=st, ghosts=False, kernels=cache)
+    with pytest.raises(ValueError, match="z_mm"):
+        prepare_kernels(paper, z_mm=(-1.0,))
+
+
+def test_one_trace_gives_the_own_path_and_all_light_lsfs(paper):
+    kw = {"z_mm": [0.0, 1.5, 3.5], "periods_um": [508.0, 254.0], "n_rays": RAYS, "seed": 7}
+    both, own = traced_folded_lsf_pair(paper, tracer=PixelTracer(paper), **kw)
+    for got, ghosts in ((both, True), (own, False)):
+        ref = traced_folded_lsf(paper, ghosts=ghosts, **kw)
+        assert got.ghosts is ghosts and got.n_rays == ref.n_rays and got.rows == ref.rows
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(got.h, ref.h, strict=True))
+    assert own.h[0].sum() < both.h[0].sum()  # the prototype has ghost light
+    # the report's own-path RMTF is that of a separate run
+    dpis = [100.0, 200.0]
+    periods = [2 * 25400 / d for d in dpis]
+    z = [0.5, 2.0]
+    _, lsf_own = traced_folded_lsf_pair(paper, z_mm=z, periods_um=periods, seed=7, n_rays=RAYS)
+    sep = rmtf(paper, dpi=dpis, z_mm=z, ghosts=False, seed=7, n_rays=RAYS)
+    assert rmtf_from_lsf(lsf_own, paper, dpi=dpis, seed=7).to_dict() == sep.to_dict()
+
+
+def test_quick_report_writes_what_it_promises_and_says_so(tmp_path):
+    out = tmp_path / "quick"
+    res = CliRunner().invoke(app, ["report", "--quick", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    d = json.loads((out / "report.json").read_text())
+    assert d["quick"] is True
+    assert any("search" in x for x in d["left_out"]) and d["reduced"]
+    assert d["search"] is None and d["tolerance"] is None and d["parameter_study"] is None
+    page = (out / "index.html").read_text()
+    assert "Quick report" in page and "left out of this quick report" in page
+    for x in d["left_out"] + d["reduced"]:
+        assert html.escape(x) in page
+    shown = set(re.findall(r'src="([^"]+)"', page))
+    assert shown == set(d["figures"])  # every figure on the page, and only those
+    for name in d["figures"]:
+        with Image.open(out / name) as im:
+            assert im.size[0] > 300 and im.size[1] > 150
+    assert {"rmtf", "efficiency", "scans", "ghosts", "spots", "psf"} <= set(d)
