@@ -131,3 +131,24 @@ def test_the_study_row_that_is_the_design_shows_the_headline_numbers(paper):
     assert row["dof_mm"] == r.dof_mm["200"] and row["ghost_fraction"] == g.ghost_fraction
     (fresh,) = parameter_study(paper, factors=own, n_rays=1 << 16).rows
     assert fresh["source"] == "study" and fresh["dof_mm"] != row["dof_mm"]
+
+
+def test_with_headline_replaces_only_the_designs_own_row(paper):
+    from opticalstamp.analysis.paper_study import parameter_study, with_headline
+    from opticalstamp.analysis.rmtf import rmtf
+
+    factors = {
+        "hole_shape": ("square",),
+        "sensitive_um": (42.3, 32.0),
+        "gap_medium": ("air",),
+        "fresnel": (False,),
+        "glass_index": (1.52,),
+    }
+    st = parameter_study(paper, factors=factors, n_rays=1 << 16)
+    g = analyse_ghosts(paper, n_rays=RAYS)
+    r = rmtf(paper, dpi=(200.0,), n_rays=RAYS)
+    new = with_headline(st, paper, g, r, fresnel=False)
+    own, other = new.rows
+    assert own["source"] == "headline" and own["dof_mm"] == r.dof_mm["200"]
+    assert other == st.rows[1]  # 32 um sensitive area: another design, left as it was
+    assert with_headline(st, paper, g, r, fresnel=True).rows == st.rows

@@ -6,6 +6,7 @@ each combination, and which combinations agree with the paper's light-efficiency
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from collections.abc import Mapping
@@ -53,6 +54,51 @@ class StudyResult:
         return [r for r in self.rows if r["consistent_efficiency"] and r["consistent_dof"]]
 
 
+def _row(combo: dict, g, r, g_ref: float, f_tol: float, dof_tol: float, source: str) -> dict:
+    """One study row from a combination's ghost analysis ``g`` and RMTF ``r`` (``g_ref``: the
+    reference lens's etendue)."""
+    f_ref = reference_f_number()
+    tot = g.etendue_own_um2sr + g.etendue_ghost_um2sr
+    ratio = tot / g_ref
+    f_w = f_ref / math.sqrt(ratio)
+    dof = r.dof_mm["200"]
+    z = np.asarray(r.z_mm)
+    return combo | {
+        "etendue_um2sr": tot,
+        "ratio": ratio,
+        "inverse_ratio": 1 / ratio,
+        "working_f_number": f_w,
+        "ghost_fraction": g.ghost_fraction,
+        "dof_mm": dof,
+        "rmtf200_at_3_5mm": float(np.interp(3.5, z, r.rmtf_max["200"])),
+        "consistent_efficiency": abs(f_w - PAPER_F_NUMBER) <= f_tol,
+        "consistent_dof": dof >= PAPER_DOF_MM - dof_tol,
+        "source": source,
+    }
+
+
+def with_headline(study: StudyResult, design: Design, ghosts, rmtf_result, fresnel: bool):
+    """The study with the row that *is* ``design`` (same fingerprint and Fresnel setting)
+    rebuilt from the design's headline analyses, so a report gives the design one depth of
+    field; that row says ``"source": "headline"``."""
+    g_ref = reference_etendue(output_pitch(design))
+    rows = []
+    for row in study.rows:
+        combo = {k: row[k] for k in study.factors}
+        d = with_unstated(
+            design,
+            hole_shape=combo["hole_shape"],
+            sensitive_um=combo["sensitive_um"],
+            gap_medium=combo["gap_medium"],
+            glass_index=combo["glass_index"],
+        )
+        if d.fingerprint() == design.fingerprint() and combo["fresnel"] == fresnel:
+            tol = (study.meta["f_tolerance"], study.meta["dof_tolerance_mm"])
+            row = _row(combo, ghosts, rmtf_result, g_ref, *tol, "headline")
+        rows.append(row)
+    return dataclasses.replace(study, rows=rows)
+
+
 def parameter_study(
     design: Design,
     *,
@@ -79,7 +125,6 @@ def parameter_study(
     fac = dict(DEFAULT_FACTORS if factors is None else factors)
     names = list(fac)
     g_ref = reference_etendue(output_pitch(design))
-    f_ref = reference_f_number()
     rows = []
     combos = list(itertools.product(*(fac[n] for n in names)))
     it = combos
@@ -102,26 +147,8 @@ def parameter_study(
         else:
             g = analyse_ghosts(d, seed=seed, n_rays=n_rays, fresnel=combo["fresnel"])
             r = rmtf(d, dpi=(200.0,), seed=seed, n_rays=n_rays, fresnel=combo["fresnel"])
-        tot = g.etendue_own_um2sr + g.etendue_ghost_um2sr
-        ratio = tot / g_ref
-        f_w = f_ref / math.sqrt(ratio)
-        dof = r.dof_mm["200"]
-        z = np.asarray(r.z_mm)
-        rows.append(
-            combo
-            | {
-                "etendue_um2sr": tot,
-                "ratio": ratio,
-                "inverse_ratio": 1 / ratio,
-                "working_f_number": f_w,
-                "ghost_fraction": g.ghost_fraction,
-                "dof_mm": dof,
-                "rmtf200_at_3_5mm": float(np.interp(3.5, z, r.rmtf_max["200"])),
-                "consistent_efficiency": abs(f_w - PAPER_F_NUMBER) <= f_tolerance,
-                "consistent_dof": dof >= PAPER_DOF_MM - dof_tolerance_mm,
-                "source": "study" if reuse is None else "headline",
-            }
-        )
+        source = "study" if reuse is None else "headline"
+        rows.append(_row(combo, g, r, g_ref, f_tolerance, dof_tolerance_mm, source))
     return StudyResult(
         design=design.name,
         seed=seed,

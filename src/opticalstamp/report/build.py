@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..analysis.ghosts import analyse_ghosts
+from ..analysis.paper_study import with_headline
 from ..analysis.spots import psf, spots
 from ..design import Design, load_design
 from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
@@ -222,6 +223,8 @@ def build_report(
         names = list(figures)
         clock.lap("figures")
         st, sr, tr = (background.result(k) for k in ("parameter_study", "search", "tolerance"))
+        if st is not None:  # the row that is this design: its headline analyses, not a re-run
+            st = with_headline(st, design, g, quality["rmtf_result"], fresnel)
         clock.lap("wait_for_studies")
         studies = {
             "study.png": (st, plotting.plot_study),
