@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
+from ..defaults import RAYS_LSF, RAYS_MAP
 from ..design import Design, square_holes
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 from ..raytrace.stack import lattice_of
@@ -98,7 +99,7 @@ def traced_folded_lsf(
     *,
     z_mm,
     periods_um,
-    n_rays: int = 1 << 21,
+    n_rays: int = RAYS_LSF,
     seed: int = 0,
     ghosts: bool = True,
     fresnel: bool = False,
@@ -125,7 +126,7 @@ def traced_folded_lsf_pair(
     *,
     z_mm,
     periods_um,
-    n_rays: int = 1 << 21,
+    n_rays: int = RAYS_LSF,
     seed: int = 0,
     fresnel: bool = False,
     n_batches: int = 16,
@@ -423,7 +424,7 @@ def traced_maps(
     *,
     z_mm,
     row: int = 0,
-    n_rays: int = 1 << 22,
+    n_rays: int = RAYS_MAP,
     seed: int = 0,
     fresnel: bool = False,
     fine_bin_um: float = 4.0,
@@ -463,7 +464,7 @@ def traced_map_sets(
     *,
     z_sets,
     row: int = 0,
-    n_rays: int = 1 << 22,
+    n_rays: int = RAYS_MAP,
     seed: int = 0,
     fresnel: bool = False,
     fine_bin_um: float = 4.0,

@@ -366,7 +366,7 @@ def report(
         d,
         out,
         seed=seed,
-        n_rays=ray_count(rays, 1 << 22),
+        n_rays=ray_count(rays, RAYS_MAP),
         fresnel=fresnel,
         progress=True,
         quick=quick,

@@ -27,6 +27,7 @@ from ..analysis.lsf import (
     paraxial_support,
     traced_map_sets,
 )
+from ..defaults import RAYS_MAP
 from ..design import Design
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 
@@ -163,7 +164,7 @@ def scan_kernels(
     source: str = "auto",
     ghosts: bool = True,
     fresnel: bool = False,
-    n_rays: int = 1 << 22,
+    n_rays: int = RAYS_MAP,
     seed: int = 0,
     progress: bool = False,
     tracer: PixelTracer | None = None,
@@ -256,7 +257,7 @@ class KernelCache:
         source: str = "auto",
         ghosts: bool = True,
         fresnel: bool = False,
-        n_rays: int = 1 << 22,
+        n_rays: int = RAYS_MAP,
         seed: int = 0,
     ) -> list[list[ScanKernel]]:
         """Kernels [row][level]: what ``scan_kernels(design, levels, ...)`` returns.
@@ -304,7 +305,7 @@ def kernel_cache(
     source: str = "auto",
     ghosts: bool = True,
     fresnel: bool = False,
-    n_rays: int = 1 << 22,
+    n_rays: int = RAYS_MAP,
     seed: int = 0,
     progress: bool = False,
     tracer: PixelTracer | None = None,

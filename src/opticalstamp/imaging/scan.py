@@ -29,6 +29,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 from scipy import ndimage, signal
 
+from ..defaults import RAYS_MAP
 from ..design import Design
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import lattice_of, output_pitch
@@ -59,7 +60,7 @@ class ScanSettings(BaseModel):
     calibration_lines: int = Field(32, ge=1, le=4096)
     white_reference: float = Field(1.0, gt=0, le=1)
     kernel: str = Field("auto", pattern="^(auto|paraxial|trace)$")
-    kernel_rays: int = Field(1 << 22, ge=1 << 14, le=1 << 30)
+    kernel_rays: int = Field(RAYS_MAP, ge=1 << 14, le=1 << 30)
     fresnel: bool = False  # Fresnel transmission losses in the traced kernels
 
 

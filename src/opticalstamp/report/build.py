@@ -24,6 +24,7 @@ from pathlib import Path
 from ..analysis.ghosts import analyse_ghosts
 from ..analysis.paper_study import with_headline
 from ..analysis.spots import psf, spots
+from ..defaults import RAYS_LSF, RAYS_MAP
 from ..design import Design, load_design
 from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
 from ..raytrace.pixel import PixelTracer
@@ -70,7 +71,7 @@ class Work:
     reduced: tuple[str, ...] = ()
 
 
-def report_work(quick: bool = False, n_rays: int = 1 << 22) -> Work:
+def report_work(quick: bool = False, n_rays: int = RAYS_MAP) -> Work:
     """The work of a full report (``n_rays`` for its maps), or of a quick one."""
     if not quick:
         return Work(
@@ -78,12 +79,12 @@ def report_work(quick: bool = False, n_rays: int = 1 << 22) -> Work:
             ghost_rays=None,
             map_rays=n_rays,
             concept_rays=None,
-            lsf_rays=1 << 21,
+            lsf_rays=RAYS_LSF,
             lsf_z_mm=None,
             area_scales=(1.0, 2.0),
             studies=True,
             scan_dpi=1200.0,
-            kernel_rays=1 << 22,
+            kernel_rays=RAYS_MAP,
             ocr=True,
         )
     map_rays = min(n_rays, 1 << 19)
@@ -121,7 +122,7 @@ def build_report(
     out_dir: str | Path,
     *,
     seed: int = 0,
-    n_rays: int = 1 << 22,
+    n_rays: int = RAYS_MAP,
     fresnel: bool = False,
     progress: bool = False,
     quick: bool = False,
