@@ -50,9 +50,7 @@ def _height(spec: str | None, z: float | None, doc_shape, dpi: float, seed: int)
 
     if (spec is None) == (z is None):
         fail("give exactly one of --z MM and --height-map FILE|SHAPE")
-    if spec is None:
-        if not 0 <= z <= 10:
-            fail(f"--z: must lie in [0, 10] mm (got {z:g})")
+    if spec is None:  # --z itself is checked while parsing
         return None
     h_mm, w_mm = (um_to_mm(n * pitch_of_dpi(dpi)) for n in doc_shape[:2])
     try:
