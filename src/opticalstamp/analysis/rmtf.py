@@ -55,7 +55,7 @@ def chart_correlation(h: np.ndarray) -> np.ndarray:
     return c
 
 
-def _sample(c: np.ndarray, v_bins: np.ndarray) -> np.ndarray:
+def sample_periodic(c: np.ndarray, v_bins: np.ndarray) -> np.ndarray:
     """Periodic linear interpolation of c[..., n] at fractional bin positions v."""
     n = c.shape[-1]
     i0 = np.floor(v_bins).astype(np.int64)
@@ -93,7 +93,7 @@ def rmtf_curves(
         shifts = np.arange(0.0, per, shift_step_um)
         c_full = chart_correlation(h.sum(axis=1))  # (rows, nz, n)
         phases = [((x[None, :] - shifts[:, None]) % per) / per * n for x in pix]
-        sig = np.concatenate([_sample(c_full[r], v) for r, v in enumerate(phases)], axis=-1)
+        sig = np.concatenate([sample_periodic(c_full[r], v) for r, v in enumerate(phases)], axis=-1)
         imax, imin = sig.max(axis=-1), sig.min(axis=-1)  # (nz, shifts)
         rm = np.where(imax + imin > 0, (imax - imin) / np.where(imax + imin > 0, imax + imin, 1), 0)
         best = rm.argmax(axis=-1)  # (nz,)
@@ -106,7 +106,7 @@ def rmtf_curves(
             c_batch = chart_correlation(h * n_b)  # each batch scaled to a full estimate
             for iz, ib in enumerate(best):
                 sb = np.concatenate(
-                    [_sample(c_batch[r, :, iz], phases[r][ib]) for r in range(h.shape[0])],
+                    [sample_periodic(c_batch[r, :, iz], phases[r][ib]) for r in range(h.shape[0])],
                     axis=-1,
                 )  # (batches, pixels)
                 bmax, bmin = sb.max(axis=-1), sb.min(axis=-1)
@@ -132,7 +132,7 @@ def chart_waveform(
     for r, x in enumerate(merged_pixels(design, window_um)):
         c = chart_correlation(h[r])
         xs.append(x)
-        sig.append(_sample(c, ((x - shift_um) % per) / per * n))
+        sig.append(sample_periodic(c, ((x - shift_um) % per) / per * n))
     x, s = np.concatenate(xs), np.concatenate(sig)
     order = np.argsort(x)
     return x[order], s[order]

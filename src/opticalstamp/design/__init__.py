@@ -1,20 +1,18 @@
 """What a scanner is: the design model and its validation, design files, materials,
-derived designs (variants) and presets. The first stage: it imports nothing else of
+derived designs (variants) and presets; two kinds: the optical stamp and the
+gradient-index rod-lens array it is compared with. The first stage: it imports nothing else of
 opticalstamp but ``validate``."""
 
-from .model import (
-    A4_WIDTH_UM,
-    Design,
-    DesignError,
-    Gap,
-    Mask,
-    Sensor,
-    Slab,
+from .files import (
+    KINDS,
+    AnyDesign,
     design_from_dict,
     format_validation_error,
     load_design,
     preset_names,
 )
+from .model import A4_WIDTH_UM, Design, DesignError, Gap, Mask, Sensor, Slab
+from .rodlens import CoverGlass, RodArray, RodLensDesign, RodSensor
 from .variants import (
     drop_mask,
     one_row,
@@ -33,6 +31,12 @@ from .variants import (
 
 __all__ = [
     "A4_WIDTH_UM",
+    "KINDS",
+    "AnyDesign",
+    "CoverGlass",
+    "RodArray",
+    "RodLensDesign",
+    "RodSensor",
     "Design",
     "DesignError",
     "Gap",

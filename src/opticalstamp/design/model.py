@@ -16,9 +16,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import tomllib
-from importlib import resources
-from pathlib import Path
 from typing import Annotated, Literal
 
 from pydantic import (
@@ -26,7 +23,6 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
-    ValidationError,
     model_validator,
 )
 
@@ -60,6 +56,7 @@ def _integer(value: object) -> object:
     return value
 
 
+Rows = Annotated[Literal[1, 2], BeforeValidator(_integer)]
 Number = Annotated[float, BeforeValidator(_number), Field(allow_inf_nan=False)]
 PositiveUm = Annotated[Number, Field(gt=0, le=MAX_LENGTH_UM)]
 OffsetUm = Annotated[Number, Field(ge=-MAX_OFFSET_UM, le=MAX_OFFSET_UM)]
@@ -69,7 +66,9 @@ class DesignError(InputError):
     """A design that cannot be used, with a message naming the field and the rule."""
 
 
-class _Frozen(BaseModel):
+class FrozenModel(BaseModel):
+    """Base of every design model: immutable, unknown keys refused."""
+
     model_config = ConfigDict(frozen=True, extra="forbid")
 
 
@@ -96,7 +95,7 @@ def _check_medium(value: object) -> float | str:
 Medium = Annotated[float | str, BeforeValidator(_check_medium)]
 
 
-class Mask(_Frozen):
+class Mask(FrozenModel):
     """An absorbing mask with one hole above each used pixel."""
 
     name: str | None = None
@@ -136,7 +135,7 @@ class Mask(_Frozen):
         return self.hole_width_um * self.hole_height_um
 
 
-class Slab(_Frozen):
+class Slab(FrozenModel):
     """A homogeneous layer of the stack, optionally masked on its top face."""
 
     medium: Medium
@@ -144,14 +143,14 @@ class Slab(_Frozen):
     mask_top: Mask | None = None
 
 
-class Gap(_Frozen):
+class Gap(FrozenModel):
     """The reference gap between the top mask and the reference plane (Z = 0)."""
 
     medium: Medium = "air"
     thickness_um: Annotated[Number, Field(ge=0, le=MAX_LENGTH_UM)] = 1000.0
 
 
-class Sensor(_Frozen):
+class Sensor(FrozenModel):
     """Line sensor and the staggered lattice of used pixels (paper Fig. 3).
 
     ``acceptance_half_angle_deg`` is the pixel's angular response, a hard cut-off on the
@@ -163,7 +162,7 @@ class Sensor(_Frozen):
     sensitive_width_um: PositiveUm = 42.3
     sensitive_height_um: PositiveUm = 42.3
     lines: Annotated[int, BeforeValidator(_integer), Field(ge=1, le=MAX_LINES)] = 3
-    rows: Annotated[Literal[1, 2], BeforeValidator(_integer)] = 2
+    rows: Rows = 2
     row_pitch_um: PositiveUm = 169.2
     row_b_offset_x_um: OffsetUm = 84.6
     row_b_offset_y_um: OffsetUm = 84.6
@@ -199,7 +198,7 @@ class Sensor(_Frozen):
         return max(1, round(A4_WIDTH_UM / self.row_pitch_um))
 
 
-class Design(_Frozen):
+class Design(FrozenModel):
     """A complete scanner design (paper Figs. 2-4)."""
 
     name: str = "unnamed"
@@ -271,73 +270,10 @@ class Design(_Frozen):
 
     def fingerprint(self) -> str:
         """Short hash of the design's content (for result provenance)."""
-        blob = json.dumps(self.model_dump(mode="json"), sort_keys=True).encode()
-        return hashlib.sha256(blob).hexdigest()[:12]
+        return content_hash(self)
 
 
-# -- loading ------------------------------------------------------------------------------
-def format_validation_error(err: ValidationError, source: str) -> str:
-    lines = [f"invalid design {source}:"]
-    for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = e["msg"].removeprefix("Value error, ")
-        if e["type"] == "extra_forbidden":
-            msg = "unknown key (not part of the design format)"
-        got = e.get("input")
-        skip = isinstance(got, dict | list) or e["type"] == "missing" or "(got" in msg
-        shown = "" if skip else f" (got {got!r})"
-        lines.append(f"  {loc}: {msg}{shown}")
-    return "\n".join(lines)
-
-
-def design_from_dict(data: dict, source: str = "<dict>") -> Design:
-    """Validate a mapping (as read from TOML) into a :class:`Design`."""
-    try:
-        return Design.model_validate(data)
-    except ValidationError as err:
-        raise DesignError(format_validation_error(err, source)) from None
-    except RecursionError:
-        raise DesignError(f"invalid design {source}: nested too deeply") from None
-
-
-def preset_names() -> list[str]:
-    files = resources.files("opticalstamp.design") / "presets"
-    return sorted(p.name.removesuffix(".toml") for p in files.iterdir() if p.name.endswith(".toml"))
-
-
-def load_design(spec: str | Path) -> Design:
-    """Load a built-in preset by name or a design TOML file by path.
-
-    A UTF-8 byte-order mark is accepted; files over MAX_DESIGN_FILE_BYTES and TOML nested
-    too deeply for the parser are refused with a :class:`DesignError`.
-    """
-    spec_s = str(spec)
-    if spec_s in preset_names():
-        text = (resources.files("opticalstamp.design") / "presets" / f"{spec_s}.toml").read_text()
-        source = f"preset {spec_s!r}"
-    else:
-        path = Path(spec_s)
-        if not path.is_file():
-            raise DesignError(
-                f"design {spec_s!r} is neither a preset ({', '.join(preset_names())}) "
-                "nor a readable file"
-            )
-        try:
-            if path.stat().st_size > MAX_DESIGN_FILE_BYTES:
-                raise DesignError(
-                    f"design file {spec_s}: larger than {MAX_DESIGN_FILE_BYTES >> 10} KiB; "
-                    "a design is a short TOML file"
-                )
-            text = path.read_text(encoding="utf-8-sig")
-        except (OSError, UnicodeDecodeError) as err:
-            raise DesignError(f"cannot read design file {spec_s}: {err}") from None
-        source = f"file {spec_s}"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        raise DesignError(f"malformed TOML in {source}: {err}") from None
-    except RecursionError:
-        raise DesignError(
-            f"malformed TOML in {source}: tables or arrays nested too deeply"
-        ) from None
-    return design_from_dict(data, source)
+def content_hash(model: BaseModel) -> str:
+    """Short SHA-256 of a model's JSON content (a design's fingerprint)."""
+    blob = json.dumps(model.model_dump(mode="json"), sort_keys=True).encode()
+    return hashlib.sha256(blob).hexdigest()[:12]

@@ -19,7 +19,8 @@ from collections.abc import Mapping, Sequence
 
 from pydantic import BaseModel
 
-from .model import Design, DesignError, design_from_dict
+from .files import design_from_dict
+from .model import Design, DesignError
 
 __all__ = [
     "drop_mask",

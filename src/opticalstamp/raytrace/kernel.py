@@ -172,6 +172,12 @@ def trace_bundle(x, y, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, status
         w[j] = wo
 
 
+#: Public names of the generator and the Fresnel helper for other compiled kernels
+#: (the rod-lens tracer): one generator, so every tracer is seeded the same way.
+uniform_pair = _uniform_pair
+fresnel_sp = _fresnel_sp
+
+
 # -- importance sampling: the direction that joins two points through layered slabs ------
 @nb.njit(inline="always", **_JIT)
 def _reach(rho, slabs, n_pre):

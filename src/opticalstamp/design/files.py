@@ -1,0 +1,99 @@
+"""Design files: TOML presets and files read into a design of their ``kind``.
+
+Invalid input raises :class:`DesignError` naming every offending field and its rule.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from .model import MAX_DESIGN_FILE_BYTES, Design, DesignError
+from .rodlens import KIND as RODLENS
+from .rodlens import RodLensDesign
+
+STAMP = "stamp"
+KINDS = (STAMP, RODLENS)
+#: Any design opticalstamp can analyse.
+AnyDesign = Design | RodLensDesign
+
+
+def format_validation_error(err: ValidationError, source: str) -> str:
+    lines = [f"invalid design {source}:"]
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        msg = e["msg"].removeprefix("Value error, ")
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key (not part of the design format)"
+        got = e.get("input")
+        skip = isinstance(got, dict | list) or e["type"] == "missing" or "(got" in msg
+        shown = "" if skip else f" (got {got!r})"
+        lines.append(f"  {loc}: {msg}{shown}")
+    return "\n".join(lines)
+
+
+def design_from_dict(data: dict, source: str = "<dict>") -> AnyDesign:
+    """Validate a mapping (as read from TOML) into a design of its ``kind``.
+
+    ``kind`` absent or ``"stamp"``: a :class:`Design` (the optical stamp);
+    ``"rod-lens-array"``: a :class:`RodLensDesign`.
+    """
+    kind = data.get("kind", STAMP) if isinstance(data, dict) else STAMP
+    if kind not in KINDS:
+        raise DesignError(
+            f"invalid design {source}:\n  kind: must be one of {', '.join(KINDS)} (got {kind!r})"
+        )
+    try:
+        if kind == RODLENS:
+            return RodLensDesign.model_validate(data)
+        return Design.model_validate({k: v for k, v in data.items() if k != "kind"})
+    except ValidationError as err:
+        raise DesignError(format_validation_error(err, source)) from None
+    except RecursionError:
+        raise DesignError(f"invalid design {source}: nested too deeply") from None
+
+
+def preset_names() -> list[str]:
+    files = resources.files("opticalstamp.design") / "presets"
+    return sorted(p.name.removesuffix(".toml") for p in files.iterdir() if p.name.endswith(".toml"))
+
+
+def load_design(spec: str | Path) -> AnyDesign:
+    """Load a built-in preset by name or a design TOML file by path.
+
+    A UTF-8 byte-order mark is accepted; files over MAX_DESIGN_FILE_BYTES and TOML nested
+    too deeply for the parser are refused with a :class:`DesignError`.
+    """
+    spec_s = str(spec)
+    if spec_s in preset_names():
+        text = (resources.files("opticalstamp.design") / "presets" / f"{spec_s}.toml").read_text()
+        source = f"preset {spec_s!r}"
+    else:
+        path = Path(spec_s)
+        if not path.is_file():
+            raise DesignError(
+                f"design {spec_s!r} is neither a preset ({', '.join(preset_names())}) "
+                "nor a readable file"
+            )
+        try:
+            if path.stat().st_size > MAX_DESIGN_FILE_BYTES:
+                raise DesignError(
+                    f"design file {spec_s}: larger than {MAX_DESIGN_FILE_BYTES >> 10} KiB; "
+                    "a design is a short TOML file"
+                )
+            text = path.read_text(encoding="utf-8-sig")
+        except (OSError, UnicodeDecodeError) as err:
+            raise DesignError(f"cannot read design file {spec_s}: {err}") from None
+        source = f"file {spec_s}"
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise DesignError(f"malformed TOML in {source}: {err}") from None
+    except RecursionError:
+        raise DesignError(
+            f"malformed TOML in {source}: tables or arrays nested too deeply"
+        ) from None
+    return design_from_dict(data, source)
