@@ -27,9 +27,10 @@ _EXPORTS = MappingProxyType(
         # design
         "Design": "design.model",
         "DesignError": "design.model",
-        "load_design": "design.model",
-        "design_from_dict": "design.model",
-        "preset_names": "design.model",
+        "load_design": "design.files",
+        "design_from_dict": "design.files",
+        "preset_names": "design.files",
+        "RodLensDesign": "design.rodlens",
         "InputError": "validate",
         # deriving a design from another (always validated)
         "replace": "design.variants",
@@ -53,6 +54,7 @@ _EXPORTS = MappingProxyType(
         # imaging
         "simulate_scan": "imaging.scan",
         "ScanSettings": "imaging.scan",
+        "prepare_kernels": "imaging.scan",
         "make_chart": "imaging.charts",
         "measure_rmtf": "imaging.measure",
         "sfr": "imaging.measure",

@@ -69,6 +69,155 @@ class GhostResult:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    def to_dataset(self):
+        """The result as an xarray Dataset (the dicts of :meth:`to_dict` as labelled arrays).
+
+        Coordinates: ``z_mm`` (the object distances of ``landing``), ``distance_um`` (centre
+        of each landing bin, with ``distance_lo_um`` / ``distance_hi_um`` its edges),
+        ``path`` (a label per ghost path, largest etendue first: each mask's hole, object
+        side first, as ``mask:row dk``), ``mask``, ``plane`` and ``status`` (the ledger).
+
+        Variables: ``landing_um2sr`` (z_mm, distance_um), ghost etendue per distance bin
+        from the pixel's axis; ``landing_overflow_um2sr`` (z_mm), the last bin of
+        ``landing[z]["etendue_by_distance_um2sr"]``, which holds every distance beyond the
+        regular bins (>= ``distance_overflow_um``); ``nearest_um``, ``median_um``,
+        ``within_detector_um2sr``, ``within_detector_se`` (z_mm); per path
+        ``path_etendue_um2sr``, ``path_etendue_se``, ``path_share`` (of all ghost
+        etendue), ``path_n_rays``, ``emission_angle_lo_deg``, ``emission_angle_hi_deg``,
+        ``path_nearest_landing_um`` (path, z_mm) and ``hole_dk`` (path, mask; ``hole_row``
+        its own/other label); the scalars ``etendue_own_um2sr``, ``etendue_ghost_um2sr``,
+        ``ghost_fraction`` and their ``*_se``; ``ledger`` (plane, status), ray counts.
+        Missing values (None in the dicts) are NaN; every variable has ``units``.
+        """
+        import xarray as xr
+
+        f64 = np.float64
+        zkeys = list(self.landing)
+        land = [self.landing[k] for k in zkeys]
+        bins = {float(v["bin_um"]) for v in land}
+        if len(bins) > 1:
+            raise ValueError(f"landing bins differ between distances: {sorted(bins)}")
+        bin_um = bins.pop() if bins else float("nan")
+        hist = np.array([v["etendue_by_distance_um2sr"] for v in land], dtype=f64)
+        hist = hist if land else np.zeros((0, 0))
+        n_bins = max(hist.shape[1] - 1, 0)  # the last bin is the overflow
+        lo = np.arange(n_bins) * bin_um
+        masks = [h["mask"] for h in self.paths[0].holes] if self.paths else []
+        labels = [_path_label(p.holes) for p in self.paths]
+        statuses = list(STATUS_NAMES)
+        statuses += sorted({s for row in self.ledger.values() for s in row} - set(statuses))
+
+        def per_z(key: str) -> np.ndarray:
+            return np.array([_nan(v[key]) for v in land], dtype=f64)
+
+        def per_path(get) -> np.ndarray:
+            return np.array([get(p) for p in self.paths], dtype=f64)
+
+        um, um2sr, one = {"units": "um"}, {"units": "um^2 sr"}, {"units": "1"}
+        data = {
+            "landing_um2sr": (("z_mm", "distance_um"), hist[:, :n_bins], um2sr),
+            "landing_overflow_um2sr": (
+                "z_mm",
+                hist[:, n_bins] if hist.shape[1] else np.zeros(len(zkeys)),
+                um2sr | {"long_name": "ghost etendue landing at >= distance_overflow_um"},
+            ),
+            "nearest_um": ("z_mm", per_z("nearest_um"), um),
+            "median_um": ("z_mm", per_z("median_um"), um),
+            "within_detector_um2sr": ("z_mm", per_z("within_detector_um2sr"), um2sr),
+            "within_detector_se": ("z_mm", per_z("within_detector_se"), um2sr),
+            "path_etendue_um2sr": ("path", per_path(lambda p: p.etendue_um2sr), um2sr),
+            "path_etendue_se": ("path", per_path(lambda p: p.etendue_se), um2sr),
+            "path_share": ("path", per_path(lambda p: p.share), one),
+            "path_n_rays": (
+                "path",
+                np.array([p.n_rays for p in self.paths], dtype=np.int64),
+                {"units": "rays"},
+            ),
+            "emission_angle_lo_deg": (
+                "path",
+                per_path(lambda p: p.emission_angle_deg[0]),
+                {"units": "deg"},
+            ),
+            "emission_angle_hi_deg": (
+                "path",
+                per_path(lambda p: p.emission_angle_deg[1]),
+                {"units": "deg"},
+            ),
+            "path_nearest_landing_um": (
+                ("path", "z_mm"),
+                np.array(
+                    [[_nan(p.nearest_landing_um.get(k)) for k in zkeys] for p in self.paths],
+                    dtype=f64,
+                ).reshape(len(self.paths), len(zkeys)),
+                um,
+            ),
+            "hole_dk": (
+                ("path", "mask"),
+                np.array([[h["dk"] for h in p.holes] for p in self.paths], dtype=np.int64).reshape(
+                    len(self.paths), len(masks)
+                ),
+                {"units": "pixels", "long_name": "hole index relative to the pixel's own"},
+            ),
+            "etendue_own_um2sr": ((), f64(self.etendue_own_um2sr), um2sr),
+            "etendue_own_se": ((), f64(self.etendue_own_se), um2sr),
+            "etendue_ghost_um2sr": ((), f64(self.etendue_ghost_um2sr), um2sr),
+            "etendue_ghost_se": ((), f64(self.etendue_ghost_se), um2sr),
+            "ghost_fraction": ((), f64(self.ghost_fraction), one),
+            "ghost_fraction_se": ((), f64(self.ghost_fraction_se), one),
+            "ledger": (
+                ("plane", "status"),
+                np.array(
+                    [[row.get(s, 0) for s in statuses] for row in self.ledger.values()],
+                    dtype=np.int64,
+                ).reshape(len(self.ledger), len(statuses)),
+                {"units": "rays"},
+            ),
+        }
+        coords = {
+            "z_mm": ("z_mm", [float(k) for k in zkeys], {"units": "mm"}),
+            "distance_um": ("distance_um", lo + bin_um / 2, um),
+            "distance_lo_um": ("distance_um", lo, um),
+            "distance_hi_um": ("distance_um", lo + bin_um, um),
+            "path": ("path", labels),
+            "mask": ("mask", masks),
+            "hole_row": (
+                ("path", "mask"),
+                np.array([[h["row"] for h in p.holes] for p in self.paths], dtype=object).reshape(
+                    len(self.paths), len(masks)
+                ),
+            ),
+            "plane": ("plane", list(self.ledger)),
+            "status": ("status", statuses),
+        }
+        detector = {v["detector_half_um"] for v in land}
+        attrs = {
+            "design": self.design,
+            "fingerprint": self.fingerprint,
+            "seed": self.seed,
+            "n_rays": self.n_rays,
+            "fresnel": int(self.fresnel),
+            "pixel_row": self.pixel["row"],
+            "pixel_k": self.pixel["k"],
+            "pixel_x_um": self.pixel["x_um"],
+            "pixel_y_um": self.pixel["y_um"],
+            "bin_um": bin_um,
+            "distance_overflow_um": n_bins * bin_um,
+        }
+        if len(detector) == 1:
+            attrs["detector_half_um"] = float(detector.pop())
+        if "estimator" in self.meta:
+            attrs["estimator"] = self.meta["estimator"]
+        return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _path_label(holes: list[dict]) -> str:
+    """'layer 1:own-19; layer 2:other+0; ...' (each mask's hole, object side first)."""
+    return "; ".join(f"{h['mask']}:{h['row']}{h['dk']:+d}" for h in holes)
+
+
+def _nan(v) -> float:
+    return float("nan") if v is None else float(v)
+
 
 def _schedule(n_rays: int | None, max_rays: int) -> list[int]:
     if n_rays is not None:

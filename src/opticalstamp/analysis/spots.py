@@ -61,6 +61,71 @@ class SpotResult:
             out[key] = [float(getattr(s, key)) for s in self.spots]
         return out | {"meta": self.meta}
 
+    def to_dataset(self):
+        """The spots as an xarray Dataset on the coordinate ``z_mm``.
+
+        Variables ``extent_x_um``, ``extent_y_um``, ``fwhm_x_um``, ``fwhm_y_um``,
+        ``center_cell_fraction`` (z_mm), as in :meth:`to_dict`, and ``map_sr`` (z_mm, y,
+        x), the responsivity maps. Each distance has its own map grid (its own size and
+        offset from the pixel's axis), so the maps are centred in a common (y, x) array and
+        padded with NaN; the coordinates ``x_um`` (z_mm, x) and ``y_um`` (z_mm, y) are each
+        map bin's centre from the pixel's axis (NaN in the padding). One distance's map
+        with its own coordinates::
+
+            m = ds.map_sr.sel(z_mm=1.0).dropna("x", how="all").dropna("y", how="all")
+        """
+        import xarray as xr
+
+        nz = len(self.spots)
+        ny = max((s.map_sr.shape[0] for s in self.spots), default=0)
+        nx = max((s.map_sr.shape[1] for s in self.spots), default=0)
+        maps = np.full((nz, ny, nx), np.nan)
+        xc = np.full((nz, nx), np.nan)
+        yc = np.full((nz, ny), np.nan)
+        for i, s in enumerate(self.spots):
+            my, mx = s.map_sr.shape
+            oy, ox = (ny - my) // 2, (nx - mx) // 2
+            maps[i, oy : oy + my, ox : ox + mx] = s.map_sr
+            xc[i, ox : ox + mx] = 0.5 * (s.x_edges_um[1:] + s.x_edges_um[:-1])
+            yc[i, oy : oy + my] = 0.5 * (s.y_edges_um[1:] + s.y_edges_um[:-1])
+
+        def col(key: str) -> np.ndarray:
+            return np.array([getattr(s, key) for s in self.spots], dtype=np.float64)
+
+        um = {"units": "um"}
+        attrs = {
+            "design": self.design,
+            "fingerprint": self.fingerprint,
+            "seed": self.seed,
+            "n_rays": self.n_rays,
+            "pixel_row": self.pixel["row"],
+            "pixel_k": self.pixel["k"],
+            "pixel_x_um": self.pixel["x_um"],
+            "pixel_y_um": self.pixel["y_um"],
+        }
+        for k, v in self.meta.items():
+            attrs[k] = int(v) if isinstance(v, bool) else v
+        return xr.Dataset(
+            {
+                "extent_x_um": ("z_mm", col("extent_x_um"), um),
+                "extent_y_um": ("z_mm", col("extent_y_um"), um),
+                "fwhm_x_um": ("z_mm", col("fwhm_x_um"), um),
+                "fwhm_y_um": ("z_mm", col("fwhm_y_um"), um),
+                "center_cell_fraction": ("z_mm", col("center_cell_fraction"), {"units": "1"}),
+                "map_sr": (
+                    ("z_mm", "y", "x"),
+                    maps,
+                    {"units": "sr", "long_name": "responsivity (etendue per object area)"},
+                ),
+            },
+            coords={
+                "z_mm": ("z_mm", col("z_mm"), {"units": "mm"}),
+                "x_um": (("z_mm", "x"), xc, um),
+                "y_um": (("z_mm", "y"), yc, um),
+            },
+            attrs=attrs,
+        )
+
 
 def fwhm(profile: np.ndarray, centers: np.ndarray) -> float:
     """Full width at half maximum (outermost half-max crossings, linear interpolation)."""
@@ -208,6 +273,62 @@ class PSF:
             d.pop(key)
         d["grid_power"] = self.grid_power.tolist()
         return d
+
+    def to_dataset(self):
+        """The PSF as an xarray Dataset.
+
+        Variables ``grid_power`` (line, column), the power fraction per sensor pixel, with
+        the coordinates ``line_y_um`` / ``column_x_um`` (pixel centres on the sensor);
+        ``fine_map`` (y_um, x_um), landing power density on bin centres; the scalar
+        fractions ``own_pixel``, ``neighbour_own_path``, ``neighbour_ghost``,
+        ``insensitive`` (of the power reaching the sensor plane) and ``reaching_sensor``
+        (of the emitted power). The object point, own pixel and design in the attributes.
+        """
+        import xarray as xr
+
+        lines, cols = self.grid_power.shape
+        one = {"units": "1"}
+        ex, ey = self.fine_edges_x_um, self.fine_edges_y_um
+        scalars = {
+            k: ((), np.float64(getattr(self, k)), one)
+            for k in (
+                "own_pixel",
+                "neighbour_own_path",
+                "neighbour_ghost",
+                "insensitive",
+                "reaching_sensor",
+            )
+        }
+        return xr.Dataset(
+            {
+                "grid_power": (("line", "column"), self.grid_power, one),
+                "fine_map": (("y_um", "x_um"), self.fine_map, {"units": "1/um^2"}),
+                **scalars,
+            },
+            coords={
+                "line_y_um": ("line", np.arange(lines) * self.grid_pitch_um, {"units": "um"}),
+                "column_x_um": (
+                    "column",
+                    self.grid_x0_um + (np.arange(cols) + 0.5) * self.grid_pitch_um,
+                    {"units": "um"},
+                ),
+                "y_um": ("y_um", 0.5 * (ey[1:] + ey[:-1]), {"units": "um"}),
+                "x_um": ("x_um", 0.5 * (ex[1:] + ex[:-1]), {"units": "um"}),
+            },
+            attrs={
+                "design": self.design,
+                "fingerprint": self.fingerprint,
+                "seed": self.seed,
+                "n_rays": self.n_rays,
+                "x_obj_um": self.x_obj_um,
+                "y_obj_um": self.y_obj_um,
+                "z_mm": self.z_mm,
+                "own_pixel_row": self.own_pixel_id["row"],
+                "own_pixel_k": self.own_pixel_id["k"],
+                "grid_pitch_um": self.grid_pitch_um,
+                "fresnel": int(bool(self.meta.get("fresnel", False))),
+            },
+        )
 
 
 def nearest_pixel(design: Design, x: float, y: float) -> tuple[int, int]:

@@ -164,6 +164,114 @@ class ToleranceResult:
             "meta": self.meta,
         }
 
+    def to_dataset(self):
+        """The study as an xarray Dataset on the coordinates ``sample``, ``error`` and
+        ``z_mm`` (and the scalar coordinate ``dpi`` of the RMTF).
+
+        Per sample: ``errors`` (sample, error), the drawn errors; ``ok`` (1 where the
+        evaluation succeeded); ``rmtf`` (sample, z_mm), ``dof_mm``, ``efficiency_ratio``,
+        ``efficiency_ratio_total``, ``ghost_fraction``, ``etendue_own_um2sr``,
+        ``etendue_ghost_um2sr``, ``nearest_ghost_mm`` (NaN where the evaluation failed).
+        The nominal design's values as ``nominal_*``. The sensitivity table (each error at
+        +-1 sigma alone, mean absolute change) as ``sigma``, ``d_dof_mm``,
+        ``d_efficiency_ratio``, ``d_ghost_fraction`` (error) and ``d_rmtf`` (error, z_mm),
+        NaN for an error not in the table (sigma 0, or its evaluations failed);
+        ``yield_fraction`` (NaN without a spec). Every variable has ``units`` (``errors``
+        and ``sigma``: the coordinate ``error_units``, deg for the tilt, else um).
+        Unlike :func:`tolerance_dataset` it needs no design (error names from the draws).
+        """
+        import xarray as xr
+
+        nan = float("nan")
+        names = list(self.errors[0]) if self.errors else []
+        zk = [f"{z:g}" for z in self.z_mm]
+        samples = self.samples
+
+        def col(k: str) -> np.ndarray:
+            return np.array([nan if s is None else s[k] for s in samples], dtype=np.float64)
+
+        rm = np.array(
+            [[nan] * len(zk) if s is None else [s["rmtf_at"][z] for z in zk] for s in samples],
+            dtype=np.float64,
+        ).reshape(len(samples), len(zk))
+        sens = {row["error"]: row for row in self.sensitivity}
+
+        def by_error(k: str) -> np.ndarray:
+            return np.array([sens.get(n, {}).get(k, nan) for n in names], dtype=np.float64)
+
+        d_rm = np.array(
+            [[sens.get(n, {}).get(f"d_rmtf@{z}", nan) for z in zk] for n in names],
+            dtype=np.float64,
+        ).reshape(len(names), len(zk))
+        one, mm = {"units": "1"}, {"units": "mm"}
+        um2sr = {"units": "um^2 sr"}
+        metrics = {
+            "dof_mm": mm,
+            "efficiency_ratio": one,
+            "efficiency_ratio_total": one,
+            "ghost_fraction": one,
+            "etendue_own_um2sr": um2sr,
+            "etendue_ghost_um2sr": um2sr,
+            "nearest_ghost_mm": mm,
+        }
+        data = {
+            "errors": (
+                ("sample", "error"),
+                np.array([[e[n] for n in names] for e in self.errors], dtype=np.float64).reshape(
+                    len(self.errors), len(names)
+                ),
+                {"units": "see error_units"},
+            ),
+            "ok": ("sample", np.array([s is not None for s in samples], np.int8), one),
+            "rmtf": (("sample", "z_mm"), rm, one),
+        }
+        for k, u in metrics.items():
+            if any(s is not None and k in s for s in samples):
+                data[k] = ("sample", col(k), u)
+        data["nominal_rmtf"] = (
+            "z_mm",
+            np.array([self.nominal["rmtf_at"][z] for z in zk], dtype=np.float64),
+            one,
+        )
+        for k, u in metrics.items():
+            if k in self.nominal:
+                data[f"nominal_{k}"] = ((), np.float64(self.nominal[k]), u)
+        mean_abs = "mean |change| at +-1 sigma of this error alone"
+        data |= {
+            "sigma": ("error", by_error("sigma"), {"units": "see error_units"}),
+            "d_dof_mm": ("error", by_error("d_dof_mm"), mm | {"long_name": mean_abs}),
+            "d_efficiency_ratio": (
+                "error",
+                by_error("d_efficiency_ratio"),
+                one | {"long_name": mean_abs},
+            ),
+            "d_ghost_fraction": (
+                "error",
+                by_error("d_ghost_fraction"),
+                one | {"long_name": mean_abs},
+            ),
+            "d_rmtf": (("error", "z_mm"), d_rm, one | {"long_name": mean_abs}),
+            "yield_fraction": (
+                (),
+                np.float64(nan if self.yield_fraction is None else self.yield_fraction),
+                one,
+            ),
+        }
+        attrs = {"design": self.design, "seed": self.seed, "spec": self.spec}
+        attrs |= {f"sigma_{k}": float(v) for k, v in self.sigmas.items()}
+        attrs |= {k: v for k, v in self.meta.items() if isinstance(v, int | float | str)}
+        return xr.Dataset(
+            data,
+            coords={
+                "sample": ("sample", np.arange(len(samples))),
+                "error": ("error", names),
+                "error_units": ("error", ["deg" if n == "tilt" else "um" for n in names]),
+                "z_mm": ("z_mm", np.asarray(self.z_mm, dtype=np.float64), mm),
+                "dpi": ((), np.float64(self.dpi)),
+            },
+            attrs=attrs,
+        )
+
 
 def tolerance(
     design: Design,
