@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 
 from ..defaults import DETECTOR_HALF_UM, RAYS_MAP, RSE_GHOST, RSE_OWN
-from ..design import Design, load_design
+from ..design import AnyDesign, Design, RodLensDesign, load_design
 from ..validate import (
     InputError,
     check_number,
@@ -126,13 +126,24 @@ def fail(msg: str) -> None:
     raise typer.Exit(2)
 
 
-def open_design(spec: str) -> Design:
-    """Load a design (InputError: exit 2); print its geometric-optics warnings."""
+def open_design(spec: str, kinds: tuple[str, ...] = ("stamp",)) -> AnyDesign:
+    """Load a design (InputError: exit 2); print a stamp's geometric-optics warnings.
+
+    ``kinds``: the kinds of design the command analyses; another kind is refused with a
+    message naming the command's scope and the commands that take it.
+    """
     from ..analysis.diffraction import geometric_optics_warnings
 
     d = load_design(spec)
-    for w in geometric_optics_warnings(d):
-        typer.echo(f"warning: {w}", err=True)
+    kind = "rod-lens-array" if isinstance(d, RodLensDesign) else "stamp"
+    if kind not in kinds:
+        raise InputError(
+            f"--design {spec}: a {kind} design; this command analyses "
+            f"{' and '.join(kinds)} designs (a rod-lens array: `opticalstamp compare`)"
+        )
+    if isinstance(d, Design):
+        for w in geometric_optics_warnings(d):
+            typer.echo(f"warning: {w}", err=True)
     return d
 
 

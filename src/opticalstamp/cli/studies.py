@@ -19,6 +19,7 @@ from ..defaults import (
 from ..validate import check_number
 from .common import (
     DesignOpt,
+    FresnelOpt,
     JsonOpt,
     PlotOpt,
     SeedOpt,
@@ -323,3 +324,47 @@ def tolerance(
         from ..report.plotting import plot_tolerance
 
         save_plot(plot_tolerance(r), plot)
+
+
+@command()
+def compare(
+    designs: Annotated[
+        list[str],
+        typer.Argument(help="two or more presets or design files, stamps or rod-lens arrays"),
+    ],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            help="output folder (replaced as a whole): index.html, compare.json, PNGs",
+            callback=writable(directory=True, marker="compare.json"),
+        ),
+    ] = Path("compare"),
+    seed: SeedOpt = 0,
+    fresnel: FresnelOpt = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Designs side by side: light vs F/10, working F-number, thickness, 200-dpi depth of
+    field, ghost fraction, and contrast vs height on one axis (paper §4: the stamp has
+    ~1/100 of a rod-lens array's light; a rod-lens scanner is >= 15 mm thick)."""
+    from ..report.compare import write_comparison
+
+    if len(designs) < 2:
+        fail("compare: give at least two designs")
+    ds = [open_design(s, kinds=("stamp", "rod-lens-array")) for s in designs]
+    rows = write_comparison(ds, out, seed=seed, fresnel=fresnel)
+    lines = [
+        f"{'design':<22} {'kind':<15} {'light/F10':>10} {'vs first':>9} {'F_w':>6} "
+        f"{'thick mm':>8} {'DOF200 mm (low..high)':>22} {'ghost':>6}"
+    ]
+    for r in rows:
+        dof = r["dof_mm"]
+        lines.append(
+            f"{r['name']:<22} {r['kind']:<15} {r['light_vs_f10']:>10.4g} "
+            f"{r['light_vs_first']:>9.3g} {r['working_f_number']:>6.1f} "
+            f"{r['thickness_mm']:>8.2f} {dof['low']:>10.2f} .. {dof['high']:<9.2f} "
+            f"{r['ghost_fraction']:>6.3f}"
+        )
+    lines.append(f"wrote {out / 'index.html'} and {out / 'compare.json'}")
+    emit({"designs": rows}, as_json, lines)

@@ -31,10 +31,10 @@ the RMTF computed from the folded line-spread functions (own path; minimum and m
 over chart positions). With ghost light on they differ for a reason, not an error: ghost
 light comes from 6-34 mm away, so a finite chart on a white page gets a different veiling
 background than the infinite chart of the computed RMTF.</p>
-{_table(prof, ["Z (mm)", "measured on the scan", "computed min", "computed max"])}
+{table(prof, ["Z (mm)", "measured on the scan", "computed min", "computed max"])}
 <p>Slanted-edge SFR (ISO 12233) of the simulated scans of the slanted-square chart, along
 x (main scan) and y (sub-scan, which adds the motion smear of one line):</p>
-{_table(sfr, ["Z (mm)", "axis", "MTF50 (cycles/mm)", "SFR at 100 dpi", "SFR at 200 dpi"])}
+{table(sfr, ["Z (mm)", "axis", "MTF50 (cycles/mm)", "SFR at 100 dpi", "SFR at 200 dpi"])}
 <img src="scan_lines.png"><img src="scan_tilt.png">
 """
 
@@ -73,7 +73,7 @@ found. Every design here is evaluated by the {html.escape(s["meta"]["estimator"]
 of field can differ from the exact trace of the RMTF section (the Fresnel setting of the
 report does not apply).</p>
 {
-        _table(
+        table(
             front,
             [
                 "holes (um, object side first)",
@@ -91,13 +91,13 @@ report does not apply).</p>
 um, holes {t["sigmas"]["hole_um"]:g} um, plates and gaps {t["sigmas"]["thickness_um"]:g} um,
 tilt {t["sigmas"]["tilt_deg"]:g} deg (1 sigma), each evaluated by the
 {html.escape(t["meta"]["estimator"])}. Yield for {html.escape(t["spec"])}: {t["yield"]:.1%}.</p>
-{_table(rm, ["Z (mm)", "RMTF 5 %", "median", "95 %", "nominal"])}
-{_table(sens, ["error", "sigma", "DOF change (mm)", "RMTF@2mm change", "ghost change"])}
+{table(rm, ["Z (mm)", "RMTF 5 %", "median", "95 %", "nominal"])}
+{table(sens, ["error", "sigma", "DOF change (mm)", "RMTF@2mm change", "ghost change"])}
 <img src="tolerance.png">
 """
 
 
-def _table(rows: list[list], head: list[str]) -> str:
+def table(rows: list[list], head: list[str]) -> str:
     th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
     body = "".join(
         "<tr>" + "".join(f"<td>{html.escape(_fmt(c))}</td>" for c in r) + "</tr>" for r in rows
@@ -180,7 +180,7 @@ ghost etendue {g["etendue_ghost_um2sr"]:.4g} &plusmn; {g["etendue_ghost_se"]:.2g
 ghost fraction {g["ghost_fraction"]:.4g} &plusmn; {g["ghost_fraction_se"]:.2g}
 ({g["n_rays"]:,} importance-sampled rays).</p>
 {
-        _table(
+        table(
             ghost_rows,
             [
                 "holes (object side first)",
@@ -195,11 +195,11 @@ ghost fraction {g["ghost_fraction"]:.4g} &plusmn; {g["ghost_fraction_se"]:.2g}
 <p>Where ghost light meets the object plane (distance from the pixel's axis) and how much
 lands inside the virtual detector (&plusmn;{
         g["landing"][next(iter(g["landing"]))]["detector_half_um"]:g} um):</p>
-{_table(land_rows, ["Z (mm)", "nearest (um)", "median (um)", "inside detector (um2 sr)"])}
+{table(land_rows, ["Z (mm)", "nearest (um)", "median (um)", "inside detector (um2 sr)"])}
 <img src="ghosts.png">
 <h3>The paper's Fig. 1 concepts</h3>
 {
-        _table(
+        table(
             conc,
             [
                 "design",
@@ -212,7 +212,7 @@ lands inside the virtual detector (&plusmn;{
     }
 <h2>Spots on the object plane (paper Fig. 5)</h2>
 {
-        _table(
+        table(
             spot_rows,
             [
                 "Z (mm)",
@@ -227,7 +227,7 @@ lands inside the virtual detector (&plusmn;{
 <img src="spots.png">
 <h2>PSFs on the sensor (paper Fig. 10)</h2>
 {
-        _table(
+        table(
             psf_rows,
             [
                 "X obj (um)",
@@ -294,7 +294,7 @@ losses and glass index; consistent with the paper when the working F-number is w
 {st["meta"]["f_tolerance"]:g} of 60 and the depth of field at least
 {st["paper"]["dof_mm"] - st["meta"]["dof_tolerance_mm"]:g} mm.</p>
 {
-        _table(
+        table(
             st_rows,
             [
                 "holes",
@@ -379,23 +379,23 @@ shifted in {r["shift_step_um"]:g} um steps; RMTF is the maximum over shifts ({r[
 ghost light {"included" if r["ghosts"] else "left out"}, {r["n_rays"]:,} rays per pixel row).
 Depth of field: largest Z with RMTF({r["dof_dpi"]:g} dpi) &ge; {r["dof_threshold"]:g}:
 <b>{r["dof_mm"]["200"]:.2f} mm</b> (paper: 3.5 mm measured).</p>
-{_table(rows, ["Z (mm)"] + [f"{k} dpi" for k in keys] + ["SE (200 dpi)"])}
+{table(rows, ["Z (mm)"] + [f"{k} dpi" for k in keys] + ["SE (200 dpi)"])}
 <img src="rmtf.png">
 <p>Depth of field (mm) by model: the paraxial closed form against the exact tracer shows
 how far the paraxial limit is off; the ghost light's uniform background lowers contrast.</p>
-{_table(dof_rows, ["model", "200 dpi", "247 dpi", "150 dpi"])}
+{table(dof_rows, ["model", "200 dpi", "247 dpi", "150 dpi"])}
 <h3>The 200-dpi chart as the merged line sees it (paper Fig. 12 c, d)</h3>
 <p>Signals of the pixels under the chart at the best shift; the RMTF measured back from
 this waveform as from an image agrees with the computed one.</p>
-{_table(prof, ["Z (mm)", "chart shift (um)", "RMTF computed", "RMTF measured from waveform"])}
+{table(prof, ["Z (mm)", "chart shift (um)", "RMTF computed", "RMTF measured from waveform"])}
 <img src="chart_profiles.png">
 <h2>Light efficiency (paper Fig. 13)</h2>
 <p>Reference: 1:1 lens, f = 10 mm, 2 mm pupil, 20 mm conjugates, a pixel of the
 design's output pitch ({e["meta"]["reference_lens"]["pixel_um"]:.1f} um; the paper's 84.6 um):
 {e["reference_etendue_um2sr"]:.4g} um&sup2;sr (working F {e["reference_f_number"]:g}).</p>
-{_table(eff_rows, ["light", "etendue (um2 sr)", "ratio", "1/ratio", "working F"])}
+{table(eff_rows, ["light", "etendue (um2 sr)", "ratio", "1/ratio", "working F"])}
 <p>Effect of the sensitive-area size (the paper expects 4x the light from 4x the area):</p>
-{_table(area_rows, ["side (um)", "area ratio", "own-path gain", "total gain", "ghost fraction"])}
+{table(area_rows, ["side (um)", "area ratio", "own-path gain", "total gain", "ghost fraction"])}
 <img src="efficiency.png">
 <h2>Diffraction (paper Fig. 6)</h2>
 <p>This design's object-side hole as a slit: {df["slit_um"]:g} um in
@@ -404,12 +404,12 @@ design's output pitch ({e["meta"]["reference_lens"]["pixel_um"]:.1f} um; the pap
 (R2 = {df["r2_um"]:.0f} um air-equivalent): geometric edge X =
 {df["geometric_edge_um"]:.2f} um. (The paper's Fig. 6, for its 48 um slit at R1 2000 um
 and R2 658 um: an edge of 32 um and about 7 % of the light outside it.)</p>
-{_table(slit_rows, ["wavelength (um)", "Fresnel number", "fraction outside the edge"])}
+{table(slit_rows, ["wavelength (um)", "Fresnel number", "fraction outside the edge"])}
 <img src="diffraction.png">
 <p>Per-layer budget of this design (2-D holes, point source on the axis at
 Z = {df["budget"]["z_mm"]:g} mm):</p>
 {
-        _table(
+        table(
             bud_rows,
             [
                 "layer",

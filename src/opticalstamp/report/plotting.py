@@ -453,3 +453,66 @@ def plot_pareto_variants(results: dict):
     ax.legend(fontsize=7)
     ax.set_title("Pareto fronts by structure (stars: the base of each)", fontsize=9)
     return fig
+
+
+def plot_compare_contrast(rows: list[dict], dof_dpi: float = 200.0, threshold: float = 0.3):
+    """Contrast vs object height from the document reference, every design on one axis.
+
+    One panel per chart resolution; stamps solid, rod-lens arrays dashed.
+    """
+    keys = list(rows[0]["contrast"]["by_dpi"])
+    fig, axes = _subplots(1, len(keys), figsize=(4.0 * len(keys), 3.6), sharey=True)
+    axes = np.atleast_1d(axes)
+    for ax, key in zip(axes, keys, strict=True):
+        for i, r in enumerate(rows):
+            ls = "--" if r["kind"] == "rod-lens-array" else "-"
+            c = r["contrast"]
+            ax.plot(c["heights_mm"], c["by_dpi"][key], ls, color=f"C{i}", label=r["name"])
+        ax.axhline(threshold, color="k", lw=0.6, ls=":")
+        ax.axvline(0.0, color="0.5", lw=0.6)
+        ax.set_title(f"{key} dpi", fontsize=9)
+        ax.set_ylim(0, 1.02)
+    fig.supxlabel("object height from the document reference (mm)", fontsize=9)
+    axes[0].set_ylabel("contrast (RMTF, max over chart shift)")
+    axes[0].legend(fontsize=7, loc="upper right")
+    fig.suptitle(
+        f"contrast vs height (dashed: rod-lens arrays; dotted: {threshold:g} = DOF at "
+        f"{dof_dpi:g} dpi)",
+        fontsize=10,
+    )
+    return fig
+
+
+def plot_compare_light(rows: list[dict]):
+    """Light relative to the paper's F/10 reference (log axis), with thickness."""
+    fig, (a1, a2) = _subplots(1, 2, figsize=(10, 3.4))
+    names = [r["name"] for r in rows]
+    y = np.arange(len(rows))
+    light = [r["light_vs_f10"] for r in rows]
+    a1.barh(y, light, color=[f"C{i}" for i in range(len(rows))])
+    a1.set_xscale("log")
+    a1.axvline(1.0, color="k", lw=0.6, ls=":")
+    for yi, v in zip(y, light, strict=True):
+        a1.text(v, yi, f" {v:.3g}", va="center", fontsize=8)
+    a1.set_yticks(y, names, fontsize=8)
+    a1.set_xlabel("light vs F/10 1:1 lens (own path; log)")
+    a2.barh(y, [r["thickness_mm"] for r in rows], color=[f"C{i}" for i in range(len(rows))])
+    a2.set_yticks(y, [""] * len(rows))
+    a2.set_xlabel("sensor to document reference (mm)")
+    fig.suptitle("light and thickness", fontsize=10)
+    return fig
+
+
+def plot_rod_ripple(eff):
+    """A rod-lens pixel's etendue along one rod period (efficiency ripple)."""
+    fig, ax = _subplots(figsize=(6.0, 3.2))
+    x = np.asarray(eff.positions_um)
+    g = np.asarray(eff.etendue_by_position_um2sr)
+    ax.plot(x, g / g.mean(), "o-", ms=3)
+    ax.set_xlabel("pixel centre from a rod axis (um), one rod period")
+    ax.set_ylabel("etendue / mean")
+    ax.set_title(
+        f"{eff.design}: ripple {eff.ripple:.3f} (noise alone ~{eff.ripple_noise:.3f})",
+        fontsize=9,
+    )
+    return fig

@@ -1,0 +1,91 @@
+"""`opticalstamp compare`: designs of any kind side by side, as JSON, PNGs and one page."""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
+from ..studies.compare import compare
+from .html import table
+
+_STYLE = (
+    "body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
+    "table{border-collapse:collapse;font-size:90%}td,th{border:1px solid #ccc;padding:3px 6px}"
+    "img{max-width:100%}"
+)
+
+
+def rows_table(rows: list[dict]) -> str:
+    """The comparison table (one row per design)."""
+    body = []
+    for r in rows:
+        dof = r["dof_mm"]
+        body.append(
+            [
+                r["name"],
+                r["kind"],
+                r["light_vs_f10"],
+                r["light_vs_first"],
+                r["working_f_number"],
+                r["thickness_mm"],
+                f"{dof['low']:.2f} .. {dof['high']:.2f}",
+                dof["span"],
+                r["ghost_fraction"],
+            ]
+        )
+    head = [
+        "design",
+        "kind",
+        "light vs F/10",
+        "light vs first",
+        "working F",
+        "thickness (mm)",
+        "200-dpi DOF (mm from nominal)",
+        "DOF span (mm)",
+        "ghost fraction",
+    ]
+    return table(body, head)
+
+
+def page(rows: list[dict], figures: dict[str, str]) -> str:
+    notes = "".join(
+        f"<li><b>{html.escape(r['name'])}</b>: {html.escape(r['ghost_note'])}; "
+        f"{html.escape(r['dof_mm'].get('note', 'DOF ends at the first 0.3 crossings'))}</li>"
+        for r in rows
+    )
+    imgs = "".join(
+        f'<h2>{html.escape(title)}</h2><img src="{name}" alt="{html.escape(title)}">'
+        for name, title in figures.items()
+    )
+    return (
+        f"<!doctype html><html><head><meta charset='utf-8'><title>opticalstamp compare"
+        f"</title><style>{_STYLE}</style></head><body><h1>Designs side by side</h1>"
+        f"{rows_table(rows)}<p>Light: etendue of one output pixel from a uniform Lambertian "
+        "object over the paper's F/10 1:1 lens for the same pixel (a stamp's own-path light; "
+        "a rod-lens array's averaged along the array). Heights from the document reference "
+        "(a stamp's reference plane, a rod-lens array's cover-glass top or focus), positive "
+        "away from the scanner. Thickness: sensor to document reference.</p>"
+        f"<ul>{notes}</ul>{imgs}</body></html>"
+    )
+
+
+def write_comparison(
+    designs, out_dir: str | Path, *, seed: int = 0, fresnel: bool = False
+) -> list[dict]:
+    """Compare ``designs`` and write compare.json, PNGs and index.html into ``out_dir``
+    (replaced as a whole once everything is written)."""
+    from . import plotting
+
+    rows = compare(designs, seed=seed, fresnel=fresnel)
+    figures = {
+        "contrast.png": "contrast vs object height",
+        "light.png": "light and thickness",
+    }
+    with replace_folder(Path(out_dir)) as tmp:
+        save_figure(plotting.plot_compare_contrast(rows), tmp / "contrast.png")
+        save_figure(plotting.plot_compare_light(rows), tmp / "light.png")
+        data = {"designs": rows, "provenance": [provenance(d, seed) for d in designs]}
+        write_atomic(tmp / "compare.json", to_json(data))
+        write_atomic(tmp / "index.html", page(rows, figures))
+    return rows

@@ -1,0 +1,125 @@
+"""Designs of any kind side by side: light, thickness, depth of field, ghosts.
+
+Every design is evaluated with the definitions shared by both kinds:
+
+* ``light_vs_f10``: etendue of one output pixel from a uniform Lambertian object over the
+  paper's F/10 1:1 reference lens for the same pixel. For a stamp, own-path light only
+  (ghost light is crosstalk, not signal); for a rod-lens array, averaged over the pixel's
+  position along the array. ``working_f_number`` = 10 / sqrt(light_vs_f10).
+* ``thickness_mm``: from the sensor surface to the document reference (a stamp's
+  reference plane Z = 0; a rod-lens array's cover-glass top, or its nominal object plane
+  TC when it has no cover glass).
+* Heights: measured from the document reference, positive away from the scanner, for
+  both kinds. A stamp's nominal object plane is its reference plane (its contrast is
+  highest there and the document cannot come closer); a rod-lens array's is its focus.
+* ``dof_mm``: heights where the 200-dpi contrast (shading-corrected RMTF, maximised over
+  the chart's shift) stays >= 0.3, as ``low``, ``high`` relative to the nominal object
+  plane and their ``span``; each end at the first crossing from the best height.
+* ``ghost_fraction``: the stamp's traced ghost light over all light; 0 for a rod-lens
+  array, whose model has no stray path (skin and resin absorb: ``ghost_note`` says so).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..analysis.efficiency import efficiency
+from ..analysis.rmtf import depth_of_field, rmtf
+from ..analysis.rodlens import rod_contrast, rod_efficiency
+from ..defaults import DOF_DPI, DOF_THRESHOLD, Z_GRID_MM
+from ..design import AnyDesign, Design, RodLensDesign
+from ..validate import parse_grid
+
+#: Chart resolutions of the overlay plot (dpi).
+COMPARE_DPI = (100.0, 200.0, 300.0)
+#: Heights (mm from the document reference) of a stamp's contrast curve.
+STAMP_HEIGHTS_MM = parse_grid(Z_GRID_MM, "z_mm", 0.0, 100.0)
+#: Heights (mm from the nominal object plane) of a rod-lens array's contrast curve.
+ROD_HEIGHTS_MM = tuple(np.round(np.arange(-1.5, 1.5001, 0.125), 6))
+
+
+def _kind(design: AnyDesign) -> str:
+    return "rod-lens-array" if isinstance(design, RodLensDesign) else "stamp"
+
+
+def evaluate_stamp(design: Design, *, seed: int = 0, fresnel: bool = False) -> dict:
+    eff = efficiency(design, seed=seed, fresnel=fresnel, area_scales=(1.0,), z_mm=(0.0,))
+    hs = np.asarray(STAMP_HEIGHTS_MM)
+    r = rmtf(design, dpi=COMPARE_DPI, z_mm=hs, seed=seed, fresnel=fresnel)
+    key = f"{DOF_DPI:g}"
+    high = depth_of_field(hs, np.asarray(r.rmtf_max[key]), DOF_THRESHOLD)
+    ghost = eff.etendue_ghost_um2sr / eff.etendue_um2sr if eff.etendue_um2sr > 0 else 0.0
+    return {
+        "light_vs_f10": eff.ratio_own,
+        "light_vs_f10_se": eff.etendue_own_se / eff.reference_etendue_um2sr,
+        "light_vs_f10_with_ghosts": eff.ratio,
+        "working_f_number": eff.working_f_number_own,
+        "thickness_mm": design.reference_plane_um / 1000,
+        "nominal_object_plane_mm": 0.0,
+        "dof_mm": {
+            "low": 0.0,
+            "high": high,
+            "span": high,
+            "clipped_high": bool(high >= hs[-1]),
+            "note": "low end: the reference plane, the closest a document can come",
+        },
+        "ghost_fraction": ghost,
+        "ghost_note": "traced ghost (crosstalk) light over all light reaching the pixel",
+        "contrast": {
+            "heights_mm": hs.tolist(),
+            "by_dpi": {f"{d:g}": list(r.rmtf_max[f"{d:g}"]) for d in COMPARE_DPI},
+        },
+        "estimator": "trace",
+    }
+
+
+def evaluate_rodlens(design: RodLensDesign, *, seed: int = 0, fresnel: bool = False) -> dict:
+    eff = rod_efficiency(design, seed=seed, fresnel=fresnel)
+    con = rod_contrast(
+        design, dpi=COMPARE_DPI, heights_mm=ROD_HEIGHTS_MM, seed=seed, fresnel=fresnel
+    )
+    a = design.array
+    return {
+        "light_vs_f10": eff.ratio,
+        "light_vs_f10_se": eff.ratio_se,
+        "working_f_number": eff.working_f_number,
+        "ripple": eff.ripple,
+        "ripple_noise": eff.ripple_noise,
+        "thickness_mm": design.reference_plane_um / 1000,
+        "conjugate_length_mm": a.conjugate_um / 1000,
+        "rod_length_mm": a.length_um / 1000,
+        "working_distance_mm": a.working_um / 1000,
+        "nominal_object_plane_mm": 0.0,
+        "dof_mm": dict(con.dof_mm),
+        "ghost_fraction": 0.0,
+        "ghost_note": "no stray path in the model: rod skin and black resin absorb",
+        "contrast": {
+            "heights_mm": con.heights_mm,
+            "by_dpi": {f"{d:g}": row for d, row in zip(COMPARE_DPI, con.contrast, strict=True)},
+        },
+        "estimator": "trace",
+    }
+
+
+def evaluate(design: AnyDesign, *, seed: int = 0, fresnel: bool = False) -> dict:
+    """One design's comparison figures (see the module's docstring for definitions)."""
+    run = evaluate_rodlens if isinstance(design, RodLensDesign) else evaluate_stamp
+    out = run(design, seed=seed, fresnel=fresnel)
+    return {
+        "name": design.name,
+        "kind": _kind(design),
+        "fingerprint": design.fingerprint(),
+        "seed": seed,
+        "fresnel": fresnel,
+    } | out
+
+
+def compare(designs, *, seed: int = 0, fresnel: bool = False) -> list[dict]:
+    """Evaluate each design; add each one's light relative to the first."""
+    rows = [evaluate(d, seed=seed, fresnel=fresnel) for d in designs]
+    ref = rows[0]["light_vs_f10"]
+    for r in rows:
+        r["light_vs_first"] = r["light_vs_f10"] / ref if ref > 0 else math.inf
+    return rows

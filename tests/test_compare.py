@@ -1,0 +1,80 @@
+"""`opticalstamp compare`: any mix of kinds, one JSON object per design, one page."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from edges import assert_clean_refusal, run
+from opticalstamp.design import load_design
+from opticalstamp.studies.compare import evaluate
+
+
+def test_compare_cli_writes_page_json_and_figures(tmp_path):
+    out = tmp_path / "cmp"
+    res = run(["compare", "paper2016", "sla-1row-12deg", "-o", str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.stdout)["designs"]
+    assert [r["kind"] for r in rows] == ["stamp", "rod-lens-array"]
+    for r in rows:
+        for key in ("light_vs_f10", "working_f_number", "thickness_mm", "dof_mm", "ghost_fraction"):
+            assert key in r
+        assert r["dof_mm"]["span"] == pytest.approx(r["dof_mm"]["high"] - r["dof_mm"]["low"])
+    stamp, rodl = rows
+    assert rodl["ghost_fraction"] == 0.0 and "no stray path" in rodl["ghost_note"]
+    # paper section 4: the stamp has about 1/100 of a rod-lens array's light; >= 15 mm thick
+    assert 50 < rodl["light_vs_f10"] / stamp["light_vs_f10"] < 200
+    assert rodl["thickness_mm"] > 5 * stamp["thickness_mm"]
+    assert {p.name for p in out.iterdir()} == {
+        "index.html",
+        "compare.json",
+        "contrast.png",
+        "light.png",
+    }
+    assert "sla-1row-12deg" in (out / "index.html").read_text()
+
+
+def test_stamp_light_is_own_path_only():
+    d = load_design("paper2016")
+    r = evaluate(d)
+    assert r["light_vs_f10"] < r["light_vs_f10_with_ghosts"]
+    assert r["ghost_fraction"] == pytest.approx(
+        1 - r["light_vs_f10"] / r["light_vs_f10_with_ghosts"], rel=1e-9
+    )
+
+
+@pytest.mark.parametrize("cmd", [["ghosts"], ["spots"], ["rmtf"], ["efficiency"]])
+def test_stamp_commands_refuse_a_rod_lens_design_clearly(cmd):
+    res = run([*cmd, "--design", "sla-1row-12deg"])
+    assert_clean_refusal(res, "rod-lens-array design")
+
+
+@pytest.mark.parametrize(
+    ("patch", "field"),
+    [
+        ("numerical_aperture = 1.7", "numerical_aperture"),
+        ("core_radius_um = 400.0", "core_radius_um"),
+        ("overlap = 0.2", "overlap"),
+        ("rows = 3", "rows"),
+    ],
+)
+def test_bad_rod_design_files_exit_2_naming_the_field(tmp_path, patch, field):
+    key = patch.split(" =")[0]
+    lines = [
+        'kind = "rod-lens-array"',
+        "wavelength_um = 0.55",
+        "[array]",
+        "rows = 1",
+        "rod_radius_um = 250.0",
+        "core_radius_um = 235.0",
+        "n0 = 1.6",
+        "numerical_aperture = 0.2",
+        "overlap = 1.7",
+    ]
+    lines = [patch if ln.startswith(key + " ") else ln for ln in lines]
+    f = tmp_path / "bad.toml"
+    f.write_text("\n".join(lines) + "\n")
+    res = run(["compare", "paper2016", str(f), "-o", str(tmp_path / "o")])
+    assert_clean_refusal(res, field)
+    assert not (tmp_path / "o").exists()
