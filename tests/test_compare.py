@@ -31,6 +31,7 @@ def test_compare_cli_writes_page_json_and_figures(tmp_path):
         "compare.json",
         "contrast.png",
         "light.png",
+        "text.png",
     }
     assert "sla-1row-12deg" in (out / "index.html").read_text()
 

@@ -126,6 +126,10 @@ def fail(msg: str) -> None:
     raise typer.Exit(2)
 
 
+#: Commands that take either kind of design.
+BOTH_KINDS = ("stamp", "rod-lens-array")
+
+
 def open_design(spec: str, kinds: tuple[str, ...] = ("stamp",)) -> AnyDesign:
     """Load a design (InputError: exit 2); print a stamp's geometric-optics warnings.
 

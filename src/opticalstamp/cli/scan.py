@@ -11,6 +11,7 @@ import typer
 from ..units import pitch_of_dpi, um_to_mm
 from ..validate import check_output_path
 from .common import (
+    BOTH_KINDS,
     DesignOpt,
     FresnelOpt,
     JsonOpt,
@@ -177,7 +178,7 @@ def scan(
     from ..io.files import encode_png, encode_tiff16, provenance, to_json, write_set
 
     png, tif, sidecar = _scan_outputs(output)
-    d = open_design(design)
+    d = open_design(design, kinds=BOTH_KINDS)
     st = _settings(
         illumination, kernel, speed_error, surround, illuminance_lux, exposure_ms, fresnel
     )
@@ -260,7 +261,7 @@ def ocr_eval(
     from ..imaging.scan import prepare_kernels, simulate_scan
     from ..io.files import linear_to_srgb, provenance
 
-    d = open_design(design)
+    d = open_design(design, kinds=BOTH_KINDS)
     try:
         truth = text.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:

@@ -18,6 +18,7 @@ from ..defaults import (
 )
 from ..validate import check_number
 from .common import (
+    BOTH_KINDS,
     DesignOpt,
     FresnelOpt,
     JsonOpt,
@@ -352,7 +353,7 @@ def compare(
 
     if len(designs) < 2:
         fail("compare: give at least two designs")
-    ds = [open_design(s, kinds=("stamp", "rod-lens-array")) for s in designs]
+    ds = [open_design(s, kinds=BOTH_KINDS) for s in designs]
     rows = write_comparison(ds, out, seed=seed, fresnel=fresnel)
     lines = [
         f"{'design':<22} {'kind':<15} {'light/F10':>10} {'vs first':>9} {'F_w':>6} "

@@ -28,7 +28,7 @@ from ..analysis.lsf import (
     traced_map_sets,
 )
 from ..defaults import RAYS_MAP
-from ..design import Design
+from ..design import AnyDesign, Design, RodLensDesign
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 
 
@@ -134,7 +134,7 @@ def traced_kernels(
     return out
 
 
-def kernel_source(design: Design, source: str = "auto", fresnel: bool = False) -> str:
+def kernel_source(design: AnyDesign, source: str = "auto", fresnel: bool = False) -> str:
     """What ``source`` means for this design: "paraxial" or "trace" (see :func:`scan_kernels`).
 
     Raises
@@ -142,6 +142,10 @@ def kernel_source(design: Design, source: str = "auto", fresnel: bool = False) -
     ValueError
         For an unknown source, or "paraxial" with circular holes.
     """
+    if isinstance(design, RodLensDesign):  # no closed form: always traced
+        if source not in ("auto", "trace"):
+            raise ValueError(f"a rod-lens array's kernels are traced (got source {source!r})")
+        return "trace"
     rect = all(m.shape != "circle" for m in design.masks)
     if source == "auto":
         source = "paraxial" if rect and not fresnel else "trace"
@@ -158,7 +162,7 @@ def _rays(source: str, n_rays: int) -> int:
 
 
 def scan_kernels(
-    design: Design,
+    design: AnyDesign,
     z_mm,
     *,
     source: str = "auto",
@@ -182,7 +186,7 @@ def scan_kernels(
 
 
 def _kernel_sets(
-    design: Design,
+    design: AnyDesign,
     z_sets,
     source: str,
     ghosts: bool,
@@ -192,8 +196,15 @@ def _kernel_sets(
     progress: bool,
     tracer: PixelTracer | None,
 ) -> list[list[list[ScanKernel]]]:
-    """Kernels [set][row][level] for each set of distances, from one trace per row."""
+    """Kernels [set][row][level] for each set of distances, from one trace per row
+    (a rod-lens array: [set][phase class][level], from one trace)."""
     source = kernel_source(design, source, fresnel)
+    if isinstance(design, RodLensDesign):
+        from .rodkernels import rod_kernel_sets
+
+        return rod_kernel_sets(
+            design, z_sets, fresnel=fresnel, n_rays=n_rays, seed=seed, progress=progress
+        )
     sampling = Sampling(_rays(source, n_rays), seed, fresnel)
     tr = tracer_for(design, sampling, tracer)  # one reverse path for every row
     out = [[] for _ in z_sets]
@@ -251,7 +262,7 @@ class KernelCache:
 
     def lookup(
         self,
-        design: Design,
+        design: AnyDesign,
         levels,
         *,
         source: str = "auto",
@@ -299,7 +310,7 @@ class KernelCache:
 
 
 def kernel_cache(
-    design: Design,
+    design: AnyDesign,
     level_sets,
     *,
     source: str = "auto",

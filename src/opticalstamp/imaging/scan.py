@@ -30,7 +30,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy import ndimage, signal
 
 from ..defaults import RAYS_MAP
-from ..design import Design
+from ..design import AnyDesign, Design, RodLensDesign
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import lattice_of, output_pitch
 from ..units import dpi_of_pitch, pitch_of_dpi
@@ -159,6 +159,50 @@ def _ghost_signal(blocks: np.ndarray, kern: ScanKernel, centers, x_pix, surround
     return ndimage.map_coordinates(r, [yy, xx], order=1, mode="constant", cval=surround * g.sum())
 
 
+@dataclass(frozen=True)
+class PixelGroup:
+    """Pixels that share one kernel: their x centres, the sensor y of their row, the line
+    delay of their row, and the index of their kernels in ``scan_kernels``' output."""
+
+    x_um: np.ndarray
+    y_um: float
+    delay: int
+    kernel: int
+
+
+def scan_pitch(design: AnyDesign) -> float:
+    """Output pixel pitch (um) of a scan: the merged pitch of a stamp, a rod-lens array's
+    sensor pitch."""
+    if isinstance(design, RodLensDesign):
+        return design.output_pitch_um
+    return output_pitch(design)
+
+
+def pixel_groups(design: AnyDesign, n_cols: int) -> list[PixelGroup]:
+    """The output columns (c + 1/2) pitch, c < n_cols, grouped by the kernel they use.
+
+    A stamp: its rows of used pixels (row B delayed by row offset / pitch lines). A
+    rod-lens array: its pixels' phase classes on the rod lattice (one sensor row);
+    classes without a pixel are left out.
+    """
+    pitch = scan_pitch(design)
+    if isinstance(design, RodLensDesign):
+        from .rodkernels import phase_of
+
+        x = (np.arange(n_cols) + 0.5) * pitch
+        cls = phase_of(design, x)
+        return [PixelGroup(x[cls == g], 0.0, 0, int(g)) for g in np.unique(cls)]
+    lat = lattice_of(design)
+    n_rows = design.sensor.rows
+    delay = int(round(lat.row_y[1] / pitch)) if n_rows == 2 else 0
+    out = []
+    for r in range(n_rows):
+        n_k = n_cols // n_rows + 1
+        x_pix = lat.row_x[r] % lat.pitch + np.arange(n_k) * lat.pitch + pitch / 2
+        out.append(PixelGroup(x_pix[x_pix < n_cols * pitch], lat.row_y[r], delay * r, r))
+    return out
+
+
 def scan_levels(z_mm: float | None, height_map: np.ndarray | None, z_step_mm: float) -> list[float]:
     """The distances (mm) whose kernels a scan needs: ``z_mm``, or for a height map every
     multiple of ``z_step_mm`` from below its lowest to above its highest point."""
@@ -272,14 +316,13 @@ def simulate_scan(
         check_range(np.asarray(height_map), "height_map")
     p = pitch_of_dpi(doc_dpi)
     h_um, w_um = doc.shape[0] * p, doc.shape[1] * p
-    lat = lattice_of(design)
-    n_rows = design.sensor.rows
-    pitch = output_pitch(design)
+    pitch = scan_pitch(design)
     n_lines = int(np.floor(h_um / pitch))
     n_cols = int(np.floor(w_um / pitch))
     if n_lines < 1 or n_cols < 1:
         raise ValueError("document smaller than one output pixel")
-    delay = int(round(lat.row_y[1] / pitch)) if n_rows == 2 else 0
+    groups = pixel_groups(design, n_cols)
+    delay = max(g.delay for g in groups)
     rng_lines = np.random.default_rng([seed, 7])
     step = (
         pitch
@@ -299,6 +342,8 @@ def simulate_scan(
         kern = scan_kernels(design, levels, progress=progress, **how)
     else:
         kern = kernels.lookup(design, levels, **how)
+    kern = [kern[g.kernel] for g in groups]
+    n_rows = len(groups)
     n_ch = doc.shape[2]
     duty = st.sensor.exposure_duty
     smear = duty * pitch / (3 if color else 1)
@@ -312,17 +357,15 @@ def simulate_scan(
     by_row: dict[int, list] = {r: [None] * n_ch for r in range(n_rows)}
     blocks: dict[int, np.ndarray] = {}
     for r, ch in jobs:
-        n_k = n_cols // n_rows + 1
-        x_pix = lat.row_x[r] % lat.pitch + np.arange(n_k) * lat.pitch + pitch / 2
-        x_pix = x_pix[x_pix < n_cols * pitch]
-        n_l = n_lines + (delay if r == 1 else 0)
-        centers = y_line[:n_l] - lat.row_y[r]
+        x_pix, row_y = groups[r].x_um, groups[r].y_um
+        n_l = n_lines + groups[r].delay
+        centers = y_line[:n_l] - row_y
         if color:
             centers = centers + (ch - 1) * pitch / 3
         z_loc = None
         if height_map is not None:
             z_loc = sample_height(
-                np.asarray(height_map), h_um / 1000, w_um / 1000, centers + lat.row_y[r], x_pix
+                np.asarray(height_map), h_um / 1000, w_um / 1000, centers + row_y, x_pix
             )
         sig = np.zeros((n_l, x_pix.size))
         for il, zl in enumerate(levels):
@@ -368,7 +411,7 @@ def simulate_scan(
         (raw[r] - darks[r][None]) / np.maximum(whites[r] - darks[r], 1e-9)[None]
         for r in range(n_rows)
     ]
-    image = merge_rows(corrected, pix_x, delay, n_lines)
+    image = merge_rows(corrected, pix_x, [g.delay for g in groups], n_lines)
     if not color:
         image = image[..., 0]
         raw = [a[..., 0] for a in raw]
@@ -400,13 +443,12 @@ def simulate_scan(
 
 
 def merge_rows(
-    rows: list[np.ndarray], x_pix: list[np.ndarray], delay: int, n_lines: int
+    rows: list[np.ndarray], x_pix: list[np.ndarray], delays: list[int], n_lines: int
 ) -> np.ndarray:
-    """Merge the staggered rows into one image: row B's line m + delay goes with row A's
-    line m (paper §4); columns are ordered by the pixels' x."""
-    parts = [rows[0][:n_lines]]
-    if len(rows) == 2:
-        parts.append(rows[1][delay : delay + n_lines])
+    """Merge the pixel groups into one image: group g's line m + delays[g] goes with line m
+    (the stamp's row B, paper §4: delay = row offset / line pitch); columns are ordered by
+    the pixels' x."""
+    parts = [r[d : d + n_lines] for r, d in zip(rows, delays, strict=True)]
     x = np.concatenate(x_pix)
     order = np.argsort(x, kind="stable")
     return np.concatenate(parts, axis=1)[:, order]

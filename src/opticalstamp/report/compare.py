@@ -6,7 +6,7 @@ import html
 from pathlib import Path
 
 from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
-from ..studies.compare import compare
+from ..studies.compare import TEXT_HEIGHTS_MM, compare, text_scans
 from .html import table
 
 _STYLE = (
@@ -81,10 +81,19 @@ def write_comparison(
     figures = {
         "contrast.png": "contrast vs object height",
         "light.png": "light and thickness",
+        "text.png": "the same 8-pt text scanned by each design",
     }
     with replace_folder(Path(out_dir)) as tmp:
         save_figure(plotting.plot_compare_contrast(rows), tmp / "contrast.png")
         save_figure(plotting.plot_compare_light(rows), tmp / "light.png")
+        panels = text_scans(designs, seed=seed, fresnel=fresnel)
+        fig = plotting.plot_scan_panels(
+            panels,
+            "heights from each design's document reference",
+            cols=len(TEXT_HEIGHTS_MM),
+            interpolation="antialiased",
+        )
+        save_figure(fig, tmp / "text.png")
         data = {"designs": rows, "provenance": [provenance(d, seed) for d in designs]}
         write_atomic(tmp / "compare.json", to_json(data))
         write_atomic(tmp / "index.html", page(rows, figures))

@@ -297,8 +297,13 @@ def plot_chart_profiles(profiles: list[dict]):
     return fig
 
 
-def plot_scan_panels(panels: list[tuple[str, np.ndarray]], title: str, cols: int = 1):
-    """Simulated scans side by side or stacked (paper Figs. 8, 9, 12 a-b), display-encoded."""
+def plot_scan_panels(
+    panels: list[tuple[str, np.ndarray]], title: str, cols: int = 1, interpolation="nearest"
+):
+    """Simulated scans side by side or stacked (paper Figs. 8, 9, 12 a-b), display-encoded.
+
+    ``interpolation``: "nearest" shows the pixels; "antialiased" for panels drawn smaller
+    than their pixel count (nearest would drop pixels)."""
     from ..io.files import linear_to_srgb
 
     rows = int(np.ceil(len(panels) / cols))
@@ -310,7 +315,7 @@ def plot_scan_panels(panels: list[tuple[str, np.ndarray]], title: str, cols: int
         squeeze=False,
     )
     for ax, (name, img) in zip(axes.ravel(), panels, strict=False):
-        ax.imshow(linear_to_srgb(img), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+        ax.imshow(linear_to_srgb(img), cmap="gray", vmin=0, vmax=1, interpolation=interpolation)
         ax.set_title(name, fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])

@@ -36,6 +36,10 @@ from ..validate import parse_grid
 COMPARE_DPI = (100.0, 200.0, 300.0)
 #: Heights (mm from the document reference) of a stamp's contrast curve.
 STAMP_HEIGHTS_MM = parse_grid(Z_GRID_MM, "z_mm", 0.0, 100.0)
+#: Heights (mm from the document reference) of the text scanned by each design.
+TEXT_HEIGHTS_MM = (0.0, 0.5, 1.0, 2.0)
+#: Sampling (dpi) of the text document scanned by each design.
+TEXT_DPI = 600.0
 #: Heights (mm from the nominal object plane) of a rod-lens array's contrast curve.
 ROD_HEIGHTS_MM = tuple(np.round(np.arange(-1.5, 1.5001, 0.125), 6))
 
@@ -123,3 +127,21 @@ def compare(designs, *, seed: int = 0, fresnel: bool = False) -> list[dict]:
     for r in rows:
         r["light_vs_first"] = r["light_vs_f10"] / ref if ref > 0 else math.inf
     return rows
+
+
+def text_scans(designs, *, heights_mm=TEXT_HEIGHTS_MM, seed: int = 0, fresnel: bool = False):
+    """The same text (the built-in text chart's first half lines) scanned by each design at
+    each height: [(title, image)] in design-major order, linear reflectance."""
+    from ..imaging.charts import text_chart
+    from ..imaging.scan import ScanSettings, prepare_kernels, simulate_scan
+
+    doc, _ = text_chart(TEXT_DPI)
+    doc = doc[: doc.shape[0] // 2, : doc.shape[1] // 2]  # two half lines of 8-pt text
+    st = ScanSettings(fresnel=fresnel)
+    panels = []
+    for d in designs:
+        kern = prepare_kernels(d, z_mm=heights_mm, settings=st, seed=seed)
+        for z in heights_mm:
+            r = simulate_scan(doc, TEXT_DPI, d, z_mm=z, settings=st, seed=seed, kernels=kern)
+            panels.append((f"{d.name}, {z:g} mm", r.image))
+    return panels
