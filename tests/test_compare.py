@@ -32,6 +32,7 @@ def test_compare_cli_writes_page_json_and_figures(tmp_path):
         "contrast.png",
         "light.png",
         "text.png",
+        "rodlens-1.png",
     }
     assert "sla-1row-12deg" in (out / "index.html").read_text()
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
+from ..analysis.rodlens import rod_psf
 from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
 from ..studies.compare import TEXT_HEIGHTS_MM, compare, text_scans
 from .html import table
@@ -94,6 +95,12 @@ def write_comparison(
             interpolation="antialiased",
         )
         save_figure(fig, tmp / "text.png")
+        for i, (d, r) in enumerate(zip(designs, rows, strict=True)):
+            if r["kind"] == "rod-lens-array":
+                name = f"rodlens-{i}.png"
+                psf = rod_psf(d, seed=seed)
+                save_figure(plotting.plot_rod_details(r, psf), tmp / name)
+                figures[name] = f"{d.name}: ripple, MTF and point PSFs"
         data = {"designs": rows, "provenance": [provenance(d, seed) for d in designs]}
         write_atomic(tmp / "compare.json", to_json(data))
         write_atomic(tmp / "index.html", page(rows, figures))

@@ -521,3 +521,36 @@ def plot_rod_ripple(eff):
         fontsize=9,
     )
     return fig
+
+
+def plot_rod_details(row: dict, psf: dict):
+    """A rod-lens array: ripple along one rod period, MTF vs height, point PSFs."""
+    fig, axes = _subplots(1, 4, figsize=(14, 3.3), layout="constrained")
+    rp = row["ripple_profile"]
+    axes[0].plot(rp["positions_um"], rp["relative"], "o-", ms=3)
+    axes[0].set_xlabel("pixel centre from a rod axis (um)")
+    axes[0].set_ylabel("etendue / mean")
+    axes[0].set_title(f"ripple {row['ripple']:.3f} (noise ~{row['ripple_noise']:.3f})", fontsize=9)
+    m = row["mtf"]
+    for key, vals in m["by_dpi"].items():
+        axes[1].plot(m["heights_mm"], vals, label=f"{key} dpi")
+    axes[1].set_xlabel("height from focus (mm)")
+    axes[1].set_ylabel("MTF at the chart fundamental")
+    axes[1].legend(fontsize=7)
+    edges = np.asarray(psf["x_edges_um"])
+    ext = [edges[0], edges[-1], edges[0], edges[-1]]
+    k = len(psf["heights_mm"]) - 1
+    for ax, (name, at) in zip(axes[2:], psf["at"].items(), strict=False):
+        img = np.asarray(at["by_height"][k]["image"])
+        ax.imshow(img, extent=ext, origin="lower", cmap="magma", interpolation="nearest")
+        ax.set_title(
+            f"point {name} (x = {at['x_um']:.0f} um), {psf['heights_mm'][k]:g} mm: "
+            f"rms {at['by_height'][k]['rms_um']:.0f} um",
+            fontsize=8,
+        )
+        ax.set_xlabel("x (um)")
+        half = max(150.0, 4 * at["by_height"][k]["rms_um"])
+        ax.set_xlim(-half, half)
+        ax.set_ylim(-half, half)
+    fig.suptitle(f"{row['name']}: rod-lens array details", fontsize=10)
+    return fig

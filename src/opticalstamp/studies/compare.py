@@ -103,6 +103,14 @@ def evaluate_rodlens(design: RodLensDesign, *, seed: int = 0, fresnel: bool = Fa
             "heights_mm": con.heights_mm,
             "by_dpi": {f"{d:g}": row for d, row in zip(COMPARE_DPI, con.contrast, strict=True)},
         },
+        "mtf": {
+            "heights_mm": con.heights_mm,
+            "by_dpi": {f"{d:g}": row for d, row in zip(COMPARE_DPI, con.mtf, strict=True)},
+        },
+        "ripple_profile": {
+            "positions_um": eff.positions_um,
+            "relative": (np.asarray(eff.etendue_by_position_um2sr) / eff.etendue_um2sr).tolist(),
+        },
         "estimator": "trace",
     }
 
