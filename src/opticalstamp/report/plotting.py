@@ -465,7 +465,9 @@ def plot_compare_contrast(rows: list[dict], dof_dpi: float = 200.0, threshold: f
 
     One panel per chart resolution; stamps solid, rod-lens arrays dashed.
     """
-    keys = list(rows[0]["contrast"]["by_dpi"])
+    keys = [
+        k for k in rows[0]["contrast"]["by_dpi"] if all(k in r["contrast"]["by_dpi"] for r in rows)
+    ]
     fig, axes = _subplots(1, len(keys), figsize=(4.0 * len(keys), 3.6), sharey=True)
     axes = np.atleast_1d(axes)
     for ax, key in zip(axes, keys, strict=True):

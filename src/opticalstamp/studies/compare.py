@@ -26,9 +26,9 @@ import math
 import numpy as np
 
 from ..analysis.efficiency import efficiency
-from ..analysis.rmtf import depth_of_field, rmtf
+from ..analysis.rmtf import rmtf
 from ..analysis.rodlens import rod_contrast, rod_efficiency
-from ..defaults import DOF_DPI, DOF_THRESHOLD, Z_GRID_MM
+from ..defaults import Z_GRID_MM
 from ..design import AnyDesign, Design, RodLensDesign
 from ..validate import parse_grid
 
@@ -50,10 +50,14 @@ def _kind(design: AnyDesign) -> str:
 
 def evaluate_stamp(design: Design, *, seed: int = 0, fresnel: bool = False) -> dict:
     eff = efficiency(design, seed=seed, fresnel=fresnel, area_scales=(1.0,), z_mm=(0.0,))
-    hs = np.asarray(STAMP_HEIGHTS_MM)
-    r = rmtf(design, dpi=COMPARE_DPI, z_mm=hs, seed=seed, fresnel=fresnel)
-    key = f"{DOF_DPI:g}"
-    high = depth_of_field(hs, np.asarray(r.rmtf_max[key]), DOF_THRESHOLD)
+    r = rmtf(design, dpi=COMPARE_DPI, z_mm=STAMP_HEIGHTS_MM, seed=seed, fresnel=fresnel)
+    return stamp_row(design, eff, r)
+
+
+def stamp_row(design: Design, eff, r) -> dict:
+    """A stamp's comparison figures from its efficiency and (traced) RMTF results."""
+    key = f"{r.dof_dpi:g}"
+    high = float(r.dof_mm[key])
     ghost = eff.etendue_ghost_um2sr / eff.etendue_um2sr if eff.etendue_um2sr > 0 else 0.0
     return {
         "light_vs_f10": eff.ratio_own,
@@ -66,16 +70,17 @@ def evaluate_stamp(design: Design, *, seed: int = 0, fresnel: bool = False) -> d
             "low": 0.0,
             "high": high,
             "span": high,
-            "clipped_high": bool(high >= hs[-1]),
+            "clipped_high": bool(high >= r.z_mm[-1]),
             "note": "low end: the reference plane, the closest a document can come",
         },
+        "dof_dpi": r.dof_dpi,
         "ghost_fraction": ghost,
         "ghost_note": "traced ghost (crosstalk) light over all light reaching the pixel",
         "contrast": {
-            "heights_mm": hs.tolist(),
-            "by_dpi": {f"{d:g}": list(r.rmtf_max[f"{d:g}"]) for d in COMPARE_DPI},
+            "heights_mm": list(r.z_mm),
+            "by_dpi": {k: list(v) for k, v in r.rmtf_max.items() if float(k) in COMPARE_DPI},
         },
-        "estimator": "trace",
+        "estimator": r.method,
     }
 
 
@@ -118,19 +123,27 @@ def evaluate_rodlens(design: RodLensDesign, *, seed: int = 0, fresnel: bool = Fa
 def evaluate(design: AnyDesign, *, seed: int = 0, fresnel: bool = False) -> dict:
     """One design's comparison figures (see the module's docstring for definitions)."""
     run = evaluate_rodlens if isinstance(design, RodLensDesign) else evaluate_stamp
-    out = run(design, seed=seed, fresnel=fresnel)
+    return labelled(design, run(design, seed=seed, fresnel=fresnel), seed, fresnel)
+
+
+def labelled(design: AnyDesign, row: dict, seed: int, fresnel: bool) -> dict:
+    """A design's row with its name, kind, fingerprint, seed and Fresnel setting first."""
     return {
         "name": design.name,
         "kind": _kind(design),
         "fingerprint": design.fingerprint(),
         "seed": seed,
         "fresnel": fresnel,
-    } | out
+    } | row
 
 
 def compare(designs, *, seed: int = 0, fresnel: bool = False) -> list[dict]:
     """Evaluate each design; add each one's light relative to the first."""
-    rows = [evaluate(d, seed=seed, fresnel=fresnel) for d in designs]
+    return relative_to_first([evaluate(d, seed=seed, fresnel=fresnel) for d in designs])
+
+
+def relative_to_first(rows: list[dict]) -> list[dict]:
+    """Add ``light_vs_first``: each row's light over the first row's."""
     ref = rows[0]["light_vs_f10"]
     for r in rows:
         r["light_vs_first"] = r["light_vs_f10"] / ref if ref > 0 else math.inf
