@@ -46,7 +46,7 @@ def test_stamp_light_is_own_path_only():
     )
 
 
-@pytest.mark.parametrize("cmd", [["ghosts"], ["spots"], ["rmtf"], ["efficiency"]])
+@pytest.mark.parametrize("cmd", [["ghosts"], ["spots"], ["rmtf"], ["psf"], ["report"]])
 def test_stamp_commands_refuse_a_rod_lens_design_clearly(cmd):
     res = run([*cmd, "--design", "sla-1row-12deg"])
     assert_clean_refusal(res, "rod-lens-array design")
@@ -80,3 +80,13 @@ def test_bad_rod_design_files_exit_2_naming_the_field(tmp_path, patch, field):
     res = run(["compare", "paper2016", str(f), "-o", str(tmp_path / "o")])
     assert_clean_refusal(res, field)
     assert not (tmp_path / "o").exists()
+
+
+def test_efficiency_command_takes_a_rod_lens_design():
+    res = run(["efficiency", "--design", "sla-1row-12deg", "--json"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["estimator"] == "trace" and data["ratio"] > 1
+    assert data["working_f_number"] == pytest.approx(10 / data["ratio"] ** 0.5)
+    res = run(["efficiency", "--design", "sla-1row-12deg", "--study"])
+    assert_clean_refusal(res, "--study")
