@@ -17,7 +17,7 @@ from opticalstamp.analysis.rmtf import rmtf
 from opticalstamp.design import load_design
 
 
-def _median_time(fn, repeats: int) -> tuple[float, object]:
+def median_time(fn, repeats: int) -> tuple[float, object]:
     fn()
     times, out = [], None
     for _ in range(repeats):
@@ -29,10 +29,10 @@ def _median_time(fn, repeats: int) -> tuple[float, object]:
 
 if __name__ == "__main__":
     design = load_design("paper2016")
-    t, res = _median_time(lambda: rmtf(design), 5)
+    t, res = median_time(lambda: rmtf(design), 5)
     se = max(max(v) for v in res.rmtf_max_se.values())
     print(f"RMTF table 4 periods x {len(res.z_mm)} Z: {t:.2f} s (max SE {se:.4f})")
-    t, _ = _median_time(lambda: rmtf(design, method="paraxial"), 5)
+    t, _ = median_time(lambda: rmtf(design, method="paraxial"), 5)
     print(f"RMTF table, paraxial closed form (own path): {t:.3f} s")
-    t, _ = _median_time(lambda: slit_case(wavelengths_um=(0.4, 0.7)), 5)
+    t, _ = median_time(lambda: slit_case(wavelengths_um=(0.4, 0.7)), 5)
     print(f"diffraction profile at two wavelengths: {t:.3f} s")

@@ -10,28 +10,17 @@ Medians of several runs after a warm-up (kernels compiled and cached first).
 from __future__ import annotations
 
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+from bench_metrics import median_time
 
 from opticalstamp.analysis.rodlens import rod_contrast, rod_efficiency
 from opticalstamp.design import load_design
 from opticalstamp.raytrace.rodlens import trace_rods
-
-
-def _median_time(fn, repeats: int) -> tuple[float, object]:
-    fn()
-    times, out = [], None
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times), out
 
 
 def _both(design):
@@ -44,14 +33,14 @@ if __name__ == "__main__":
     print(f"load average before: {os.getloadavg()[0]:.2f}")
     for name in ("sla-1row-12deg", "sla-2row-20deg"):
         d = load_design(name)
-        t, (e, c) = _median_time(lambda d=d: _both(d), 3)
+        t, (e, c) = median_time(lambda d=d: _both(d), 3)
         print(
             f"{name}: efficiency (SE {e.etendue_se / e.etendue_um2sr:.2%}) + contrast table "
             f"{len(c.heights_mm)} heights x {len(c.dpi)} dpi: {t:.2f} s"
         )
         n = 1 << 22
         pix = np.linspace(0, 2 * d.array.rod_radius_um, 32, endpoint=False)
-        t, _ = _median_time(lambda d=d, pix=pix, n=n: trace_rods(d, pix, n_rays=n), 3)
+        t, _ = median_time(lambda d=d, pix=pix, n=n: trace_rods(d, pix, n_rays=n), 3)
         print(f"{name}: rod tracer {n / t / 1e6:.2f} M launched rays/s")
     with tempfile.TemporaryDirectory() as tmp:
         exe = Path(sys.executable).with_name("opticalstamp")
@@ -62,5 +51,5 @@ if __name__ == "__main__":
         def run():
             subprocess.run(cmd, check=True, capture_output=True)
 
-        t, _ = _median_time(run, 3)
+        t, _ = median_time(run, 3)
     print(f"compare paper2016 sla-1row-12deg (whole process): {t:.1f} s")

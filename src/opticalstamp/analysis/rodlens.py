@@ -59,15 +59,24 @@ def _provenance(design: RodLensDesign, rays: RodRays) -> dict:
     }
 
 
-# -- light ------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class RodEfficiency:
+class RodResult:
+    """What every rod-lens result carries: the design, how it was traced."""
+
     design: str
     fingerprint: str
     seed: int
     fresnel: bool
     estimator: str
     n_rays: int
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+# -- light ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RodEfficiency(RodResult):
     etendue_um2sr: float
     etendue_se: float
     reference_etendue_um2sr: float
@@ -81,9 +90,6 @@ class RodEfficiency:
     ripple_noise: float  # expected (max - min) / mean of pure noise at this ray count
     ledger: dict
     meta: dict = field(default_factory=dict)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 def rod_efficiency(
@@ -145,13 +151,7 @@ def _range_of_normals(n: int) -> float:
 
 # -- contrast, MTF and depth of field ------------------------------------------------------
 @dataclass(frozen=True)
-class RodContrast:
-    design: str
-    fingerprint: str
-    seed: int
-    fresnel: bool
-    estimator: str
-    n_rays: int
+class RodContrast(RodResult):
     dpi: list[float]
     heights_mm: list[float]
     contrast: list[list[float]]  # (dpi, height): shading-corrected RMTF
@@ -164,9 +164,6 @@ class RodContrast:
     lsf_x_um: list[float]
     lsf: list[list[float]]  # (height, x): position-averaged LSF, normalised to area 1
     meta: dict = field(default_factory=dict)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 class _Line:
