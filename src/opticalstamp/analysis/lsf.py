@@ -155,6 +155,25 @@ def traced_folded_lsf_pair(
     return both, own
 
 
+def folded_subset(lsf: FoldedLSF, z_mm, periods_um) -> FoldedLSF | None:
+    """``lsf`` at the given distances and periods only (in the order given), or None where
+    ``lsf`` lacks one of them.
+
+    Each (Z, period) of a traced fold is tallied on its own from the same rays in the same
+    order, so the subset is bit for bit what the same trace folded onto these distances
+    and periods alone gives (same rays, seed, light and Fresnel option).
+    """
+    zs = np.asarray(z_mm, dtype=np.float64)
+    per = np.asarray(periods_um, dtype=np.float64)
+    iz = [np.flatnonzero(lsf.z_mm == z) for z in zs]
+    ip = [np.flatnonzero(lsf.periods_um == p) for p in per]
+    if any(i.size == 0 for i in iz + ip):
+        return None
+    iz = np.array([i[0] for i in iz])
+    h = [np.ascontiguousarray(lsf.h[int(i[0])][:, :, iz, :]) for i in ip]
+    return replace(lsf, z_mm=zs, periods_um=per, h=h)
+
+
 def _lsf_sampling(
     sampling: Sampling | None, n_rays: int, seed: int, fresnel: bool, chunk: int, n_batches: int
 ) -> Sampling:
@@ -256,10 +275,19 @@ def paraxial_profile(design: Design, z_mm: float, u_um: np.ndarray, axis: int = 
 
 
 def _profile(ax: _Axis, z_mm: float, u_um: np.ndarray) -> np.ndarray:
-    lev = ax.levers(z_mm)
-    u = np.asarray(u_um, dtype=np.float64)[..., None]
-    lo = ((u - ax.off - ax.half) / lev).max(axis=-1)
-    hi = ((u - ax.off + ax.half) / lev).min(axis=-1)
+    return _profile_at(ax, ax.levers(z_mm), u_um)
+
+
+def _profile_at(ax: _Axis, lev: np.ndarray, u_um: np.ndarray) -> np.ndarray:
+    """r(U) for the levers ``lev``: max and min over the planes taken plane by plane
+    (the same values as a reduction over a plane axis, without its short inner loop)."""
+    u = np.asarray(u_um, dtype=np.float64)
+    lo = hi = None
+    for o, h, le in zip(ax.off, ax.half, lev, strict=True):
+        a = (u - o - h) / le
+        b = (u - o + h) / le
+        lo = a if lo is None else np.maximum(lo, a)
+        hi = b if hi is None else np.minimum(hi, b)
     return np.maximum(hi - lo, 0.0)
 
 
@@ -281,7 +309,10 @@ def _pairs(ax: _Axis, z_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _support(ax: _Axis, z_mm: float) -> tuple[float, float]:
-    lev, a, ok = _pairs(ax, z_mm)
+    return _support_of(ax, *_pairs(ax, z_mm))
+
+
+def _support_of(ax: _Axis, lev: np.ndarray, a: np.ndarray, ok: np.ndarray) -> tuple:
     rhs = ((ax.off + ax.half) / lev)[:, None] - ((ax.off - ax.half) / lev)[None, :]
     r = rhs[ok] / a[ok]
     up = a[ok] > 0
@@ -293,7 +324,11 @@ def _support(ax: _Axis, z_mm: float) -> tuple[float, float]:
 def _kinks(ax: _Axis, z_mm: float) -> np.ndarray:
     """Every U where the piecewise-linear profile can bend, within its support."""
     lev, a, ok = _pairs(ax, z_mm)
-    lo, hi = _support(ax, z_mm)
+    return _kinks_of(ax, lev, a, ok, _support_of(ax, lev, a, ok))
+
+
+def _kinks_of(ax: _Axis, lev, a, ok, support: tuple[float, float]) -> np.ndarray:
+    lo, hi = support
     pts = [np.array([lo, hi])]
     for si in (-1, 1):
         for sj in (-1, 1):
@@ -309,12 +344,28 @@ def paraxial_cumulative(design: Design, z_mm: float, u_um: np.ndarray, axis: int
 
 
 def _cumulative(ax: _Axis, z_mm: float, u_um: np.ndarray) -> np.ndarray:
-    k = _kinks(ax, z_mm)
-    rk = _profile(ax, z_mm, k)
-    cum = np.concatenate([[0.0], np.cumsum(np.diff(k) * (rk[1:] + rk[:-1]) / 2)])
-    u = np.clip(np.asarray(u_um, dtype=np.float64), k[0], k[-1])
-    i = np.clip(np.searchsorted(k, u, side="right") - 1, 0, k.size - 1)
-    return cum[i] + (u - k[i]) * (rk[i] + _profile(ax, z_mm, u)) / 2
+    return _Slice(ax, z_mm).cumulative(u_um)
+
+
+class _Slice:
+    """The paraxial profile of one axis at one Z: levers, support, kinks and the running
+    integral at the kinks, computed once for every evaluation of :meth:`cumulative`."""
+
+    def __init__(self, ax: _Axis, z_mm: float) -> None:
+        lev, a, ok = _pairs(ax, z_mm)
+        self.ax, self.lev = ax, lev
+        self.support = _support_of(ax, lev, a, ok)
+        k = _kinks_of(ax, lev, a, ok, self.support)
+        rk = _profile_at(ax, lev, k)
+        self.k, self.rk = k, rk
+        self.cum = np.concatenate([[0.0], np.cumsum(np.diff(k) * (rk[1:] + rk[:-1]) / 2)])
+
+    def cumulative(self, u_um: np.ndarray) -> np.ndarray:
+        """Exact integral of r from -inf to U."""
+        k, rk = self.k, self.rk
+        u = np.clip(np.asarray(u_um, dtype=np.float64), k[0], k[-1])
+        i = np.clip(np.searchsorted(k, u, side="right") - 1, 0, k.size - 1)
+        return self.cum[i] + (u - k[i]) * (rk[i] + _profile_at(self.ax, self.lev, u)) / 2
 
 
 def paraxial_etendue_1d(design: Design, axis: int = 0) -> float:
@@ -341,15 +392,17 @@ def paraxial_folded_lsf(design: Design, *, z_mm, periods_um) -> FoldedLSF:
     ax = _Axis.of(design, 0)
     lat = lattice_of(design)
     rows = [(float(lat.row_x[r]), float(lat.row_y[r])) for r in range(design.sensor.rows)]
+    slices = [_Slice(ax, float(z)) for z in zs]  # one per Z, for every period
     h = []
     for p, n in zip(per, nb, strict=True):
         du = p / n
         arr = np.zeros((len(rows), 1, zs.size, int(n)))
-        for iz, z in enumerate(zs):
-            lo, hi = _support(ax, float(z))
+        bins = np.arange(n + 1)[None, :] * du
+        for iz, sl in enumerate(slices):
+            lo, hi = sl.support
             m0, m1 = int(np.floor(lo / p)) - 1, int(np.ceil(hi / p)) + 1
-            edges = np.arange(m0, m1)[:, None] * p + np.arange(n + 1)[None, :] * du
-            cum = _cumulative(ax, float(z), edges)
+            edges = np.arange(m0, m1)[:, None] * p + bins
+            cum = sl.cumulative(edges)
             folded = (np.diff(cum, axis=1) * g_y).sum(axis=0)
             arr[:, 0, iz] = folded
         h.append(arr)

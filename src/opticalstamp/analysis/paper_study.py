@@ -9,13 +9,14 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from types import MappingProxyType
 
 import numpy as np
 
 from ..design import Design, with_unstated
+from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import output_pitch
 from .efficiency import reference_etendue, reference_f_number
 from .ghosts import analyse_ghosts
@@ -51,7 +52,7 @@ class StudyResult:
 
     @property
     def consistent(self) -> list[dict]:
-        return [r for r in self.rows if r["consistent_efficiency"] and r["consistent_dof"]]
+        return [r for r in self.rows if r.get("consistent_efficiency") and r.get("consistent_dof")]
 
 
 def _row(combo: dict, g, r, g_ref: float, f_tol: float, dof_tol: float, source: str) -> dict:
@@ -109,6 +110,8 @@ def parameter_study(
     dof_tolerance_mm: float = 0.25,
     progress: bool = False,
     known: Mapping | None = None,
+    deferred: Collection = (),
+    part: tuple[int, int] = (0, 1),
 ) -> StudyResult:
     """Every combination of ``factors`` (default :data:`DEFAULT_FACTORS`).
 
@@ -121,12 +124,27 @@ def parameter_study(
     already computed (the report passes its headline analyses):
     a combination that *is* that design reuses them, so one design has one depth of field
     in a report. Such rows say ``"source": "headline"``, the others ``"study"``.
+
+    ``deferred`` holds (a design's fingerprint, Fresnel on/off) whose analyses are left to
+    the caller: a combination that is one of them is not analysed and gets a row of its
+    factors with ``"source": "deferred"`` and no figures, for :func:`with_headline` to
+    fill (the report passes its design, whose headline analyses run at the same time).
+
+    The ghost analysis and the RMTF of a combination share one tracer (its pixel's pilot
+    run, and the rays of the pixel both trace, are computed once).
+
+    ``part`` = (i, n): only combinations i, i + n, i + 2n, ... (every combination carries
+    its own seed, so a part's rows are those of the whole study); :func:`join_parts`
+    puts the n parts back together, e.g. after running them on n processes.
     """
     fac = dict(DEFAULT_FACTORS if factors is None else factors)
     names = list(fac)
     g_ref = reference_etendue(output_pitch(design))
     rows = []
-    combos = list(itertools.product(*(fac[n] for n in names)))
+    i_part, n_parts = part
+    if not (isinstance(n_parts, int) and n_parts >= 1 and 0 <= i_part < n_parts):
+        raise ValueError(f"part: expected (i, n) with 0 <= i < n (got {part!r})")
+    combos = list(itertools.product(*(fac[n] for n in names)))[i_part::n_parts]
     it = combos
     if progress:
         from tqdm import tqdm
@@ -141,12 +159,18 @@ def parameter_study(
             gap_medium=combo["gap_medium"],
             glass_index=combo["glass_index"],
         )
-        reuse = (known or {}).get((d.fingerprint(), combo["fresnel"]))
+        key = (d.fingerprint(), combo["fresnel"])
+        if key in deferred:
+            rows.append(combo | {"source": "deferred"})
+            continue
+        reuse = (known or {}).get(key)
         if reuse is not None:
             g, r = reuse
         else:
-            g = analyse_ghosts(d, seed=seed, n_rays=n_rays, fresnel=combo["fresnel"])
-            r = rmtf(d, dpi=(200.0,), seed=seed, n_rays=n_rays, fresnel=combo["fresnel"])
+            fr = combo["fresnel"]
+            tr = PixelTracer(d, replay=True)  # one pilot, and (0, 0)'s rays traced once
+            g = analyse_ghosts(d, seed=seed, n_rays=n_rays, fresnel=fr, tracer=tr)
+            r = rmtf(d, dpi=(200.0,), seed=seed, n_rays=n_rays, fresnel=fr, tracer=tr)
         source = "study" if reuse is None else "headline"
         rows.append(_row(combo, g, r, g_ref, f_tolerance, dof_tolerance_mm, source))
     return StudyResult(
@@ -157,3 +181,16 @@ def parameter_study(
         paper={"ratio": PAPER_RATIO, "working_f_number": PAPER_F_NUMBER, "dof_mm": PAPER_DOF_MM},
         meta={"n_rays": n_rays, "f_tolerance": f_tolerance, "dof_tolerance_mm": dof_tolerance_mm},
     )
+
+
+def join_parts(parts: Sequence[StudyResult]) -> StudyResult:
+    """The study whose parts (``part`` = (0, n), (1, n), ... (n - 1, n) of
+    :func:`parameter_study`, in that order) are ``parts``: their rows interleaved back into
+    the order of the combinations."""
+    if not parts:
+        raise ValueError("parts: no parts to join")
+    first = parts[0]
+    rows = []
+    for i in range(max(len(p.rows) for p in parts)):
+        rows.extend(p.rows[i] for p in parts if i < len(p.rows))
+    return dataclasses.replace(first, rows=rows)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 
 from .stack import Path
@@ -87,9 +88,58 @@ def jacobian(r: np.ndarray, d: np.ndarray, n: np.ndarray) -> np.ndarray:
 
 
 def alias_table(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vose's alias method for drawing index i with probability p_i (p sums to 1)."""
-    n = p.size
-    scaled = p * n
+    """Vose's alias method for drawing index i with probability p_i (p sums to 1).
+
+    Compiled (:func:`_vose`); the tables are bit for bit those of the plain-Python loop
+    (the same stacks, popped and pushed in the same order, the same float64 arithmetic).
+    """
+    scaled = np.ascontiguousarray(p * p.size)
+    if scaled.dtype != np.float64:  # the loop's arithmetic is in p's own precision
+        return _vose_python(scaled)
+    prob = np.ones(scaled.size)
+    alias = np.arange(scaled.size, dtype=np.int64)
+    _vose(scaled, prob, alias)
+    return prob, alias
+
+
+@nb.njit(cache=True, nogil=True)
+def _vose(scaled, prob, alias):  # pragma: no cover - compiled
+    """Vose's loop on ``scaled`` = p n (changed in place), filling ``prob`` and ``alias``.
+
+    ``small`` and ``large`` are stacks (last in, first out) seeded in index order, as the
+    Python lists of :func:`_vose_python`.
+    """
+    n = scaled.size
+    small = np.empty(n, np.int64)
+    large = np.empty(n, np.int64)
+    ns = 0
+    nl = 0
+    for i in range(n):
+        if scaled[i] < 1.0:
+            small[ns] = i
+            ns += 1
+        elif scaled[i] >= 1.0:  # NaN in neither, as with flatnonzero
+            large[nl] = i
+            nl += 1
+    while ns > 0 and nl > 0:
+        ns -= 1
+        s = small[ns]
+        nl -= 1
+        g = large[nl]
+        prob[s] = scaled[s]
+        alias[s] = g
+        scaled[g] -= 1.0 - scaled[s]
+        if scaled[g] < 1.0:
+            small[ns] = g
+            ns += 1
+        else:
+            large[nl] = g
+            nl += 1
+
+
+def _vose_python(scaled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vose's loop in plain Python (for a ``scaled`` = p n that is not float64)."""
+    n = scaled.size
     prob = np.ones(n)
     alias = np.arange(n, dtype=np.int64)
     small = list(np.flatnonzero(scaled < 1.0))
@@ -119,6 +169,22 @@ def hole_targets(path: Path, source: Source, weights: np.ndarray | None = None) 
     ``weights`` (one per lattice site, >= 0) is given, q = 0.1 q_geometric + 0.9 weights,
     which stays positive for every hole, so the estimator stays unbiased.
     """
+    n_pre, hx, hy, area, q = _geometric(path, source)
+    if weights is not None and np.sum(weights) > 0:
+        q = DEFENSIVE_SHARE * q + (1 - DEFENSIVE_SHARE) * weights / np.sum(weights)
+    prob, alias = alias_table(q)
+    return Targets(hx, hy, prob, alias, q / area, n_pre)
+
+
+def geometric_q_per_area(path: Path, source: Source) -> np.ndarray:
+    """``hole_targets(path, source).q_per_area`` (the geometric table, no weights), without
+    building the alias table."""
+    _, _, _, area, q = _geometric(path, source)
+    return q / area
+
+
+def _geometric(path: Path, source: Source) -> tuple:
+    """(n_pre, hole x, hole y, hole area, geometric q) of :func:`hole_targets`."""
     n_pre = path.first_mask_slab + 1
     d, n = path.slabs[:n_pre, 0], path.slabs[:n_pre, 1]
     if d.sum() <= 0:
@@ -132,8 +198,4 @@ def hole_targets(path: Path, source: Source, weights: np.ndarray | None = None) 
     r = np.hypot(hx - source.x, hy - source.y)
     area = path.hole_area(m0)
     f = area / jacobian(r, d, n)
-    q = f / f.sum()
-    if weights is not None and np.sum(weights) > 0:
-        q = DEFENSIVE_SHARE * q + (1 - DEFENSIVE_SHARE) * weights / np.sum(weights)
-    prob, alias = alias_table(q)
-    return Targets(hx, hy, prob, alias, q / area, n_pre)
+    return n_pre, hx, hy, area, f / f.sum()

@@ -1,14 +1,16 @@
 """`opticalstamp report`: every analysis of a design as JSON, PNG and one HTML page.
 
 The work is arranged so that nothing is computed twice: one
-:class:`~opticalstamp.raytrace.pixel.PixelTracer` (one pilot run per pixel) serves the
-traced analyses and the scan kernels; the folded LSF is traced once for all light and the
-own path (:func:`~opticalstamp.analysis.lsf.traced_folded_lsf_pair`); the scan kernels of
-every simulated scan come from one trace per pixel row
-(:func:`~opticalstamp.imaging.scan.prepare_kernels`); the parameter study, the design
-search and the tolerance study run in processes of their own while the other sections run
-here (every analysis and evaluation carries its own seed, so no number depends on where it
-runs).
+:class:`~opticalstamp.raytrace.pixel.PixelTracer` (one pilot run per pixel, and each chunk
+of rays traced once: ``replay``) serves the traced analyses and the scan kernels; the
+folded LSF is traced once for all light and the own path
+(:func:`~opticalstamp.analysis.lsf.traced_folded_lsf_pair`), and the scans' computed RMTF
+is folded from it; the scan kernels of every simulated scan come from one trace per pixel
+row (:func:`~opticalstamp.imaging.scan.prepare_kernels`); the parameter study (in two
+parts, without the design's own row, which the headline analyses give), the design search
+and the tolerance study run in background processes while the other sections run here,
+on the cores those leave free (every analysis and evaluation carries its own seed, so no
+number depends on where it runs or on how many threads it uses).
 
 ``quick`` reduces the work (fewer rays and distances, 600-dpi scans, no OCR) and leaves
 out the parameter study, the search and the tolerance study; the page and report.json
@@ -18,13 +20,14 @@ say so.
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..analysis.ghosts import analyse_ghosts
 from ..analysis.paper_study import with_headline
 from ..analysis.spots import psf, spots
-from ..defaults import RAYS_LSF, RAYS_MAP
+from ..defaults import DOF_DPI, RAYS_LSF, RAYS_MAP
 from ..design import Design, load_design
 from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
 from ..raytrace.pixel import PixelTracer
@@ -153,48 +156,61 @@ def build_report(
     t0 = time.perf_counter()
     clock = _Clock()
     work = report_work(quick, n_rays)
-    jobs = _studies(design, seed) if work.studies else {}
+    jobs = _studies(design, seed, fresnel) if work.studies else {}
     # the folder is replaced as a whole once everything is written, or not at all
     with replace_folder(Path(out_dir)) as tmp, _Background(jobs) as background:
-        tracer = PixelTracer(design)  # one pilot per pixel for every traced analysis below
-        g = analyse_ghosts(
-            design,
-            z_mm=work.z_mm,
-            n_rays=work.ghost_rays,
-            seed=seed,
-            fresnel=fresnel,
-            progress=progress,
-            tracer=tracer,
-        )
-        sp = spots(
-            design,
-            z_mm=work.z_mm,
-            seed=seed,
-            n_rays=work.map_rays,
-            fresnel=fresnel,
-            progress=progress,
-            tracer=tracer,
-        )
-        psfs = [
-            psf(
+        # one pilot per pixel for every traced analysis below, and each chunk of rays traced
+        # once (the ghost analysis, the folded LSFs and the scan kernels share chunks)
+        tracer = PixelTracer(design, replay=True)
+        with background.cores():  # numba threads: the cores the studies leave free
+            g = analyse_ghosts(
                 design,
-                x_obj_um=x,
-                z_mm=1.0,
+                z_mm=work.z_mm,
+                n_rays=work.ghost_rays,
+                seed=seed,
+                fresnel=fresnel,
+                progress=progress,
+                tracer=tracer,
+            )
+            sp = spots(
+                design,
+                z_mm=work.z_mm,
                 seed=seed,
                 n_rays=work.map_rays,
                 fresnel=fresnel,
                 progress=progress,
+                tracer=tracer,
             )
-            for x in (0.0, output_pitch(design) / 2)  # a pixel's axis and half a pitch off
-        ]
+            psfs = [
+                psf(
+                    design,
+                    x_obj_um=x,
+                    z_mm=1.0,
+                    seed=seed,
+                    n_rays=work.map_rays,
+                    fresnel=fresnel,
+                    progress=progress,
+                )
+                for x in (0.0, output_pitch(design) / 2)  # a pixel's axis and half a pitch off
+            ]
         clock.lap("ghosts_spots_psf")
-        concepts = _concepts(design, g, work, seed=seed, fresnel=fresnel)
+        with background.cores():
+            concepts = _concepts(design, g, work, seed=seed, fresnel=fresnel)
         clock.lap("concepts")
-        quality = _quality(
-            design, g, work, seed=seed, fresnel=fresnel, progress=progress, tracer=tracer
-        )
+        with background.cores():
+            quality = _quality(
+                design, g, work, seed=seed, fresnel=fresnel, progress=progress, tracer=tracer
+            )
         clock.lap("quality")
-        scans = _scans(design, work, seed=seed, fresnel=fresnel, tracer=tracer)
+        with background.cores():
+            scans = _scans(
+                design,
+                work,
+                seed=seed,
+                fresnel=fresnel,
+                tracer=tracer,
+                own_lsf=quality.pop("lsf_own"),
+            )
         clock.lap("scans")
         figures = {
             "ghosts.png": plotting.plot_ghosts(g),
@@ -223,20 +239,28 @@ def build_report(
             save_figure(fig, tmp / name)
         names = list(figures)
         clock.lap("figures")
-        st, sr, tr = (background.result(k) for k in ("parameter_study", "search", "tolerance"))
-        if st is not None:  # the row that is this design: its headline analyses, not a re-run
-            st = with_headline(st, design, g, quality["rmtf_result"], fresnel)
-        clock.lap("wait_for_studies")
-        studies = {
-            "study.png": (st, plotting.plot_study),
-            "pareto.png": (sr, plotting.plot_pareto),
-            "tolerance.png": (tr, plotting.plot_tolerance),
+        # each study's figure as soon as that study is done, while the others run on
+        plots = {
+            "parameter_study": ("study.png", plotting.plot_study),
+            "search": ("pareto.png", plotting.plot_pareto),
+            "tolerance": ("tolerance.png", plotting.plot_tolerance),
         }
-        for name, (res, plot) in studies.items():
-            if res is not None:
-                save_figure(plot(res), tmp / name)
-                names.append(name)
-        clock.lap("study_figures")
+        done: dict = {}
+        drawing = 0.0
+        for key in background.as_completed():
+            res = background.result(key)
+            if key == "parameter_study":  # the row that is this design: its headline analyses
+                res = with_headline(res, design, g, quality["rmtf_result"], fresnel)
+            done[key] = res
+            t_draw = time.perf_counter()
+            name, plot = plots[key]
+            save_figure(plot(res), tmp / name)
+            names.append(name)
+            drawing += time.perf_counter() - t_draw
+        st, sr, tr = (done.get(k) for k in ("parameter_study", "search", "tolerance"))
+        clock.lap("wait_for_studies")  # less the study figures, drawn while the others ran on
+        clock.laps["wait_for_studies"] -= drawing
+        clock.laps["study_figures"] = drawing
         data = {
             "provenance": provenance(design, seed) | {"fresnel": fresnel},
             "quick": quick,
@@ -374,6 +398,7 @@ def _quality(
         )
     eff = efficiency(design, seed=seed, fresnel=fresnel, ghosts=g, area_scales=work.area_scales)
     return {
+        "lsf_own": lsf_own,  # the scans' computed RMTF folds it again (see _scans)
         "rmtf_result": res,
         "rmtf_own": own,
         "rmtf_paraxial": par,
@@ -384,16 +409,31 @@ def _quality(
     }
 
 
-def _scans(design: Design, work: Work, *, seed: int, fresnel: bool, tracer: PixelTracer) -> dict:
-    """Simulated scans of the built-in charts (paper Figs. 8, 9, 12) and their measures."""
+def _scans(
+    design: Design,
+    work: Work,
+    *,
+    seed: int,
+    fresnel: bool,
+    tracer: PixelTracer,
+    own_lsf=None,
+) -> dict:
+    """Simulated scans of the built-in charts (paper Figs. 8, 9, 12) and their measures.
+
+    ``own_lsf``: the own-path folded LSF of the RMTF section (:func:`_quality`), whose
+    folds at 0.5 and 3.5 mm and 200 dpi are those of the computed RMTF here where it was
+    traced alike (same rays, no Fresnel losses): that RMTF is then not traced again.
+    """
     import numpy as np
 
-    from ..analysis.rmtf import rmtf
+    from ..analysis.lsf import folded_subset
+    from ..analysis.rmtf import rmtf, rmtf_from_lsf
     from ..imaging.charts import bar_chart, edge_chart, line_chart, text_chart
     from ..imaging.heightmap import shape_map
     from ..imaging.measure import measure_rmtf, sfr_xy
     from ..imaging.ocr import OCRUnavailable, character_error_rate, recognise, tesseract_available
     from ..imaging.scan import ScanSettings, prepare_kernels, simulate_scan
+    from ..units import period_of_dpi
 
     dpi = work.scan_dpi
     # the charts are printed on a larger white page; Fresnel losses as in the analyses
@@ -428,16 +468,25 @@ def _scans(design: Design, work: Work, *, seed: int, fresnel: bool, tracer: Pixe
     bars = bar_chart(dpi, chart_dpi=(200.0,), block_mm=10.0, height_mm=4.0)
     # RMTF compared on the own path: the chart is a finite patch on a white page, so its
     # ghost background differs from the infinite chart of the computed RMTF
-    ref = rmtf(
-        design,
-        dpi=(200.0,),
-        z_mm=(0.5, 3.5),
-        ghosts=False,
-        seed=seed,
-        window_um=8000.0,
-        n_rays=work.lsf_rays,
-        tracer=tracer,
-    )
+    ref_dpi = [200.0] + ([] if DOF_DPI == 200.0 else [float(DOF_DPI)])  # as rmtf() adds it
+    ref_args = dict(seed=seed, window_um=8000.0)
+    sub = None  # own_lsf was traced with work.lsf_rays rays, seed, and this tracer's pilots
+    if own_lsf is not None and own_lsf.method == "trace":
+        if not own_lsf.ghosts and not own_lsf.fresnel:  # as the rmtf() call below
+            periods = [period_of_dpi(d) for d in ref_dpi]
+            sub = folded_subset(own_lsf, (0.5, 3.5), periods)
+    if sub is not None:
+        ref = rmtf_from_lsf(sub, design, dpi=ref_dpi, **ref_args)
+    else:
+        ref = rmtf(
+            design,
+            dpi=(200.0,),
+            z_mm=(0.5, 3.5),
+            ghosts=False,
+            n_rays=work.lsf_rays,
+            tracer=tracer,
+            **ref_args,
+        )
     for iz, z in enumerate((0.5, 3.5)):
         r = scan(bars, z_mm=z)
         own = scan(bars, z_mm=z, ghosts=False)
@@ -490,11 +539,16 @@ def _one_numba_thread() -> None:  # pragma: no cover - runs in the background pr
     numba.set_num_threads(1)
 
 
-def _run_study(design: Design, seed: int):  # pragma: no cover - a background process
-    """The study of the paper's unstated parameters."""
+def _run_study(
+    design: Design, seed: int, fresnel: bool, part: tuple[int, int]
+):  # pragma: no cover - a background process
+    """Part ``part`` of the study of the paper's unstated parameters (background). The row
+    of the design itself is left to :func:`~opticalstamp.analysis.paper_study.with_headline`
+    (the report's own analyses of the design, computed meanwhile)."""
     from ..analysis.paper_study import parameter_study
 
-    return parameter_study(design, seed=seed)
+    deferred = {(design.fingerprint(), fresnel)}
+    return parameter_study(design, seed=seed, deferred=deferred, part=part)
 
 
 def _run_search(design: Design, seed: int):  # pragma: no cover - a background process
@@ -514,35 +568,67 @@ def _run_tolerance(design: Design, seed: int):  # pragma: no cover - a backgroun
     return tolerance(design, samples=200, seed=seed, spec="dof>=2.2,ghost<=0.2", workers=1)
 
 
-def _studies(design: Design, seed: int) -> dict:
-    """The report's studies as background jobs: name -> (function, arguments). The search
-    and the tolerance study evaluate in closed form, which needs square holes."""
-    jobs = {"parameter_study": (_run_study, (design, seed))}
+#: parts the parameter study is run in (each a background task): the study is the
+#: smallest job, and in two parts it fills two processes beside the search and the
+#: tolerance study (one each), so the processes end together
+STUDY_PARTS = 2
+
+
+def _studies(design: Design, seed: int, fresnel: bool = False) -> dict:
+    """The report's studies as background jobs: name -> list of (function, arguments),
+    the tasks whose results make the job (:func:`_joined`). The search and the tolerance
+    study evaluate in closed form, which needs square holes."""
+    parts = [(i, STUDY_PARTS) for i in range(STUDY_PARTS)]
+    jobs = {"parameter_study": [(_run_study, (design, seed, fresnel, part)) for part in parts]}
     if all(m.shape != "circle" for m in design.masks):
-        jobs["search"] = (_run_search, (design, seed))
-        jobs["tolerance"] = (_run_tolerance, (design, seed))
+        jobs["search"] = [(_run_search, (design, seed))]
+        jobs["tolerance"] = [(_run_tolerance, (design, seed))]
     return jobs
 
 
+def _joined(name: str, results: list):
+    """The result of job ``name`` from the results of its tasks."""
+    if name == "parameter_study":
+        from ..analysis.paper_study import join_parts
+
+        return join_parts(results)
+    (result,) = results
+    return result
+
+
+def _workers(n_tasks: int) -> int:
+    """Background processes for ``n_tasks`` tasks: one per core but the one this process
+    works on, and at least two (so that on two cores the three processes share them)."""
+    import os
+
+    return max(1, min(n_tasks, max(2, (os.cpu_count() or 1) - 1)))
+
+
 class _Background:
-    """Jobs that run in processes of their own (spawned, one numba thread each, one
-    process per job), started at once while the report goes on here.
+    """Jobs that run in processes of their own (spawned, one numba thread each), started
+    at once while the report goes on here.
 
     Parameters
     ----------
-    jobs : name -> (function, arguments); functions and results are pickled
+    jobs : name -> list of (function, arguments), the tasks of each job; functions and
+        results are pickled. The tasks go to :func:`_workers` processes in the order
+        given, each to the next process that is free.
     """
 
     def __init__(self, jobs: dict) -> None:
         self._pool = None
-        self._jobs = {}
-        if not jobs:
+        self._jobs: dict[str, list] = {}
+        self._n = 0
+        tasks = [(name, task) for name, job in jobs.items() for task in job]
+        if not tasks:
             return
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")  # no fork of numba's threads
-        self._pool = ctx.Pool(len(jobs), initializer=_one_numba_thread)
-        self._jobs = {name: self._pool.apply_async(fn, args) for name, (fn, args) in jobs.items()}
+        self._n = _workers(len(tasks))
+        self._pool = ctx.Pool(self._n, initializer=_one_numba_thread)
+        for name, (fn, args) in tasks:
+            self._jobs.setdefault(name, []).append(self._pool.apply_async(fn, args))
 
     def __enter__(self) -> _Background:
         return self
@@ -553,13 +639,53 @@ class _Background:
     def result(self, name: str):
         """The result of job ``name`` (waits for it; re-raises its error), or None if it
         was not started."""
-        return self._jobs[name].get() if name in self._jobs else None
+        if name not in self._jobs:
+            return None
+        return _joined(name, [task.get() for task in self._jobs[name]])
+
+    def _ready(self, name: str) -> bool:
+        return all(task.ready() for task in self._jobs[name])
+
+    def running(self) -> int:
+        """How many background processes are at work (tasks not finished, at most one per
+        process)."""
+        left = sum(not task.ready() for job in self._jobs.values() for task in job)
+        return min(self._n, left)
+
+    def as_completed(self, poll_s: float = 0.05):
+        """The names of the jobs, each as soon as its tasks have finished (failed ones
+        too)."""
+        left = list(self._jobs)
+        while left:
+            ready = [name for name in left if self._ready(name)]
+            if not ready:
+                waiting = next(t for t in self._jobs[left[0]] if not t.ready())
+                waiting.wait(poll_s)
+                continue
+            for name in ready:
+                left.remove(name)
+                yield name
+
+    @contextmanager
+    def cores(self):
+        """Numba threads of this process for a section: one per core the running jobs
+        leave free, at least one (more threads than free cores only burn CPU time that
+        the jobs could use; a result does not depend on the thread count)."""
+        import numba
+
+        before = numba.get_num_threads()
+        free = max(1, numba.config.NUMBA_NUM_THREADS - self.running())
+        numba.set_num_threads(min(before, free))
+        try:
+            yield
+        finally:
+            numba.set_num_threads(before)
 
     def close(self) -> None:
         """End the processes: at once where jobs are still running (the report failed)."""
         if self._pool is None:
             return
-        if all(job.ready() for job in self._jobs.values()):
+        if all(self._ready(name) for name in self._jobs):
             self._pool.close()
         else:
             self._pool.terminate()
