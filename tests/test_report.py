@@ -31,6 +31,7 @@ def test_report_writes_every_section(tmp_path):
         "scans",
         "search",
         "tolerance",
+        "rodlens",
     ):
         assert key in d, key
     assert d["provenance"]["design"] == "paper2016" and d["provenance"]["seed"] == 0
@@ -47,6 +48,7 @@ def test_report_writes_every_section(tmp_path):
         "Simulated scans",
         "Design search",
         "Tolerancing",
+        "The stamp against a rod-lens array",
     ):
         assert heading in page, heading
     figures = [
@@ -66,8 +68,15 @@ def test_report_writes_every_section(tmp_path):
         "scan_tilt",
         "pareto",
         "tolerance",
+        "rodlens_contrast",
+        "rodlens_light",
     ]
     for name in figures:
         assert f'src="{name}.png"' in page
         with Image.open(out / f"{name}.png") as im:
             assert im.size[0] > 300 and im.size[1] > 150
+    rows = d["rodlens"]["rows"]  # the design first, from the report's own analyses
+    assert [r["name"] for r in rows] == ["paper2016", "sla-1row-12deg", "sla-2row-20deg"]
+    assert rows[0]["light_vs_f10"] == d["efficiency"]["ratio_own"]
+    assert rows[0]["dof_mm"]["high"] == d["rmtf"]["dof_mm"]["200"]
+    assert "fits <b>sla-1row-12deg</b>" in page  # the paper's ~1/100

@@ -23,6 +23,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 
 from ..analysis.ghosts import analyse_ghosts
 from ..analysis.paper_study import with_headline
@@ -107,6 +108,7 @@ def report_work(quick: bool = False, n_rays: int = RAYS_MAP) -> Work:
             "the parameter study of the paper's unstated parameters",
             "the design search",
             "the tolerance study",
+            "the comparison with rod-lens arrays",
             "OCR of the simulated text scans",
             "the larger sensitive area of the efficiency section",
         ),
@@ -252,12 +254,22 @@ def build_report(
             if key == "parameter_study":  # the row that is this design: its headline analyses
                 res = with_headline(res, design, g, quality["rmtf_result"], fresnel)
             done[key] = res
+            if key not in plots:
+                continue
             t_draw = time.perf_counter()
             name, plot = plots[key]
             save_figure(plot(res), tmp / name)
             names.append(name)
             drawing += time.perf_counter() - t_draw
         st, sr, tr = (done.get(k) for k in ("parameter_study", "search", "tolerance"))
+        rodlens = _rodlens(design, quality, done.get("rodlens"), seed, fresnel)
+        if rodlens is not None:
+            for name, fig in (
+                ("rodlens_contrast.png", plotting.plot_compare_contrast(rodlens["rows"])),
+                ("rodlens_light.png", plotting.plot_compare_light(rodlens["rows"])),
+            ):
+                save_figure(fig, tmp / name)
+                names.append(name)
         clock.lap("wait_for_studies")  # less the study figures, drawn while the others ran on
         clock.laps["wait_for_studies"] -= drawing
         clock.laps["study_figures"] = drawing
@@ -281,6 +293,7 @@ def build_report(
             "scans": scans,
             "search": sr.to_dict() if sr is not None else None,
             "tolerance": tr.to_dict() if tr is not None else None,
+            "rodlens": rodlens,
             "figures": sorted(names),
             "elapsed_s": time.perf_counter() - t0,
             "section_elapsed_s": clock.laps,
@@ -551,6 +564,44 @@ def _run_study(
     return parameter_study(design, seed=seed, deferred=deferred, part=part)
 
 
+def _run_rodlens(seed: int, fresnel: bool):  # pragma: no cover - a background process
+    """The rod-lens presets' comparison rows (the report's "stamp against a rod-lens
+    array" section): each preset evaluated as `compare` does."""
+    from ..studies.compare import RODLENS_PRESETS, evaluate_rodlens, labelled
+
+    rows = []
+    for name in RODLENS_PRESETS:
+        d = load_design(name)
+        row = evaluate_rodlens(d, seed=seed, fresnel=fresnel, **REPORT_ROD_CURVES)
+        rows.append(labelled(d, row, seed, fresnel))
+    return rows
+
+
+#: The report's rod-lens contrast curves: the report's chart resolutions that `compare`
+#: draws, every 0.25 mm (`compare`: 100/200/300 dpi every 0.125 mm); the same rays, so
+#: light and depth of field are `compare`'s (the DOF to 1e-3 mm: bisection from another
+#: bracket).
+REPORT_ROD_CURVES = MappingProxyType(
+    {"dpi": (100.0, 200.0), "heights_mm": tuple(0.25 * i - 1.5 for i in range(13))}
+)
+
+
+def _rodlens(design: Design, quality: dict, rod_rows: list | None, seed: int, fresnel: bool):
+    """The report's rod-lens section: the design's row (from the report's own efficiency
+    and RMTF) before the presets' rows; None where the presets were not evaluated."""
+    if rod_rows is None:
+        return None
+    from ..studies.compare import labelled, relative_to_first, stamp_row
+
+    eff = quality["efficiency_result"]
+    row = stamp_row(design, eff, quality["rmtf_result"])
+    gains = [a["gain_own_vs_design"] for a in eff.sensitive_area if a["area_scale"] == 4.0]
+    return {
+        "rows": relative_to_first([labelled(design, row, seed, fresnel), *rod_rows]),
+        "area_gain": gains[0] if gains else None,
+    }
+
+
 def _run_search(design: Design, seed: int):  # pragma: no cover - a background process
     """The compact design search of a report (the CLI's `search` runs the full budget)."""
     from ..studies.search import search
@@ -580,6 +631,7 @@ def _studies(design: Design, seed: int, fresnel: bool = False) -> dict:
     study evaluate in closed form, which needs square holes."""
     parts = [(i, STUDY_PARTS) for i in range(STUDY_PARTS)]
     jobs = {"parameter_study": [(_run_study, (design, seed, fresnel, part)) for part in parts]}
+    jobs["rodlens"] = [(_run_rodlens, (seed, fresnel))]
     if all(m.shape != "circle" for m in design.masks):
         jobs["search"] = [(_run_search, (design, seed))]
         jobs["tolerance"] = [(_run_tolerance, (design, seed))]

@@ -27,11 +27,13 @@ import numpy as np
 
 from ..analysis.efficiency import efficiency
 from ..analysis.rmtf import rmtf
-from ..analysis.rodlens import rod_contrast, rod_efficiency
+from ..analysis.rodlens import RAYS_CONTRAST, rod_contrast, rod_efficiency
 from ..defaults import Z_GRID_MM
 from ..design import AnyDesign, Design, RodLensDesign
 from ..validate import parse_grid
 
+#: The rod-lens presets a report compares its design with (docs/rodlens.md).
+RODLENS_PRESETS = ("sla-1row-12deg", "sla-2row-20deg")
 #: Chart resolutions of the overlay plot (dpi).
 COMPARE_DPI = (100.0, 200.0, 300.0)
 #: Heights (mm from the document reference) of a stamp's contrast curve.
@@ -84,10 +86,20 @@ def stamp_row(design: Design, eff, r) -> dict:
     }
 
 
-def evaluate_rodlens(design: RodLensDesign, *, seed: int = 0, fresnel: bool = False) -> dict:
+def evaluate_rodlens(
+    design: RodLensDesign,
+    *,
+    seed: int = 0,
+    fresnel: bool = False,
+    dpi=COMPARE_DPI,
+    heights_mm=ROD_HEIGHTS_MM,
+    n_rays: int = RAYS_CONTRAST,
+) -> dict:
+    """A rod-lens array's comparison figures (``dpi``, ``heights_mm``, ``n_rays``: of the
+    contrast curves; the depth of field is refined by bisection whatever the grid)."""
     eff = rod_efficiency(design, seed=seed, fresnel=fresnel)
     con = rod_contrast(
-        design, dpi=COMPARE_DPI, heights_mm=ROD_HEIGHTS_MM, seed=seed, fresnel=fresnel
+        design, dpi=dpi, heights_mm=heights_mm, n_rays=n_rays, seed=seed, fresnel=fresnel
     )
     a = design.array
     return {
@@ -106,11 +118,11 @@ def evaluate_rodlens(design: RodLensDesign, *, seed: int = 0, fresnel: bool = Fa
         "ghost_note": "no stray path in the model: rod skin and black resin absorb",
         "contrast": {
             "heights_mm": con.heights_mm,
-            "by_dpi": {f"{d:g}": row for d, row in zip(COMPARE_DPI, con.contrast, strict=True)},
+            "by_dpi": {f"{d:g}": row for d, row in zip(con.dpi, con.contrast, strict=True)},
         },
         "mtf": {
             "heights_mm": con.heights_mm,
-            "by_dpi": {f"{d:g}": row for d, row in zip(COMPARE_DPI, con.mtf, strict=True)},
+            "by_dpi": {f"{d:g}": row for d, row in zip(con.dpi, con.mtf, strict=True)},
         },
         "ripple_profile": {
             "positions_um": eff.positions_um,
