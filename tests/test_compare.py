@@ -20,7 +20,9 @@ def test_compare_cli_writes_page_json_and_figures(tmp_path):
     for r in rows:
         for key in ("light_vs_f10", "working_f_number", "thickness_mm", "dof_mm", "ghost_fraction"):
             assert key in r
-        assert r["dof_mm"]["span"] == pytest.approx(r["dof_mm"]["high"] - r["dof_mm"]["low"])
+        low, high = r["dof_mm"]
+        assert r["dof_span_mm"] == pytest.approx(high - low)
+    assert rows[0]["dof_mm"][0] == 0.0 and rows[1]["dof_mm"][0] < 0 < rows[1]["dof_mm"][1]
     stamp, rodl = rows
     assert rodl["ghost_fraction"] == 0.0 and "no stray path" in rodl["ghost_note"]
     # paper section 4: the stamp has about 1/100 of a rod-lens array's light; >= 15 mm thick

@@ -78,5 +78,5 @@ def test_report_writes_every_section(tmp_path):
     rows = d["rodlens"]["rows"]  # the design first, from the report's own analyses
     assert [r["name"] for r in rows] == ["paper2016", "sla-1row-12deg", "sla-2row-20deg"]
     assert rows[0]["light_vs_f10"] == d["efficiency"]["ratio_own"]
-    assert rows[0]["dof_mm"]["high"] == d["rmtf"]["dof_mm"]["200"]
+    assert rows[0]["dof_mm"] == [0.0, d["rmtf"]["dof_mm"]["200"]]
     assert "fits <b>sla-1row-12deg</b>" in page  # the paper's ~1/100

@@ -144,7 +144,7 @@ def test_integrator_matches_the_closed_form():
     assert np.abs(xc[ok] - xi[ok]).max() < 1e-3
 
 
-def test_seed_determinism_and_chunk_invariance():
+def test_seed_determinism_chunk_and_thread_invariance():
     d = load_design("sla-2row-20deg")
     pix = [0.0, 100.0, 250.0]
     a = trace_rods(d, pix, n_rays=50_000, seed=5, chunk=1 << 20)
@@ -152,6 +152,15 @@ def test_seed_determinism_and_chunk_invariance():
     c = trace_rods(d, pix, n_rays=50_000, seed=6)
     assert np.array_equal(a.ids, b.ids) and np.array_equal(a.x, b.x)
     assert not np.array_equal(a.ids, c.ids)
+    import numba
+
+    n = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = trace_rods(d, pix, n_rays=50_000, seed=5)
+    finally:
+        numba.set_num_threads(n)
+    assert np.array_equal(a.ids, one.ids) and np.array_equal(a.x, one.x)  # any thread count
 
 
 @pytest.mark.parametrize("name", PRESETS)
@@ -238,3 +247,26 @@ def test_rod_scan_is_sharp_at_focus_and_blurs_with_height():
             mins = [line[i - 1 : i + 2].min() for i in idx]
             assert np.ptp(mins) < 0.05 and 0.4 < np.mean(mins) < 0.6
     assert widths[0] < widths[1] < widths[2]
+
+
+def test_f10_reference_against_direct_integration():
+    """G = double integral over pixel and pupil of cos(t1) cos(t2) / d^2 (parallel planes:
+    h^2 / d^4), by Gauss quadrature in pixel x, y and pupil radius, angle: independent of
+    the disk view-factor closed form the code uses."""
+    pixel, h, a = 84.667, 20_000.0, 1_000.0  # um: 300-dpi pixel, 20 mm conjugate, 2 mm pupil
+    t, wt = np.polynomial.legendre.leggauss(12)
+    xs, wx = t * pixel / 2, wt * pixel / 2
+    tr, wr = np.polynomial.legendre.leggauss(24)
+    r, w_r = (tr + 1) * a / 2, wr * a / 2
+    th = np.linspace(0, 2 * np.pi, 96, endpoint=False)
+    w_th = 2 * np.pi / th.size
+    px, py = np.meshgrid(xs, xs, indexing="ij")
+    wp = np.outer(wx, wx)
+    qx = (r[:, None] * np.cos(th)[None, :]).ravel()
+    qy = (r[:, None] * np.sin(th)[None, :]).ravel()
+    wq = (w_r[:, None] * r[:, None] * w_th * np.ones_like(th)[None, :]).ravel()
+    d2 = (px.ravel()[:, None] - qx[None, :]) ** 2 + (py.ravel()[:, None] - qy[None, :]) ** 2
+    g = np.sum(wp.ravel()[:, None] * wq[None, :] * h**2 / (h**2 + d2) ** 2)
+    assert reference_etendue(pixel) == pytest.approx(g, rel=1e-9)
+    # and the paraxial limit: pixel area x pi NA^2, NA = a / h
+    assert g == pytest.approx(pixel**2 * math.pi * (a / h) ** 2, rel=5e-3)

@@ -360,11 +360,10 @@ def compare(
         f"{'thick mm':>8} {'DOF200 mm (low..high)':>22} {'ghost':>6}"
     ]
     for r in rows:
-        dof = r["dof_mm"]
         lines.append(
             f"{r['name']:<22} {r['kind']:<15} {r['light_vs_f10']:>10.4g} "
             f"{r['light_vs_first']:>9.3g} {r['working_f_number']:>6.1f} "
-            f"{r['thickness_mm']:>8.2f} {dof['low']:>10.2f} .. {dof['high']:<9.2f} "
+            f"{r['thickness_mm']:>8.2f} {r['dof_mm'][0]:>10.2f} .. {r['dof_mm'][1]:<9.2f} "
             f"{r['ghost_fraction']:>6.3f}"
         )
     lines.append(f"wrote {out / 'index.html'} and {out / 'compare.json'}")

@@ -21,7 +21,6 @@ def rows_table(rows: list[dict]) -> str:
     """The comparison table (one row per design)."""
     body = []
     for r in rows:
-        dof = r["dof_mm"]
         body.append(
             [
                 r["name"],
@@ -30,8 +29,8 @@ def rows_table(rows: list[dict]) -> str:
                 r["light_vs_first"],
                 r["working_f_number"],
                 r["thickness_mm"],
-                f"{dof['low']:.2f} .. {dof['high']:.2f}",
-                dof["span"],
+                "{:.2f} .. {:.2f}".format(*r["dof_mm"]),
+                r["dof_span_mm"],
                 r["ghost_fraction"],
             ]
         )
@@ -52,7 +51,7 @@ def rows_table(rows: list[dict]) -> str:
 def page(rows: list[dict], figures: dict[str, str]) -> str:
     notes = "".join(
         f"<li><b>{html.escape(r['name'])}</b>: {html.escape(r['ghost_note'])}; "
-        f"{html.escape(r['dof_mm'].get('note', 'DOF ends at the first 0.3 crossings'))}</li>"
+        f"{html.escape(r['dof_detail']['note'])}</li>"
         for r in rows
     )
     imgs = "".join(

@@ -459,7 +459,7 @@ def rodlens_html(r: dict | None) -> str:
                 f"1/{ratio:.0f}",
                 "-" if custom is None else f"1/{custom:.0f}",
                 r["thickness_mm"],
-                f"{r['dof_mm']['low']:.2f} .. {r['dof_mm']['high']:.2f}",
+                "{:.2f} .. {:.2f}".format(*r["dof_mm"]),
             ]
         )
     body.append(
@@ -489,7 +489,7 @@ def rodlens_html(r: dict | None) -> str:
         + f"<p>The paper's ~1/100 fits <b>{html.escape(best['name'])}</b> (model 1/{fit:.0f}). "
         f"The stamp ({html.escape(stamp['name'])}) is {stamp['thickness_mm']:.2f} mm from sensor "
         f"to document reference and keeps 200-dpi contrast >= 0.3 up to "
-        f"{stamp['dof_mm']['high']:.2f} mm; light is the stamp's own path (ghost light is "
+        f"{stamp['dof_mm'][1]:.2f} mm; light is the stamp's own path (ghost light is "
         "crosstalk, not signal). Model and assumptions: docs/rodlens.md; any designs side by "
         "side: <code>opticalstamp compare</code>.</p>"
         + '<img src="rodlens_contrast.png" alt="contrast vs height">'

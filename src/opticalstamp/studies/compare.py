@@ -13,8 +13,9 @@ Every design is evaluated with the definitions shared by both kinds:
   both kinds. A stamp's nominal object plane is its reference plane (its contrast is
   highest there and the document cannot come closer); a rod-lens array's is its focus.
 * ``dof_mm``: heights where the 200-dpi contrast (shading-corrected RMTF, maximised over
-  the chart's shift) stays >= 0.3, as ``low``, ``high`` relative to the nominal object
-  plane and their ``span``; each end at the first crossing from the best height.
+  the chart's shift) stays >= 0.3, as ``[low, high]`` relative to the nominal object
+  plane, ``dof_span_mm`` their span; each end at the first crossing from the best height
+  (``dof_detail``: whether an end is the grid's, and a note).
 * ``ghost_fraction``: the stamp's traced ghost light over all light; 0 for a rod-lens
   array, whose model has no stray path (skin and resin absorb: ``ghost_note`` says so).
 """
@@ -68,10 +69,10 @@ def stamp_row(design: Design, eff, r) -> dict:
         "working_f_number": eff.working_f_number_own,
         "thickness_mm": design.reference_plane_um / 1000,
         "nominal_object_plane_mm": 0.0,
-        "dof_mm": {
-            "low": 0.0,
-            "high": high,
-            "span": high,
+        "dof_mm": [0.0, high],
+        "dof_span_mm": high,
+        "dof_detail": {
+            "clipped_low": False,
             "clipped_high": bool(high >= r.z_mm[-1]),
             "note": "low end: the reference plane, the closest a document can come",
         },
@@ -113,7 +114,12 @@ def evaluate_rodlens(
         "rod_length_mm": a.length_um / 1000,
         "working_distance_mm": a.working_um / 1000,
         "nominal_object_plane_mm": 0.0,
-        "dof_mm": dict(con.dof_mm),
+        "dof_mm": [con.dof_mm["low"], con.dof_mm["high"]],
+        "dof_span_mm": con.dof_mm["span"],
+        "dof_detail": {
+            k: con.dof_mm[k] for k in ("clipped_low", "clipped_high", "usable_from_reference")
+        }
+        | {"note": "each end at the first 0.3 crossing from the best focus"},
         "ghost_fraction": 0.0,
         "ghost_note": "no stray path in the model: rod skin and black resin absorb",
         "contrast": {
