@@ -310,7 +310,8 @@ def rod_contrast(
 
     lo, hi, clip_lo, clip_hi = first_crossings(hs, dof_curve, threshold, refine)
     lo, hi = float(lo), float(hi)
-    half = lsf_half_um or 3 * pitch
+    # the pixel and the defocus blur (NA per unit height) at the farthest height
+    half = lsf_half_um or 3 * pitch + design.array.na * mm_to_um(float(np.abs(hs).max()))
     edges = np.arange(-half, half + 1e-9, 2.0)
     lsf = [line.lsf(float(h), edges).tolist() for h in hs]
     return RodContrast(

@@ -99,7 +99,7 @@ def write_comparison(
                 name = f"rodlens-{i}.png"
                 psf = rod_psf(d, seed=seed)
                 save_figure(plotting.plot_rod_details(r, psf), tmp / name)
-                figures[name] = f"{d.name}: ripple, MTF and point PSFs"
+                figures[name] = f"{d.name}: ripple, LSF, MTF and point PSFs"
         data = {"designs": rows, "provenance": [provenance(d, seed) for d in designs]}
         write_atomic(tmp / "compare.json", to_json(data))
         write_atomic(tmp / "index.html", page(rows, figures))

@@ -526,23 +526,31 @@ def plot_rod_ripple(eff):
 
 
 def plot_rod_details(row: dict, psf: dict):
-    """A rod-lens array: ripple along one rod period, MTF vs height, point PSFs."""
-    fig, axes = _subplots(1, 4, figsize=(14, 3.3), layout="constrained")
+    """A rod-lens array: ripple along one rod period, LSF and MTF vs height, point PSFs."""
+    fig, axes = _subplots(1, 5, figsize=(17, 3.3), layout="constrained")
     rp = row["ripple_profile"]
     axes[0].plot(rp["positions_um"], rp["relative"], "o-", ms=3)
     axes[0].set_xlabel("pixel centre from a rod axis (um)")
     axes[0].set_ylabel("etendue / mean")
     axes[0].set_title(f"ripple {row['ripple']:.3f} (noise ~{row['ripple_noise']:.3f})", fontsize=9)
+    lsf = row["lsf"]
+    hs = np.asarray(lsf["heights_mm"])
+    for h in (0.0, 0.5, 1.0):
+        i = int(np.argmin(np.abs(hs - h)))
+        axes[1].plot(lsf["x_um"], lsf["per_um"][i], label=f"{hs[i]:g} mm")
+    axes[1].set_xlabel("x from the pixel centre (um)")
+    axes[1].set_ylabel("LSF (1/um, pixel included)")
+    axes[1].legend(fontsize=7)
     m = row["mtf"]
     for key, vals in m["by_dpi"].items():
-        axes[1].plot(m["heights_mm"], vals, label=f"{key} dpi")
-    axes[1].set_xlabel("height from focus (mm)")
-    axes[1].set_ylabel("MTF at the chart fundamental")
-    axes[1].legend(fontsize=7)
+        axes[2].plot(m["heights_mm"], vals, label=f"{key} dpi")
+    axes[2].set_xlabel("height from focus (mm)")
+    axes[2].set_ylabel("MTF at the chart fundamental")
+    axes[2].legend(fontsize=7)
     edges = np.asarray(psf["x_edges_um"])
     ext = [edges[0], edges[-1], edges[0], edges[-1]]
     k = len(psf["heights_mm"]) - 1
-    for ax, (name, at) in zip(axes[2:], psf["at"].items(), strict=False):
+    for ax, (name, at) in zip(axes[3:], psf["at"].items(), strict=False):
         img = np.asarray(at["by_height"][k]["image"])
         ax.imshow(img, extent=ext, origin="lower", cmap="magma", interpolation="nearest")
         ax.set_title(

@@ -130,6 +130,7 @@ def evaluate_rodlens(
             "heights_mm": con.heights_mm,
             "by_dpi": {f"{d:g}": row for d, row in zip(con.dpi, con.mtf, strict=True)},
         },
+        "lsf": {"x_um": con.lsf_x_um, "heights_mm": con.heights_mm, "per_um": con.lsf},
         "ripple_profile": {
             "positions_um": eff.positions_um,
             "relative": (np.asarray(eff.etendue_by_position_um2sr) / eff.etendue_um2sr).tolist(),
