@@ -29,6 +29,26 @@ app = typer.Typer(
 )
 
 
+def _version(value: bool) -> None:
+    if value:
+        from .. import __version__
+
+        typer.echo(f"opticalstamp {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", help="print the version and exit", callback=_version, is_eager=True
+        ),
+    ] = False,
+) -> None:
+    """Design and analyse lensless contact image scanners (optical stamps)."""
+
+
 def command(*args, **kwargs):
     """``app.command`` whose body turns any :class:`InputError` into ``error: ...``, exit 2.
 
