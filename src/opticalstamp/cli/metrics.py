@@ -275,11 +275,22 @@ def diffraction(
         save_plot(plot_diffraction(r), plot)
 
 
-def _image(path: Path, dpi: float | None, linear: bool, min_px: int = 8):
-    """An image checked from its header (``min_px`` pixels a side at least) and read."""
-    from ..io.files import ImageError, read_image
+def _image(path: Path, dpi: float | None, linear: bool | None, min_px: int = 8):
+    """An image checked from its header (``min_px`` pixels a side at least) and read,
+    decoded to linear values as its file says (``linear`` None) or as the user says."""
+    from ..io.files import ImageError, image_encoding, read_image
 
     try:
+        if linear is None:
+            enc = image_encoding(path)
+            linear = enc == "srgb"
+            if enc == "untagged":
+                typer.echo(
+                    f"warning: {path}: an 8-bit image without colour information, taken as "
+                    "linear values; if it is sRGB-encoded (most 8-bit images are), pass "
+                    "--linear to decode it",
+                    err=True,
+                )
         img, file_dpi = read_image(path, linear=linear, dpi=dpi, min_px=min_px)
     except ImageError as err:
         fail(str(err))
@@ -294,7 +305,15 @@ DpiOpt = Annotated[
         callback=number(10, 20000),
     ),
 ]
-LinearOpt = Annotated[bool, typer.Option("--linear", help="decode sRGB values to linear first")]
+LinearOpt = Annotated[
+    bool | None,
+    typer.Option(
+        "--linear/--as-stored",
+        help="decode sRGB values to linear first, or take them as stored (default: as the "
+        "file states its encoding; 16-bit and TIFF as stored)",
+        show_default=False,
+    ),
+]
 
 
 @command("measure-rmtf")
@@ -302,7 +321,7 @@ def measure_rmtf(
     image: ImageArg,
     dpi: DpiOpt = None,
     axis: Annotated[str, typer.Option(help="x: bars vary along x; y: along y")] = "x",
-    linear: LinearOpt = False,
+    linear: LinearOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Find the bar blocks of a chart image and measure RMTF per period (paper Fig. 12)."""
@@ -332,7 +351,7 @@ def sfr(
         str, typer.Option(help="x, y, auto (one edge) or both (a slanted dark square)")
     ] = "auto",
     roi: Annotated[str | None, typer.Option(help="region x0,y0,x1,y1 (pixels)")] = None,
-    linear: LinearOpt = False,
+    linear: LinearOpt = None,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:

@@ -360,17 +360,50 @@ def linear_to_srgb(v: np.ndarray) -> np.ndarray:
     return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
 
 
+#: PNG gAMA values (1/gamma x 100000): sRGB's nominal 1/2.2, and linear values.
+_GAMA_SRGB, _GAMA_LINEAR = 45455, 100000
+
+
 def encode_png(linear: np.ndarray, dpi: float, *, srgb: bool = True) -> bytes:
-    """8-bit PNG bytes (sRGB-encoded unless ``srgb`` is False) with the resolution."""
+    """8-bit PNG bytes (sRGB-encoded unless ``srgb`` is False) with the resolution, and
+    the encoding stated in the file: an sRGB chunk (with gAMA 1/2.2), or gAMA 1 for
+    linear values, so that readers (:func:`image_encoding`) decode it right."""
     import io as _io
 
-    from PIL import Image
+    from PIL import Image, PngImagePlugin
 
     v = linear_to_srgb(linear) if srgb else np.clip(linear, 0, 1)
     im = Image.fromarray(np.round(v * 255).astype(np.uint8))
+    info = PngImagePlugin.PngInfo()
+    if srgb:
+        info.add(b"sRGB", b"\x00")  # rendering intent: perceptual
+    gama = _GAMA_SRGB if srgb else _GAMA_LINEAR
+    info.add(b"gAMA", gama.to_bytes(4, "big"))
     buf = _io.BytesIO()
-    im.save(buf, format="PNG", dpi=(dpi, dpi))
+    im.save(buf, format="PNG", dpi=(dpi, dpi), pnginfo=info)
     return buf.getvalue()
+
+
+def image_encoding(path: str | Path) -> str:
+    """How an image file's values are encoded, from its header: "srgb" (an sRGB chunk,
+    an ICC profile, or a gamma near 1/2.2), "linear" (gamma 1, 16-bit or float samples,
+    TIFF), or "untagged" (8-bit with no colour information: sRGB is likely, not stated).
+    """
+    from PIL import Image
+
+    path = Path(path)
+    if path.suffix.lower() in (".tif", ".tiff"):
+        return "linear"
+    with _guarded(path, "image"), Image.open(path) as im:
+        info, mode = im.info, im.mode
+    if mode not in ("L", "LA", "P", "RGB", "RGBA"):
+        return "linear"  # 16-bit or float samples: opticalstamp and instruments store linear
+    if "srgb" in info or "icc_profile" in info:
+        return "srgb"
+    gamma = info.get("gamma")
+    if gamma is not None:
+        return "linear" if abs(gamma - 1.0) < 0.01 else "srgb"
+    return "untagged"
 
 
 def write_png(path: str | Path, linear: np.ndarray, dpi: float, *, srgb: bool = True) -> Path:
