@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..analysis.ghosts import GhostResult
-from ..analysis.spots import PSF, SpotResult
+from ...analysis.ghosts import GhostResult
+from ...analysis.spots import PSF, SpotResult
 
 
 def _subplots(*args, figsize=None, layout=None, **kw):
@@ -304,7 +304,7 @@ def plot_scan_panels(
 
     ``interpolation``: "nearest" shows the pixels; "antialiased" for panels drawn smaller
     than their pixel count (nearest would drop pixels)."""
-    from ..io.files import linear_to_srgb
+    from ...io.files import linear_to_srgb
 
     rows = int(np.ceil(len(panels) / cols))
     h, w = panels[0][1].shape[:2]
