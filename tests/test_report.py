@@ -32,6 +32,7 @@ def test_report_writes_every_section(tmp_path):
         "search",
         "tolerance",
         "rodlens",
+        "stack",
     ):
         assert key in d, key
     assert d["provenance"]["design"] == "paper2016" and d["provenance"]["seed"] == 0
@@ -49,6 +50,7 @@ def test_report_writes_every_section(tmp_path):
         "Design search",
         "Tolerancing",
         "The stamp against a rod-lens array",
+        "The design as built",
     ):
         assert heading in page, heading
     figures = [
@@ -70,6 +72,7 @@ def test_report_writes_every_section(tmp_path):
         "tolerance",
         "rodlens_contrast",
         "rodlens_light",
+        "stack",
     ]
     for name in figures:
         assert f'src="{name}.png"' in page

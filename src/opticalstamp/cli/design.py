@@ -8,7 +8,18 @@ from typing import Annotated
 import typer
 
 from ..design import RodLensDesign, load_design, preset_names
-from .common import app, command, fail, open_design, writable
+from .common import (
+    BOTH_KINDS,
+    JsonOpt,
+    PlotOpt,
+    app,
+    command,
+    emit,
+    fail,
+    open_design,
+    save_plot,
+    writable,
+)
 
 presets_app = typer.Typer(
     help="Built-in designs to start from: list them, or print one as a design file.",
@@ -75,3 +86,78 @@ def masks(
             f"{m.width_um:g} x {m.height_um:g} um, pitch {m.pitch_um:g} um"
         )
     typer.echo(f"wrote {path} ({path.stat().st_size:,} bytes, fingerprint {d.fingerprint()})")
+
+
+@command()
+def show(
+    design: Annotated[str, typer.Argument(help="preset name or design TOML file")],
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """The design as built: its stack as a table (layer 1 = the object side, as the paper
+    numbers them), its pixel lattice and, with --plot, a to-scale cross-section."""
+    from ..io.files import provenance
+
+    d = open_design(design, kinds=BOTH_KINDS)
+    if isinstance(d, RodLensDesign):
+        if plot is not None:
+            fail("--plot: the cross-section is drawn for stamps")
+        a = d.array
+        data = {
+            "design": d.model_dump(mode="json"),
+            "derived": {
+                "numerical_aperture": a.na,
+                "g_per_mm": a.g_per_um * 1000,
+                "pitch_length_mm": a.pitch_length_um / 1000,
+                "view_radius_mm": a.view_radius_um / 1000,
+                "overlap_degree": a.overlap_degree,
+                "rod_length_mm": a.length_um / 1000,
+                "working_distance_mm": a.working_um / 1000,
+                "conjugate_length_mm": a.conjugate_um / 1000,
+                "sensor_to_document_mm": d.reference_plane_um / 1000,
+            },
+        } | {"provenance": provenance(d, None)}
+        lines = [f"{d.name}: rod-lens array, {a.rows} row(s) of rods R = {a.rod_radius_um:g} um"]
+        lines += [f"  {k.replace('_', ' ')}: {v:.4g}" for k, v in data["derived"].items()]
+        emit(data, as_json, lines)
+        return
+    from ..design.describe import stack_rows
+    from ..raytrace.stack import output_pitch
+    from ..units import dpi_of_pitch
+
+    rows = stack_rows(d)
+    s = d.sensor
+    pitch = output_pitch(d)
+    data = {
+        "design": d.name,
+        "stack": rows,
+        "output_pitch_um": pitch,
+        "output_dpi": dpi_of_pitch(pitch),
+        "reference_plane_um": d.reference_plane_um,
+        "provenance": provenance(d, None),
+    }
+    lines = [
+        f"{d.name}: {len(d.masks)} aperture layers, {s.rows} row(s) of used pixels every "
+        f"{s.row_pitch_um:g} um ({dpi_of_pitch(pitch):.0f} dpi merged), reference plane "
+        f"{d.reference_plane_um / 1000:.3f} mm above the sensor",
+        "object side",
+        f"{'layer':>5}  {'medium':<12}{'n':>7}{'thick um':>10}{'z top um':>10}  hole",
+    ]
+    for r in rows:
+        m = r["mask"]
+        hole = "" if m is None else f"{m['shape']} {m['width_um']:g} x {m['height_um']:g} um"
+        if m is not None and (m["offset_x_um"] or m["offset_y_um"]):
+            hole += f", offset ({m['offset_x_um']:g}, {m['offset_y_um']:g}) um"
+        if r.get("reference_gap"):
+            hole = "(reference gap)"
+        layer = "" if r["layer"] is None else str(r["layer"])
+        lines.append(
+            f"{layer:>5}  {str(r['medium']):<12}{r['index']:>7.4f}{r['thickness_um']:>10g}"
+            f"{r['z_top_um']:>10g}  {hole}"
+        )
+    lines.append("sensor side")
+    emit(data, as_json, lines)
+    if plot:
+        from ..report.plotting.stack import plot_stack
+
+        save_plot(plot_stack(d), plot)

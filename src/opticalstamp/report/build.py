@@ -30,6 +30,7 @@ from ..analysis.paper_study import with_headline
 from ..analysis.spots import psf, spots
 from ..defaults import DOF_DPI, RAYS_LSF, RAYS_MAP
 from ..design import Design, load_design
+from ..design.describe import stack_rows
 from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import output_pitch
@@ -154,6 +155,7 @@ def build_report(
         What report.json holds.
     """
     from . import plotting
+    from .plotting.stack import plot_stack
 
     t0 = time.perf_counter()
     clock = _Clock()
@@ -215,6 +217,7 @@ def build_report(
             )
         clock.lap("scans")
         figures = {
+            "stack.png": plot_stack(design),
             "ghosts.png": plotting.plot_ghosts(g),
             "spots.png": plotting.plot_spots(sp),
             "psf_x0.png": plotting.plot_psf(psfs[0]),
@@ -279,6 +282,7 @@ def build_report(
             "left_out": list(work.left_out),
             "reduced": list(work.reduced),
             "design": design.model_dump(mode="json"),
+            "stack": stack_rows(design),
             "ghosts": g.to_dict(),
             "spots": sp.to_dict(),
             "psf": [p.to_dict() for p in psfs],

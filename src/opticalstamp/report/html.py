@@ -175,6 +175,7 @@ font-size:13px;text-align:right}}img{{max-width:100%}}</style></head><body>
 opticalstamp {prov["opticalstamp_version"]}, Fresnel losses {"on" if prov["fresnel"] else "off"},
 pixel acceptance half-angle {design.sensor.acceptance_half_angle_deg:g} deg.
 Numbers: <a href="report.json">report.json</a>.</p>
+{_stack_html(d.get("stack"))}
 <h2>Ghost analysis (paper Figs. 2 and 4)</h2>
 <p>Own-path etendue {g["etendue_own_um2sr"]:.4g} &plusmn; {g["etendue_own_se"]:.2g} um&sup2;sr,
 ghost etendue {g["etendue_ghost_um2sr"]:.4g} &plusmn; {g["etendue_ghost_se"]:.2g} um&sup2;sr,
@@ -494,4 +495,29 @@ def rodlens_html(r: dict | None) -> str:
         "side: <code>opticalstamp compare</code>.</p>"
         + '<img src="rodlens_contrast.png" alt="contrast vs height">'
         + '<img src="rodlens_light.png" alt="light and thickness">'
+    )
+
+
+def _stack_html(rows: list[dict] | None) -> str:
+    """The design as built: the stack table (object side first) and the drawing."""
+    if not rows:
+        return ""
+    body = []
+    for r in rows:
+        m = r["mask"]
+        hole = "reference gap" if r.get("reference_gap") else ""
+        if m is not None:
+            hole = f"{m['shape']} {m['width_um']:g} x {m['height_um']:g} um"
+            if m["offset_x_um"] or m["offset_y_um"]:
+                hole += f", offset ({m['offset_x_um']:g}, {m['offset_y_um']:g}) um"
+        body.append(
+            ["" if r["layer"] is None else r["layer"], str(r["medium"]), r["index"],
+             r["thickness_um"], r["z_top_um"], hole]
+        )  # fmt: skip
+    head = ["layer", "medium", "index", "thickness (um)", "z of top (um)", "mask hole"]
+    return (
+        "<h2>The design as built</h2><p>Object side first; aperture layers numbered from the "
+        "object side as the paper does (layer 1 faces the document).</p>"
+        + table(body, head)
+        + '<img src="stack.png" alt="the stack to scale">'
     )
