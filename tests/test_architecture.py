@@ -1,5 +1,5 @@
 """The layout guard (docs/architecture.md): stages import only earlier stages, no import
-cycles, matplotlib only in report/plotting.py, typer only in cli/, no process-wide state
+cycles, matplotlib only in report/plotting/, typer only in cli/, no process-wide state
 changed, no private names imported across modules."""
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ def plot_stack(design: Design):
     fig, axes = _subplots(
         1,
         len(rows),
-        figsize=(4.2 * len(rows), 0.8 + 4.2 * top / (2 * half)),
+        figsize=(4.2 * len(rows), 0.6 + 3.3 * top / (2 * half)),
         squeeze=False,
         layout="constrained",
     )
