@@ -178,9 +178,17 @@ class RMTFResult:
     window_um: float
     shift_step_um: float
     meta: dict = field(default_factory=dict)
+    #: per dpi: the RMTF stays above the threshold to the last Z, so ``dof_mm`` is a lower
+    #: bound (">= Zmax"), not a crossing
+    dof_open_ended: dict[str, bool] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    def dof_text(self, key: str) -> str:
+        """The depth of field for chart ``key`` as text: "2.48 mm" or ">= 4.50 mm"."""
+        v = self.dof_mm[key]
+        return f">= {v:.2f} mm" if self.dof_open_ended.get(key) else f"{v:.2f} mm"
 
     def to_dataset(self):
         """The curves as an xarray Dataset on coordinates ``dpi`` and ``z_mm``.
@@ -323,6 +331,8 @@ def rmtf_from_lsf(
     keys = [_key(d) for d in dpis]
     pick = {name: {k: cur[name][i].tolist() for i, k in enumerate(keys)} for name in cur}
     dof = {k: depth_of_field(zs, cur["max"][i], dof_threshold) for i, k in enumerate(keys)}
+    # a depth of field that reaches the last Z is a lower bound: the range ended first
+    open_ended = {k: bool(min(cur["max"][i]) >= dof_threshold) for i, k in enumerate(keys)}
     return RMTFResult(
         design=design.name,
         fingerprint=design.fingerprint(),
@@ -344,4 +354,5 @@ def rmtf_from_lsf(
         window_um=window_um,
         shift_step_um=shift_step_um,
         meta={"best_shift_um": pick["best_shift_um"]},
+        dof_open_ended=open_ended,
     )

@@ -114,7 +114,7 @@ def rmtf(
     lines.append(
         "depth of field (RMTF >= "
         + f"{threshold:g}): "
-        + ", ".join(f"{k} dpi {v:.2f} mm" for k, v in r.dof_mm.items())
+        + ", ".join(f"{k} dpi {r.dof_text(k)}" for k in r.dof_mm)
     )
     emit(data, as_json, lines)
     if plot:

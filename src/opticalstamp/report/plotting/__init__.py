@@ -126,13 +126,22 @@ def plot_ghosts(res: GhostResult, top: int = 12):
         f" fraction {res.ghost_fraction:.3g}",
         fontsize=8,
     )
-    for z, land in res.landing.items():
-        h = np.asarray(land["etendue_by_distance_um2sr"])
-        r = (np.arange(h.size) + 0.5) * land["bin_um"] / 1000
-        a2.step(r, h, where="mid", label=f"Z = {z} mm")
-    a2.set_yscale("symlog", linthresh=1e-6)
-    a2.set_xlabel("distance of ghost light from the pixel's axis on the object plane (mm)")
-    a2.set_ylabel("etendue per bin (um^2 sr)")
+    for i, (z, land) in enumerate(res.landing.items()):
+        h = np.asarray(land["etendue_by_distance_um2sr"])  # the last bin: all farther light
+        total = h.sum()
+        if total <= 0:
+            continue
+        edges = (np.arange(h.size) + 1.0) * land["bin_um"] / 1000  # upper edges (mm)
+        share = np.cumsum(h[:-1]) / total
+        far = h[-1] / total
+        a2.step(np.r_[0.0, edges[:-1]], np.r_[0.0, share], where="post", color=f"C{i}",
+                label=f"Z = {z} mm: {far:.0%} beyond {edges[-2]:.1f} mm")  # fmt: skip
+        if far > 0:
+            a2.plot([edges[-2]], [share[-1]], ">", color=f"C{i}", ms=5)
+    a2.set_ylim(0, 1.02)
+    a2.set_xlabel("distance from the pixel's axis on the object plane (mm)")
+    a2.set_ylabel("share of the ghost light landing within")
+    a2.set_title("where ghost light lands (cumulative; arrow: the rest lies farther)", fontsize=8)
     a2.legend(fontsize=7)
     fig.suptitle(
         f"{res.design}: ghost analysis of pixel {res.pixel['row']}{res.pixel['k']}", fontsize=9
@@ -160,7 +169,7 @@ def plot_rmtf(res, paper_points: dict | None = None):
     dof = res.dof_mm.get(f"{res.dof_dpi:g}")
     if dof is not None:
         ax.axvline(dof, color="k", lw=0.6, ls="--")
-        ax.text(dof, 0.95, f" DOF {dof:.2f} mm", fontsize=8, va="top")
+        ax.text(dof, 0.95, f" DOF {res.dof_text(f'{res.dof_dpi:g}')}", fontsize=8, va="top")
     ax.set_xlabel("object distance Z (mm)")
     ax.set_ylabel("RMTF")
     ax.set_ylim(0, 1.02)
