@@ -170,6 +170,7 @@ def scan(
         float, typer.Option(help="reflectance outside the page, 0 to 1", callback=number(0, 1))
     ] = 0.0,
     fresnel: FresnelOpt = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """Simulate the scanner's output for a document at a float height (paper Figs. 8, 9)."""
     import json
@@ -220,6 +221,20 @@ def scan(
         f"{r.image.shape[1]} x {r.image.shape[0]} pixels at {r.dpi:.1f} dpi",
         err=True,
     )
+    sg = r.meta["signal"]
+    lines = [
+        f"signal: {sg['electrons_white']:,.0f} e- at white ({sg['full_well_fraction_white']:.0%} "
+        f"of the full well), SNR {sg['snr_white']:.0f} at white, {sg['snr_grey18']:.0f} at 18 % "
+        f"grey; SNR {sg['target_snr_white']:g} at white needs {sg['exposure_for_target_ms']:.3g} "
+        f"ms per line (at most {sg['max_line_rate_for_target_hz']:,.0f} lines/s)"
+    ]
+    if sg["saturated_white"]:
+        lines.append(
+            f"warning: white saturates the pixels (the scan clips); an exposure below "
+            f"{sg['exposure_to_full_well_ms']:.3g} ms (--exposure-ms) or less light "
+            "(--illuminance-lux) keeps it in range"
+        )
+    emit(json.loads(to_json(meta)), as_json, lines)
 
 
 @command()

@@ -38,7 +38,7 @@ from ..validate import check_seed
 from .heightmap import Z_RANGE_MM, check_range
 from .heightmap import sample as sample_height
 from .kernels import KernelCache, ScanKernel, kernel_cache, scan_kernels
-from .sensor import SensorModel, expose, fixed_pattern
+from .sensor import SensorModel, expose, fixed_pattern, signal_budget
 from .separable import box_taps, inside, x_pass, y_pass
 
 
@@ -438,6 +438,12 @@ def simulate_scan(
             "document_dpi": doc_dpi,
             "settings": st.model_dump(mode="json"),
             "kernel_source": st.kernel,
+            # a pixel's signal and noise budget at the first level (mean over pixel groups)
+            "signal": signal_budget(
+                st.sensor,
+                st.white_reference
+                * float(np.mean([k[0].own_etendue + k[0].ghost_etendue for k in kern])),
+            ),
         },
     )
 

@@ -41,6 +41,8 @@ COMPARE_DPI = (100.0, 200.0, 300.0)
 STAMP_HEIGHTS_MM = parse_grid(Z_GRID_MM, "z_mm", 0.0, 100.0)
 #: Heights (mm from the document reference) of the text scanned by each design.
 TEXT_HEIGHTS_MM = (0.0, 0.5, 1.0, 2.0)
+#: Fraction of the full well that white fills in the text scans (auto-exposure).
+WHITE_FILL = 0.8
 #: Sampling (dpi) of the text document scanned by each design.
 TEXT_DPI = 600.0
 #: Heights (mm from the nominal object plane) of a rod-lens array's contrast curve.
@@ -171,16 +173,25 @@ def relative_to_first(rows: list[dict]) -> list[dict]:
 
 def text_scans(designs, *, heights_mm=TEXT_HEIGHTS_MM, seed: int = 0, fresnel: bool = False):
     """The same text (the built-in text chart's first half lines) scanned by each design at
-    each height: [(title, image)] in design-major order, linear reflectance."""
+    each height: [(title, image)] in design-major order, linear reflectance. Each scanner
+    is exposed so that white fills WHITE_FILL of the full well (a rod-lens array collects
+    about 100 times a stamp's light: at one exposure one of them would clip or starve)."""
     from ..imaging.charts import text_chart
     from ..imaging.scan import ScanSettings, prepare_kernels, simulate_scan
+    from ..imaging.sensor import exposure_for_white
 
     doc, _ = text_chart(TEXT_DPI)
     doc = doc[: doc.shape[0] // 2, : doc.shape[1] // 2]  # two half lines of 8-pt text
-    st = ScanSettings(fresnel=fresnel)
+    base = ScanSettings(fresnel=fresnel)
     panels = []
     for d in designs:
-        kern = prepare_kernels(d, z_mm=heights_mm, settings=st, seed=seed)
+        kern = prepare_kernels(d, z_mm=heights_mm, settings=base, seed=seed)
+        groups = kern.lookup(
+            d, [heights_mm[0]], fresnel=fresnel, n_rays=base.kernel_rays, seed=seed
+        )
+        white = float(np.mean([k[0].own_etendue + k[0].ghost_etendue for k in groups]))
+        ms = exposure_for_white(base.sensor, white, WHITE_FILL)
+        st = base.model_copy(update={"sensor": base.sensor.model_copy(update={"exposure_ms": ms})})
         for z in heights_mm:
             r = simulate_scan(doc, TEXT_DPI, d, z_mm=z, settings=st, seed=seed, kernels=kern)
             panels.append((f"{d.name}, {z:g} mm", r.image))
