@@ -33,6 +33,7 @@ def test_report_writes_every_section(tmp_path):
         "tolerance",
         "rodlens",
         "stack",
+        "summary",
     ):
         assert key in d, key
     assert d["provenance"]["design"] == "paper2016" and d["provenance"]["seed"] == 0
@@ -51,6 +52,7 @@ def test_report_writes_every_section(tmp_path):
         "Tolerancing",
         "The stamp against a rod-lens array",
         "The design as built",
+        "Verdict",
     ):
         assert heading in page, heading
     figures = [
@@ -83,3 +85,25 @@ def test_report_writes_every_section(tmp_path):
     assert rows[0]["light_vs_f10"] == d["efficiency"]["ratio_own"]
     assert rows[0]["dof_mm"] == [0.0, d["rmtf"]["dof_mm"]["200"]]
     assert "fits <b>sla-1row-12deg</b>" in page  # the paper's ~1/100
+
+
+def test_report_verdict_against_a_spec(tmp_path):
+    from edges import assert_clean_refusal, run
+
+    out = tmp_path / "q"
+    spec = "dof>=2.2,ghost_radius>=5,light>=0.05"
+    res = run(["report", "--quick", "--out", out, "--spec", spec, "--json"])
+    assert res.exit_code == 0, res.output
+    s = json.loads(res.stdout)["summary"]
+    fig = {f["figure"]: f for f in s["figures"]}
+    d = json.loads((out / "report.json").read_text())
+    assert fig["dof"]["value"] == d["rmtf"]["dof_mm"]["200"] and fig["dof"]["check"]["pass"]
+    assert fig["ghost_radius"]["value"] * 1000 == min(
+        v["nearest_um"] for v in d["ghosts"]["landing"].values()
+    )
+    assert fig["light"]["check"]["pass"] is False and s["meets_spec"] is False
+    assert fig["dof"]["paper"] == 3.5  # the prototype: the paper's figure beside the model's
+    assert "Does not meet the spec" in (out / "index.html").read_text()
+    bad = tmp_path / "bad"
+    assert_clean_refusal(run(["report", "--quick", "--out", bad, "--spec", "dof>2"]), "--spec")
+    assert not bad.exists()

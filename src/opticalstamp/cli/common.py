@@ -384,6 +384,17 @@ def report(
         ),
     ] = Path("report"),
     fresnel: FresnelOpt = False,
+    spec: Annotated[
+        str | None,
+        typer.Option(
+            "--spec",
+            help="figures the design must meet, e.g. dof>=2.2,ghost_radius>=5 (figures: "
+            "ghost_radius, dof, light, f_number, vs_rod_lens, thickness, yield)",
+        ),
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="print the report's verdict (summary) as JSON")
+    ] = False,
     quick: Annotated[
         bool,
         typer.Option(
@@ -397,16 +408,22 @@ def report(
     from ..report.build import build_report
 
     d = open_design(design)
-    build_report(
+    from ..report.summary import parse_report_spec
+
+    parse_report_spec(spec)  # refused before any work
+    data = build_report(
         d,
         out,
         seed=seed,
         n_rays=ray_count(rays, RAYS_MAP),
         fresnel=fresnel,
-        progress=True,
+        progress=not as_json,
         quick=quick,
+        spec=spec,
     )
-    typer.echo(f"wrote {out / 'index.html'} and {out / 'report.json'}")
+    typer.echo(f"wrote {out / 'index.html'} and {out / 'report.json'}", err=as_json)
+    if as_json:
+        emit({"summary": data["summary"]}, True, [])
 
 
 def main() -> None:  # pragma: no cover

@@ -132,6 +132,7 @@ def build_report(
     fresnel: bool = False,
     progress: bool = False,
     quick: bool = False,
+    spec: str | None = None,
 ) -> dict:
     """Run every analysis and write report.json, PNG figures and index.html to out_dir.
 
@@ -155,6 +156,9 @@ def build_report(
         What report.json holds.
     """
     from . import plotting
+    from .summary import parse_report_spec, summary
+
+    parse_report_spec(spec)  # a bad spec is refused before any work
     from .plotting.stack import plot_stack
 
     t0 = time.perf_counter()
@@ -302,6 +306,11 @@ def build_report(
             "elapsed_s": time.perf_counter() - t0,
             "section_elapsed_s": clock.laps,
         }
+        data["summary"] = summary(
+            data,
+            parse_report_spec(spec),
+            paper=design.fingerprint() == load_design(PAPER_PRESET).fingerprint(),
+        )
         write_atomic(tmp / "report.json", to_json(data))
         write_atomic(tmp / "index.html", page(design, data))
     return data
@@ -581,6 +590,8 @@ def _run_rodlens(seed: int, fresnel: bool):  # pragma: no cover - a background p
     return rows
 
 
+#: The preset whose report shows the paper's own figures beside the model's.
+PAPER_PRESET = "paper2016"
 #: The report's rod-lens contrast curves: the report's chart resolutions that `compare`
 #: draws, every 0.25 mm (`compare`: 100/200/300 dpi every 0.125 mm); the same rays, so
 #: light and depth of field are `compare`'s (the DOF to 1e-3 mm: bisection from another

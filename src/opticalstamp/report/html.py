@@ -170,6 +170,7 @@ def page(design: Design, d: dict) -> str:
 table{{border-collapse:collapse;margin:.5em 0}}td,th{{border:1px solid #bbb;padding:2px 6px;
 font-size:13px;text-align:right}}img{{max-width:100%}}</style></head><body>
 <h1>opticalstamp report: {html.escape(design.name)}</h1>{_quick_html(d)}
+{_summary_html(d.get("summary"))}
 <p>{html.escape(design.description)}</p>
 <p>design fingerprint {prov["design_fingerprint"]}, seed {prov["seed"]},
 opticalstamp {prov["opticalstamp_version"]}, Fresnel losses {"on" if prov["fresnel"] else "off"},
@@ -527,4 +528,47 @@ def _stack_html(rows: list[dict] | None) -> str:
         "object side as the paper does (layer 1 faces the document).</p>"
         + table(body, head)
         + '<img src="stack.png" alt="the stack to scale">'
+    )
+
+
+def _summary_html(s: dict | None) -> str:
+    """The verdict card at the top of the report."""
+    if not s:
+        return ""
+    body = []
+    paper = any(f["paper"] is not None for f in s["figures"])
+    for f in s["figures"]:
+        v = f["value"]
+        if v is None:
+            continue
+        unit = f" {f['unit']}" if f["unit"] else ""
+        shown = f"{'≥ ' if f['bound'] else ''}{_fmt(float(v))}{unit}"
+        c = f["check"]
+        verdict = (
+            "-"
+            if c is None
+            else f"{c['spec']}: "
+            + ("PASS" if c["pass"] else ("FAIL" if c["pass"] is False else "not computed"))
+        )
+        what = f["what"] + (f" at {s['dof_dpi']:g} dpi" if f["figure"] == "dof" else "")
+        row = [what, shown, verdict]
+        if paper:
+            row.append("-" if f["paper"] is None else _fmt(f["paper"]))
+        body.append(row)
+    head = ["figure", "model", "spec"] + (["paper"] if paper else [])
+    near = ", ".join(f"{v:.1f} mm at Z = {z} mm" for z, v in s["ghost_nearest_mm_by_z"].items())
+    if s["meets_spec"] is None:
+        top = 'No spec given (report --spec "dof>=2.2,ghost_radius>=5").'
+    else:
+        top = (
+            f"<b>{'Meets' if s['meets_spec'] else 'Does not meet'} the spec</b> "
+            f"{html.escape(', '.join(s['spec']))}."
+        )
+    return (
+        f"<div style='border:2px solid #444;padding:.5em 1em;margin:1em 0'>"
+        f"<h2>Verdict</h2><p>{top}</p>"
+        + table(body, head)
+        + f"<p>Ghost light ({s['ghost_fraction']:.3g} of all light) lands no nearer than "
+        f"{html.escape(near)} from the pixel's axis: the design is ghost-free within that "
+        "radius; own-path light is the signal.</p></div>"
     )

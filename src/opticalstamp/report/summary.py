@@ -1,0 +1,117 @@
+"""The report's verdict: the figures an engineer decides with, checked against a spec.
+
+From report.json's numbers (no new computation): the ghost-free radius (the nearest ghost
+light on the object plane over the heights analysed) and where ghost light goes, the
+depth of field at the RMTF section's chart ("≥" where the Z range ended first), the light
+against the paper's F/10 lens (own path: ghost light is crosstalk) and against the
+single-row rod-lens array, the working F-number, the thickness, the tolerance yield. A
+spec such as ``dof>=2.2,ghost_radius>=5`` marks each figure pass or fail; for the paper's
+prototype the paper's own figure stands beside the model's.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from types import MappingProxyType
+
+from ..validate import InputError
+
+#: Figures a spec may name: key -> (what, unit).
+FIGURES = MappingProxyType(
+    {
+        "ghost_radius": ("ghost-free radius on the object plane", "mm"),
+        "dof": ("depth of field", "mm"),
+        "light": ("light vs the F/10 lens (own path)", ""),
+        "f_number": ("working F-number", ""),
+        "vs_rod_lens": ("light vs a 1-row 12-degree rod-lens array", ""),
+        "thickness": ("sensor to document reference", "mm"),
+        "yield": ("tolerance yield", ""),
+    }
+)
+#: The paper's statements on its prototype (Kawano 2016: §4 measured depth of field, §5
+#: light efficiency 1/36 and working F 60, module 5 mm thick, ~1/100 of a rod-lens array).
+PAPER = MappingProxyType(
+    {
+        "dof": 3.5,
+        "light": 1 / 36,
+        "f_number": 60.0,
+        "vs_rod_lens": 1 / 100,
+        "thickness": 5.0,
+    }
+)
+_SPEC_RE = re.compile(r"^([a-z_]+)(>=|<=)([-+0-9.eE]+)$")
+
+
+def parse_report_spec(text: str | None) -> list[tuple[str, str, float]]:
+    """'dof>=2.2,ghost_radius>=5' -> [(figure, op, value)]; InputError naming the part."""
+    if not text:
+        return []
+    out = []
+    for part in text.replace(" ", "").split(","):
+        m = _SPEC_RE.match(part)
+        if not m or m.group(1) not in FIGURES:
+            raise InputError(
+                f"--spec: cannot read {part!r}; use figure>=number or figure<=number with "
+                f"the figures {', '.join(FIGURES)}, comma-separated"
+            )
+        try:
+            value = float(m.group(3))
+        except ValueError:
+            raise InputError(f"--spec: {part!r}: {m.group(3)!r} is not a number") from None
+        out.append((m.group(1), m.group(2), value))
+    return out
+
+
+def summary(data: dict, spec=(), paper: bool = False) -> dict:
+    """The verdict from report.json's numbers; ``spec`` from :func:`parse_report_spec`;
+    ``paper``: show the paper's figures (the design is the paper's prototype)."""
+    land = data["ghosts"]["landing"]
+    nearest = {z: v["nearest_um"] / 1000 for z, v in land.items()}
+    within = {z: v["within_detector_um2sr"] for z, v in land.items()}
+    r = data["rmtf"]
+    key = f"{r['dof_dpi']:g}"
+    eff = data["efficiency"]
+    values = {
+        "ghost_radius": min(nearest.values()) if nearest else math.inf,
+        "dof": r["dof_mm"][key],
+        "light": eff["ratio_own"],
+        "f_number": eff["working_f_number_own"],
+        "thickness": data["stack"][0]["z_top_um"] / 1000 if data.get("stack") else None,
+        "vs_rod_lens": None,
+        "yield": None,
+    }
+    rod = data.get("rodlens")
+    if rod and len(rod["rows"]) > 1:
+        values["vs_rod_lens"] = rod["rows"][0]["light_vs_f10"] / rod["rows"][1]["light_vs_f10"]
+    tol = data.get("tolerance")
+    if tol and tol.get("spec"):
+        values["yield"] = tol["yield"]
+    checks = {}
+    for name, op, v in spec:
+        got = values.get(name)
+        ok = None if got is None else bool(got >= v if op == ">=" else got <= v)
+        checks[name] = {"spec": f"{op} {v:g}", "pass": ok}
+    rows = []
+    for name, (what, unit) in FIGURES.items():
+        rows.append(
+            {
+                "figure": name,
+                "what": what,
+                "value": values[name],
+                "unit": unit,
+                "bound": name == "dof" and bool(r.get("dof_open_ended", {}).get(key)),
+                "check": checks.get(name),
+                "paper": PAPER.get(name) if paper else None,
+            }
+        )
+    return {
+        "figures": rows,
+        "ghost_nearest_mm_by_z": nearest,
+        "ghost_within_detector_um2sr_by_z": within,
+        "ghost_fraction": data["ghosts"]["ghost_fraction"],
+        "dof_dpi": r["dof_dpi"],
+        "tolerance_spec": tol.get("spec") if tol else None,
+        "spec": [f"{n}{op}{v:g}" for n, op, v in spec],
+        "meets_spec": all(c["pass"] for c in checks.values()) if checks else None,
+    }
