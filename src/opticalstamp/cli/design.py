@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from ..design import RodLensDesign, load_design, preset_names
+from ..design import RodLensDesign, load_design, preset_names, preset_text
 from .common import (
     BOTH_KINDS,
     JsonOpt,
@@ -43,12 +43,9 @@ def presets(ctx: typer.Context) -> None:
 @presets_app.command("show")
 def presets_show(name: Annotated[str, typer.Argument(help="a preset name")]) -> None:
     """Print a preset as TOML, to start a design file from (> my_design.toml)."""
-    from importlib import resources
-
     if name not in preset_names():
         fail(f"presets show: no preset {name!r}; the presets are {', '.join(preset_names())}")
-    text = (resources.files("opticalstamp.design") / "presets" / f"{name}.toml").read_text()
-    typer.echo(text, nl=False)
+    typer.echo(preset_text(name), nl=False)
 
 
 app.add_typer(presets_app, name="presets")

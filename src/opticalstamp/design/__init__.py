@@ -10,6 +10,7 @@ from .files import (
     format_validation_error,
     load_design,
     preset_names,
+    preset_text,
 )
 from .model import A4_WIDTH_UM, Design, DesignError, Gap, Mask, Sensor, Slab
 from .rodlens import CoverGlass, RodArray, RodLensDesign, RodSensor
@@ -49,6 +50,7 @@ __all__ = [
     "load_design",
     "one_row",
     "preset_names",
+    "preset_text",
     "replace",
     "scale_to_dpi",
     "square_holes",

@@ -56,6 +56,11 @@ def design_from_dict(data: dict, source: str = "<dict>") -> AnyDesign:
         raise DesignError(f"invalid design {source}: nested too deeply") from None
 
 
+def preset_text(name: str) -> str:
+    """The TOML text of the built-in preset ``name`` (one of :func:`preset_names`)."""
+    return (resources.files("opticalstamp.design") / "presets" / f"{name}.toml").read_text()
+
+
 def preset_names() -> list[str]:
     files = resources.files("opticalstamp.design") / "presets"
     return sorted(p.name.removesuffix(".toml") for p in files.iterdir() if p.name.endswith(".toml"))
@@ -69,7 +74,7 @@ def load_design(spec: str | Path) -> AnyDesign:
     """
     spec_s = str(spec)
     if spec_s in preset_names():
-        text = (resources.files("opticalstamp.design") / "presets" / f"{spec_s}.toml").read_text()
+        text = preset_text(spec_s)
         source = f"preset {spec_s!r}"
     else:
         path = Path(spec_s)

@@ -58,7 +58,7 @@ def rod_kernel_sets(
     centres = phase_centres(design, phases)
     rays = trace_rods(design, centres, n_rays=n_rays, seed=seed, fresnel=fresnel, progress=progress)
     pix = rays.pixel
-    w = rays.w * rays.ray_etendue * (rays.n_per_pixel.sum() / rays.n_per_pixel)[pix]
+    w = rays.ray_weights()
     out = []
     for z_mm in z_sets:
         per_phase: list[list[ScanKernel]] = [[] for _ in range(phases)]

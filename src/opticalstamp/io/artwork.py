@@ -90,6 +90,15 @@ def mark_positions(design: Design) -> list[tuple[float, float]]:
     return [(x0, y), (x1, y)]
 
 
+def mark_rectangles(design: Design) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The alignment crosses as rectangles ((x0, y0), (x1, y1)): two arms per cross."""
+    a, t = MARK_ARM_UM, MARK_WIDTH_UM / 2
+    out = []
+    for cx, cy in mark_positions(design):
+        out += [((cx - a, cy - t), (cx + a, cy + t)), ((cx - t, cy - a), (cx + t, cy + a))]
+    return out
+
+
 def _label(design: Design, m: MaskLayout) -> str:
     return f"{design.name} {design.fingerprint()} layer {m.layer}: {m.name}"
 
@@ -111,13 +120,8 @@ def gds_bytes(design: Design) -> bytes:
             hole.add(gdstk.rectangle((-w, -h), (w, h), layer=m.layer))
         for x, y in m.rows:
             top.add(gdstk.Reference(hole, (x, y), columns=m.count, rows=1, spacing=(m.pitch_um, 0)))
-        for cx, cy in mark_positions(design):
-            a, t = MARK_ARM_UM, MARK_WIDTH_UM / 2
-            for p, q in (
-                ((cx - a, cy - t), (cx + a, cy + t)),
-                ((cx - t, cy - a), (cx + t, cy + a)),
-            ):
-                top.add(gdstk.rectangle(p, q, layer=m.layer, datatype=1))
+        for p, q in mark_rectangles(design):
+            top.add(gdstk.rectangle(p, q, layer=m.layer, datatype=1))
         x, y = mark_positions(design)[0]
         top.add(gdstk.Label(_label(design, m), (x, y - 2 * MARK_ARM_UM), layer=m.layer))
     with tempfile.TemporaryDirectory(prefix="opticalstamp_gds_") as tmp:
@@ -149,17 +153,12 @@ def dxf_bytes(design: Design) -> bytes:
         for x, y in m.rows:
             ref = msp.add_blockref(block.name, (x, y), dxfattribs={"layer": layer})
             ref.grid(size=(1, m.count), spacing=(0, m.pitch_um))
-        for cx, cy in mark_positions(design):
-            a, t = MARK_ARM_UM, MARK_WIDTH_UM / 2
-            for (x0, y0), (x1, y1) in (
-                ((cx - a, cy - t), (cx + a, cy + t)),
-                ((cx - t, cy - a), (cx + t, cy + a)),
-            ):
-                msp.add_lwpolyline(
-                    [(x0, y0), (x1, y0), (x1, y1), (x0, y1)],
-                    close=True,
-                    dxfattribs={"layer": f"{layer} marks"},
-                )
+        for (x0, y0), (x1, y1) in mark_rectangles(design):
+            msp.add_lwpolyline(
+                [(x0, y0), (x1, y0), (x1, y1), (x0, y1)],
+                close=True,
+                dxfattribs={"layer": f"{layer} marks"},
+            )
         x, y = mark_positions(design)[0]
         msp.add_text(
             _label(design, m), height=50.0, dxfattribs={"layer": layer, "insert": (x, y - 400)}

@@ -379,6 +379,11 @@ class RodRays:
         """(n,) index into ``pixel_x_um`` of each ray's pixel."""
         return self.ids % self.pixel_x_um.size
 
+    def ray_weights(self) -> np.ndarray:
+        """(n,) etendue (um^2 sr) each ray carries toward its pixel's total (its Fresnel
+        weight times the etendue one of that pixel's launched rays stands for)."""
+        return self.w * self.ray_etendue * (self.n_per_pixel.sum() / self.n_per_pixel)[self.pixel]
+
     def etendue_per_pixel(self) -> np.ndarray:
         """Etendue (um^2 sr) each pixel collects from a uniform Lambertian object."""
         tot = np.bincount(self.pixel, weights=self.w, minlength=self.pixel_x_um.size)

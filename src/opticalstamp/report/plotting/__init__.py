@@ -519,17 +519,20 @@ def plot_compare_light(rows: list[dict]):
     return fig
 
 
+def _ripple_axes(ax, positions_um, relative, ripple: float, noise: float, name: str = ""):
+    """A rod-lens pixel's etendue / mean along one rod period, on ``ax``."""
+    ax.plot(positions_um, relative, "o-", ms=3)
+    ax.set_xlabel("pixel centre from a rod axis (um), one rod period")
+    ax.set_ylabel("etendue / mean")
+    ax.set_title(f"{name}ripple {ripple:.3f} (noise alone ~{noise:.3f})", fontsize=9)
+
+
 def plot_rod_ripple(eff):
     """A rod-lens pixel's etendue along one rod period (efficiency ripple)."""
     fig, ax = _subplots(figsize=(6.0, 3.2))
-    x = np.asarray(eff.positions_um)
     g = np.asarray(eff.etendue_by_position_um2sr)
-    ax.plot(x, g / g.mean(), "o-", ms=3)
-    ax.set_xlabel("pixel centre from a rod axis (um), one rod period")
-    ax.set_ylabel("etendue / mean")
-    ax.set_title(
-        f"{eff.design}: ripple {eff.ripple:.3f} (noise alone ~{eff.ripple_noise:.3f})",
-        fontsize=9,
+    _ripple_axes(
+        ax, eff.positions_um, g / g.mean(), eff.ripple, eff.ripple_noise, f"{eff.design}: "
     )
     return fig
 
@@ -538,10 +541,7 @@ def plot_rod_details(row: dict, psf: dict):
     """A rod-lens array: ripple along one rod period, LSF and MTF vs height, point PSFs."""
     fig, axes = _subplots(1, 5, figsize=(17, 3.3), layout="constrained")
     rp = row["ripple_profile"]
-    axes[0].plot(rp["positions_um"], rp["relative"], "o-", ms=3)
-    axes[0].set_xlabel("pixel centre from a rod axis (um)")
-    axes[0].set_ylabel("etendue / mean")
-    axes[0].set_title(f"ripple {row['ripple']:.3f} (noise ~{row['ripple_noise']:.3f})", fontsize=9)
+    _ripple_axes(axes[0], rp["positions_um"], rp["relative"], row["ripple"], row["ripple_noise"])
     lsf = row["lsf"]
     hs = np.asarray(lsf["heights_mm"])
     for h in (0.0, 0.5, 1.0):
