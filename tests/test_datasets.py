@@ -169,7 +169,7 @@ def test_tolerance_dataset(paper):
         assert float(sens[k]) == row[k]
     _same(sens.d_rmtf, [row[f"d_rmtf@{z:g}"] for z in r.z_mm])
     assert (
-        np.isnan(ds.d_dof_mm.sel(error="dx0")) and ds.error_units.sel(error="tilt").item() == "deg"
+        np.isnan(ds.d_dof_mm.sel(error="dx1")) and ds.error_units.sel(error="tilt").item() == "deg"
     )
     assert float(ds.sigma.sel(error="tilt")) == r.sigmas["tilt_deg"] == 0.02
     assert float(ds.yield_fraction) == before["yield"]

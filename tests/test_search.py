@@ -119,7 +119,7 @@ def test_search_same_for_any_workers_and_on_dask(paper, dask_cluster, tmp_path):
     assert one.reference["holes_um"] == [48.0, 40.0, 40.0]
     # the warm start puts the paper's design in the first generation
     assert any(
-        r["holes_um"] == [48.0, 40.0, 40.0] and r["thicknesses_um"] == [450.0, 400.0, 1000.0]
+        r["holes_um"] == [48.0, 40.0, 40.0] and r["thicknesses_um"] == [1000.0, 400.0, 450.0]
         for r in one.records
     )
     # resuming from the Dask run's journal evaluates nothing new
@@ -132,11 +132,11 @@ def test_pins_and_bad_pins(paper):
         paper,
         population=8,
         generations=1,
-        pinned={"hole0": 48, "t2": 1000.0},
+        pinned={"hole1": 48, "slab1": 1000.0},
         ghost_rays=1 << 15,
         workers=1,
     )
-    assert all(x["holes_um"][0] == 48 and x["thicknesses_um"][2] == 1000 for x in r.records)
+    assert all(x["holes_um"][0] == 48 and x["thicknesses_um"][0] == 1000 for x in r.records)
     with pytest.raises(ValueError, match="unknown variables"):
         search(paper, population=8, generations=1, pinned={"hole9": 1}, workers=1)
 
@@ -155,8 +155,8 @@ def test_errors_are_applied_and_reproducible(paper):
     assert e == draw_errors(
         paper, 7, 1, {"misregistration_um": 3, "hole_um": 1, "thickness_um": 10, "tilt_deg": 0.0}
     )
-    d = apply_errors(paper, {"dx0": 2.5, "hole1": -1.0, "t1": 20.0})
-    assert d.masks[-1].offset_x_um == 2.5  # mask 0 = object side
+    d = apply_errors(paper, {"dx1": 2.5, "hole2": -1.0, "slab2": 20.0})
+    assert d.masks[-1].offset_x_um == 2.5  # layer 1 = object side
     assert d.masks[1].hole_width_um == 39.0 and d.slabs[1].thickness_um == 420.0
     tilted = apply_errors(paper, {"tilt": 0.01})
     assert tilted.slabs[0].thickness_um == pytest.approx(
@@ -191,7 +191,7 @@ def test_tolerance_study(paper, tmp_path):
     assert d["dof_mm"]["p5"] <= d["dof_mm"]["p50"] <= d["dof_mm"]["p95"]
     assert 0 <= d["yield"] <= 1 and d["n_failed"] == 0
     names = [row["error"] for row in d["sensitivity"]]
-    assert "dx0" in names and "tilt" in names
+    assert "dx1" in names and "slab3" in names and "tilt" in names
     zero = tolerance(
         paper,
         samples=3,
@@ -262,7 +262,7 @@ def test_cli_search_and_tolerance_write_netcdf(tmp_path):
     ("args", "text"),
     [
         (["search", "--dask", "localhost:8786"], "--dask"),
-        (["search", "--pin", "hole0"], "--pin"),
+        (["search", "--pin", "hole1"], "--pin"),
         (["search", "--population", "2"], "--population"),
         (["search", "-o", "x.csv"], "-o"),
         (["tolerance", "--misregistration-um", "-1"], "must be in [0, 100]"),

@@ -161,7 +161,7 @@ def test_replace_refuses_an_invalid_change_naming_the_field(paper):
 def test_stack_params(paper):
     assert stack_params(paper) == {
         "holes_um": [48.0, 40.0, 40.0],
-        "thicknesses_um": [450.0, 400.0, 1000.0],
+        "thicknesses_um": [1000.0, 400.0, 450.0],  # object side first
         "offsets_um": [(0.0, 0.0), (0.0, 0.0), (0.0, 0.0)],
         "reference_gap_um": 1000.0,
     }
@@ -171,7 +171,7 @@ def test_with_stack(paper, data):
     v = with_stack(
         paper,
         holes_um=[50, 41, 39],
-        thicknesses_um=[500, 300, 900],
+        thicknesses_um=[900, 300, 500],  # object side first
         offsets_um=[(1.5, -2.0), (0, 0), (3, 0)],
         reference_gap_um=800,
         name="stack",

@@ -154,6 +154,34 @@ def depth_of_field(z_mm: np.ndarray, rmtf: np.ndarray, threshold: float = DOF_TH
     return float(z[i - 1] + (r[i - 1] - threshold) / (r[i - 1] - r[i]) * (z[i] - z[i - 1]))
 
 
+def spurious_ranges(
+    z_mm: np.ndarray, rmtf: np.ndarray, threshold: float = DOF_THRESHOLD
+) -> list[list[float]]:
+    """Ranges [from, to] of Z (mm, sampled points) past the depth of field where the RMTF
+    is back at or above the threshold.
+
+    The RMTF (paper Eq. 1) is a modulation, blind to the sign of the contrast: past a zero
+    of the transfer function the bars come back reversed (dark where the chart is light),
+    *spurious resolution*. Such ranges are reported and never counted in the depth of
+    field (:func:`depth_of_field` stops at the first crossing).
+    """
+    z = np.asarray(z_mm, dtype=np.float64)
+    r = np.asarray(rmtf, dtype=np.float64)
+    below = np.flatnonzero(r < threshold)
+    if below.size == 0:
+        return []
+    out: list[list[float]] = []
+    start = None
+    for i in range(int(below[0]), z.size):
+        if r[i] >= threshold and start is None:
+            start = float(z[i])
+        if start is not None and (r[i] < threshold or i == z.size - 1):
+            end = float(z[i - 1] if r[i] < threshold else z[i])
+            out.append([start, end])
+            start = None
+    return out
+
+
 @dataclass(frozen=True)
 class RMTFResult:
     """RMTF versus object distance for several chart periods (paper Fig. 11)."""
@@ -181,6 +209,9 @@ class RMTFResult:
     #: per dpi: the RMTF stays above the threshold to the last Z, so ``dof_mm`` is a lower
     #: bound (">= Zmax"), not a crossing
     dof_open_ended: dict[str, bool] = field(default_factory=dict)
+    #: per dpi: Z ranges [from, to] (mm) past the depth of field where the RMTF is back
+    #: over the threshold (spurious resolution, :func:`spurious_ranges`; not in dof_mm)
+    spurious_mm: dict[str, list[list[float]]] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -333,6 +364,7 @@ def rmtf_from_lsf(
     dof = {k: depth_of_field(zs, cur["max"][i], dof_threshold) for i, k in enumerate(keys)}
     # a depth of field that reaches the last Z is a lower bound: the range ended first
     open_ended = {k: bool(min(cur["max"][i]) >= dof_threshold) for i, k in enumerate(keys)}
+    spurious = {k: spurious_ranges(zs, cur["max"][i], dof_threshold) for i, k in enumerate(keys)}
     return RMTFResult(
         design=design.name,
         fingerprint=design.fingerprint(),
@@ -355,4 +387,5 @@ def rmtf_from_lsf(
         shift_step_um=shift_step_um,
         meta={"best_shift_um": pick["best_shift_um"]},
         dof_open_ended=open_ended,
+        spurious_mm=spurious,
     )

@@ -10,7 +10,7 @@ from typing import Annotated
 
 import typer
 
-from ..defaults import DETECTOR_HALF_UM, RAYS_MAP, RSE_GHOST, RSE_OWN
+from ..defaults import DETECTOR_HALF_UM, DOF_DPI, RAYS_MAP, RSE_GHOST, RSE_OWN
 from ..design import AnyDesign, Design, RodLensDesign, load_design
 from ..validate import (
     InputError,
@@ -403,6 +403,28 @@ def report(
             "parameter study, design search, tolerance study or OCR (the page says so)",
         ),
     ] = False,
+    z: Annotated[
+        str | None,
+        typer.Option(
+            help="heights (mm) of the ghost landings and spots, comma-separated, 0 to 100 "
+            "(default 0,1,2,3,4; the RMTF curves run at least as far)"
+        ),
+    ] = None,
+    dpi: Annotated[
+        float,
+        typer.Option(
+            help="chart (dpi) of the depth of field, the verdict, the search and the "
+            "tolerance study, 50 to 2400",
+            callback=number(50, 2400),
+        ),
+    ] = DOF_DPI,
+    paper_sections: Annotated[
+        str,
+        typer.Option(
+            help="the paper's own sections (Fig. 1 concepts, its unstated parameters, "
+            "paper vs model): auto (only for the paper's presets), yes or no"
+        ),
+    ] = "auto",
 ) -> None:
     """Run every analysis and write JSON, PNG figures and one HTML page."""
     from ..report.build import build_report
@@ -411,6 +433,9 @@ def report(
     from ..report.summary import parse_report_spec
 
     parse_report_spec(spec)  # refused before any work
+    if paper_sections not in ("auto", "yes", "no"):
+        fail(f"--paper-sections: must be auto, yes or no (got {paper_sections!r})")
+    zs = None if z is None else float_list(z, "--z", 0.0, 100.0)
     data = build_report(
         d,
         out,
@@ -420,6 +445,9 @@ def report(
         progress=not as_json,
         quick=quick,
         spec=spec,
+        z_mm=zs,
+        dpi=dpi,
+        paper_sections=None if paper_sections == "auto" else paper_sections == "yes",
     )
     typer.echo(f"wrote {out / 'index.html'} and {out / 'report.json'}", err=as_json)
     if as_json:

@@ -153,8 +153,9 @@ def efficiency(
         f"reference lens (F {r.reference_f_number:g}, "
         f"{r.meta['reference_lens']['pixel_um']:.1f} um pixel): "
         f"{r.reference_etendue_um2sr:.4g} um^2 sr",
-        f"ratio 1/{1 / r.ratio:.1f} (own path only 1/{1 / r.ratio_own:.1f}); working F-number "
-        f"{r.working_f_number:.1f} ({r.working_f_number_own:.1f}); paper: 1/36, F 60",
+        f"light efficiency (own path: the signal) 1/{1 / r.ratio_own:.1f}, working F-number "
+        f"{r.working_f_number_own:.1f}; with the ghost light (crosstalk, not signal) "
+        f"1/{1 / r.ratio:.1f}, F {r.working_f_number:.1f}; paper: 1/36, F 60",
     ]
     for a in r.sensitive_area:
         lines.append(

@@ -77,10 +77,13 @@ def _settings(
     kernel: str,
     speed_error: float,
     surround: float,
-    illuminance: float,
-    exposure: float,
+    electronics,
+    illuminance: float | None,
+    exposure: float | None,
     fresnel: bool,
 ):
+    """The scan's settings: the design's ``electronics`` with --illuminance-lux and
+    --exposure-ms, where given, in place of its illuminance and exposure."""
     from pydantic import ValidationError
 
     from ..imaging.scan import ScanSettings
@@ -91,7 +94,10 @@ def _settings(
         profile = _illumination_profile(Path(illumination))
         illumination = "uniform"
     try:
-        sensor = SensorModel(illuminance_lux=illuminance, exposure_ms=exposure)
+        given = {"illuminance_lux": illuminance, "exposure_ms": exposure}
+        sensor = SensorModel.model_validate(
+            electronics.model_dump() | {k: v for k, v in given.items() if v is not None}
+        )
         return ScanSettings(
             sensor=sensor,
             illumination=illumination,
@@ -147,17 +153,21 @@ def scan(
         str, typer.Option(help="uniform, ripple, or a CSV file of x_mm,relative")
     ] = "uniform",
     illuminance_lux: Annotated[
-        float,
+        float | None,
         typer.Option(
-            help="illuminance on the page (lux), (0, 1e7]", callback=number(0, 1e7, lo_open=True)
+            help="illuminance on the page (lux), (0, 1e7]; overrides the design's "
+            "[electronics] illuminance_lux (default 10000)",
+            callback=number(0, 1e7, lo_open=True),
         ),
-    ] = 10_000.0,
+    ] = None,
     exposure_ms: Annotated[
-        float,
+        float | None,
         typer.Option(
-            help="exposure per line (ms), (0, 10000]", callback=number(0, 1e4, lo_open=True)
+            help="exposure per line (ms), (0, 10000]; overrides the design's [electronics] "
+            "exposure_ms (default 1)",
+            callback=number(0, 1e4, lo_open=True),
         ),
-    ] = 1.0,
+    ] = None,
     kernel: Annotated[str, typer.Option(help="auto, paraxial or trace")] = "auto",
     speed_error: Annotated[
         float,
@@ -172,7 +182,8 @@ def scan(
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
 ) -> None:
-    """Simulate the scanner's output for a document at a float height (paper Figs. 8, 9)."""
+    """Simulate the scanner's output for a document at a float height (paper Figs. 8, 9),
+    with the design's illumination and sensor electronics (its [electronics] table)."""
     import json
 
     from ..imaging.scan import simulate_scan
@@ -181,7 +192,14 @@ def scan(
     png, tif, sidecar = _scan_outputs(output)
     d = open_design(design, kinds=BOTH_KINDS)
     st = _settings(
-        illumination, kernel, speed_error, surround, illuminance_lux, exposure_ms, fresnel
+        illumination,
+        kernel,
+        speed_error,
+        surround,
+        d.electronics,
+        illuminance_lux,
+        exposure_ms,
+        fresnel,
     )
     doc, use = _document(image, dpi, color)
     hm = _height(height_map, z, doc.shape, use, seed)
@@ -232,7 +250,7 @@ def scan(
         lines.append(
             f"warning: white saturates the pixels (the scan clips); an exposure below "
             f"{sg['exposure_to_full_well_ms']:.3g} ms (--exposure-ms) or less light "
-            "(--illuminance-lux) keeps it in range"
+            "(--illuminance-lux, or the design's [electronics]) keeps it in range"
         )
     emit(json.loads(to_json(meta)), as_json, lines)
 
@@ -260,47 +278,159 @@ def chart(
     typer.echo(f"wrote {output} ({img.shape[1]} x {img.shape[0]} at {dpi:g} dpi)", err=True)
 
 
+#: ocr-eval without IMAGE: the text sizes (pt) and faces of its built-in charts by default
+#: (6 and 8 pt are read at every Z to 4.5 mm by the prototype; 2.5 pt shows its DOF).
+OCR_POINTS = "2.5,6,8"
+OCR_FACES = "sans,serif"
+OCR_CHART_DPI = 1200.0
+
+
 @command("ocr-eval")
 def ocr_eval(
-    image: ImageArg,
-    text: Annotated[Path, typer.Option("--text", help="ground-truth text file")],
-    z: Annotated[str, typer.Option(help="float heights (mm)")] = "0.5,1.5,2.5,3.5",
+    image: Annotated[
+        Path | None,
+        typer.Argument(
+            help="a text image (PNG, TIFF, JPEG), read against --text; without it, the "
+            "built-in text charts of --points and --face are read"
+        ),
+    ] = None,
+    text: Annotated[
+        Path | None, typer.Option("--text", help="ground-truth text file of IMAGE")
+    ] = None,
+    points: Annotated[
+        str | None,
+        typer.Option(
+            help="text sizes (pt) of the built-in charts, comma-separated, 1 to 24 "
+            f"(default {OCR_POINTS}; not with IMAGE)"
+        ),
+    ] = None,
+    face: Annotated[
+        str | None,
+        typer.Option(
+            help="type faces of the built-in charts, comma-separated: sans (Pillow's "
+            f"built-in font) or serif (DejaVu Serif) (default {OCR_FACES}; not with IMAGE)"
+        ),
+    ] = None,
+    z: Annotated[
+        str, typer.Option(help="float heights (mm), comma-separated, 0 to 10")
+    ] = "0.5,1.5,2.5,3.5,4.5",
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
     dpi: DpiOpt = None,
     noiseless: Annotated[bool, typer.Option("--noiseless", help="no sensor noise")] = False,
     as_json: JsonOpt = False,
 ) -> None:
-    """Scan a text image at each Z, read it with Tesseract, report the character error rate."""
+    """Scan text at each Z, read it with Tesseract, report the character error rate.
+
+    Without IMAGE: the built-in text chart in each face and size (a table of CER per face,
+    size and Z); 6- and 8-pt text is read at every Z up to 4.5 mm by the prototype, the
+    2.5-pt sans text fails past its depth of field.
+    """
+    from ..imaging.charts import text_chart
     from ..imaging.ocr import OCRUnavailable, character_error_rate, recognise, require_tesseract
-    from ..imaging.scan import prepare_kernels, simulate_scan
+    from ..imaging.scan import ScanSettings, prepare_kernels, simulate_scan
     from ..io.files import linear_to_srgb, provenance
 
     d = open_design(design, kinds=BOTH_KINDS)
-    try:
-        truth = text.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        fail(f"--text: cannot read {text} ({err})")
-    doc, use = _document(image, dpi, False, min_px=32)  # one 8-pt line at 600 dpi: ~65 px
+    settings = None  # an image: as `scan` scans it
+    if image is None:
+        for name, given in (("--text", text), ("--dpi", dpi)):
+            if given is not None:
+                fail(f"{name}: goes with IMAGE (without IMAGE the built-in text charts are read)")
+        sizes, faces = _ocr_charts(points, face)
+        # the chart printed on a larger white page, as in the report: a dark surround's
+        # edge is read as stray characters ('|', '_') that are no loss of sharpness
+        settings = ScanSettings(surround=1.0)
+    else:
+        for name, given in (("--points", points), ("--face", face)):
+            if given is not None:
+                fail(f"{name}: for the built-in text charts only (give no IMAGE)")
+        if text is None:
+            fail("--text: the ground-truth text file of IMAGE is required")
+        try:
+            truth = text.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as err:
+            fail(f"--text: cannot read {text} ({err})")
+        doc, use = _document(image, dpi, False, min_px=32)  # one 8-pt line at 600 dpi: ~65 px
     zs = float_list(z, "--z", 0.0, 10.0)
-    out = {"z_mm": list(zs), "cer": [], "text": []}
     try:
         require_tesseract()  # before the scans, not after the first
     except OCRUnavailable as err:
         fail(str(err))
+    where = image if image is not None else f"design {design}"
     try:  # the kernels of every Z from one trace per pixel row
-        kernels = prepare_kernels(d, z_mm=zs, seed=seed)
+        kernels = prepare_kernels(d, z_mm=zs, seed=seed, settings=settings)
     except ValueError as err:
-        fail(f"{image}: {err}")
-    for zz in zs:
-        try:
-            r = simulate_scan(doc, use, d, z_mm=zz, seed=seed, noiseless=noiseless, kernels=kernels)
-        except ValueError as err:
-            fail(f"{image}: {err}")
-        got = recognise(linear_to_srgb(r.image), r.dpi)
-        out["cer"].append(character_error_rate(truth, got))
-        out["text"].append(got)
-    data = out | {"provenance": provenance(d, seed)}
-    lines = [f"{image}: character error rate against {text}"]
-    lines += [f"Z = {zz:g} mm: CER {c:.3f}" for zz, c in zip(zs, out["cer"], strict=True)]
+        fail(f"{where}: {err}")
+
+    def read(doc, doc_dpi: float, truth: str) -> tuple[list[float], list[str]]:
+        cer, got = [], []
+        for zz in zs:
+            try:
+                r = simulate_scan(
+                    doc,
+                    doc_dpi,
+                    d,
+                    z_mm=zz,
+                    seed=seed,
+                    noiseless=noiseless,
+                    settings=settings,
+                    kernels=kernels,
+                )
+            except ValueError as err:
+                fail(f"{where}: {err}")
+            got.append(recognise(linear_to_srgb(r.image), r.dpi))
+            cer.append(character_error_rate(truth, got[-1]))
+        return cer, got
+
+    if image is not None:
+        cer, got = read(doc, use, truth)
+        data = {"z_mm": list(zs), "cer": cer, "text": got, "provenance": provenance(d, seed)}
+        lines = [f"{image}: character error rate against {text}"]
+        lines += [f"Z = {zz:g} mm: CER {c:.3f}" for zz, c in zip(zs, cer, strict=True)]
+        emit(data, as_json, lines)
+        return
+    charts = []
+    for f in faces:
+        for p in sizes:
+            chart, truth = text_chart(OCR_CHART_DPI, p, face=f)
+            cer, got = read(chart, OCR_CHART_DPI, truth)
+            charts.append({"face": f, "points": p, "cer": cer, "text": got})
+    data = {
+        "z_mm": list(zs),
+        "chart_dpi": OCR_CHART_DPI,
+        "charts": charts,
+        "provenance": provenance(d, seed),
+    }
+    lines = [
+        f"character error rate of the built-in text charts ({OCR_CHART_DPI:g} dpi) "
+        f"scanned by design {design}, read by Tesseract",
+        f"{'face':<6}{'points':>7}" + "".join(f"{f'Z {zz:g} mm':>10}" for zz in zs),
+    ]
+    lines += [
+        f"{c['face']:<6}{c['points']:>7g}" + "".join(f"{v:>10.3f}" for v in c["cer"])
+        for c in charts
+    ]
     emit(data, as_json, lines)
+
+
+def _ocr_charts(points: str | None, face: str | None) -> tuple[tuple[float, ...], tuple[str, ...]]:
+    """The sizes and faces of ocr-eval's built-in charts (exit 2 naming the option)."""
+    from ..imaging.charts import FACES, FontUnavailable, serif_font_path
+
+    sizes = tuple(dict.fromkeys(float_list(points or OCR_POINTS, "--points", 1.0, 24.0)))
+    spec = OCR_FACES if face is None else face
+    names = [f.strip() for f in spec.split(",") if f.strip()]
+    bad = [f for f in names if f not in FACES]
+    if not names or bad:
+        fail(
+            f"--face: expected {' or '.join(FACES)}, comma-separated "
+            f"(got {bad[0] if bad else spec!r})"
+        )
+    faces = tuple(dict.fromkeys(names))
+    if "serif" in faces:
+        try:
+            serif_font_path()
+        except FontUnavailable as err:
+            fail(f"--face serif: {err}")
+    return sizes, faces

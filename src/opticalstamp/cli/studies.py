@@ -88,7 +88,7 @@ def _pins(text: str | None) -> dict:
         try:
             out[k.strip()] = float(v)
         except ValueError:
-            fail(f"--pin: expected NAME=VALUE pairs such as hole0=48,t2=1000 (got {part!r})")
+            fail(f"--pin: expected NAME=VALUE pairs such as hole1=48,slab1=1000 (got {part!r})")
         check_number(out[k.strip()], f"--pin {part.strip()}")
     return out
 
@@ -128,7 +128,13 @@ def search(
         int,
         typer.Option(help="NSGA-II generations, 1 to 1000", callback=number(1, 1000, integer=True)),
     ] = SEARCH_GENERATIONS,
-    pin: Annotated[str | None, typer.Option(help="fixed variables, e.g. hole0=48,t2=1000")] = None,
+    pin: Annotated[
+        str | None,
+        typer.Option(
+            help="fixed variables, numbered from the object side: hole1 (layer 1's hole), "
+            "slab1 (the slab under layer 1), ...; e.g. hole1=48,slab1=1000"
+        ),
+    ] = None,
     layers: Annotated[
         str | None,
         typer.Option(
@@ -144,15 +150,35 @@ def search(
     output: OutputOpt = None,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
+    verify: Annotated[
+        bool,
+        typer.Option(
+            "--verify/--no-verify",
+            help="re-verify the front and the base design with the exact tracer (the "
+            "figures of record; points where the surrogate is off beyond its stated "
+            "accuracy are flagged)",
+        ),
+    ] = True,
+    export_designs: Annotated[
+        Path | None,
+        typer.Option(
+            "--export-designs",
+            help="folder to write every Pareto point into as a design file (NAME-pNN.toml, "
+            "with its provenance) and front.json (replaced as a whole)",
+            callback=writable(directory=True, marker="front.json"),
+        ),
+    ] = None,
 ) -> None:
     """Search hole sizes and gaps for ghost-free, bright, deep designs (paper §3)."""
     from ..io.files import provenance, save_dataset
     from ..studies.search import (
+        journal_of,
         merged_front,
         search_base,
         search_dataset,
         search_variants,
         variant_path,
+        verify_front,
     )
 
     _check_dask(dask)
@@ -177,6 +203,17 @@ def search(
             dask_address=dask,
             progress=not as_json,
         )
+        if verify:
+            results = {
+                name: verify_front(
+                    res,
+                    workers=workers,
+                    dask_address=dask,
+                    journal=journal_of(variant_path(output, i, len(results))),
+                    progress=not as_json,
+                )
+                for i, (name, res) in enumerate(results.items())
+            }
     except (ValueError, OSError) as err:
         fail(str(err))
     if output is not None:
@@ -191,8 +228,12 @@ def search(
         data["variants"] = {k: v.to_dict() for k, v in results.items()}
     lines = [
         f"{base.name}: {sum(len(v.records) for v in results.values())} designs in "
-        f"{len(results)} variant(s); Pareto front (holes object side first, um; slabs sensor "
-        "first, um):"
+        f"{len(results)} variant(s); Pareto front (holes and slabs in um, object side first)"
+        + (
+            "; figures from the exact tracer, the surrogate's in brackets:"
+            if verify
+            else "; figures from the surrogate (--no-verify):"
+        )
     ]
     if not data["pareto"]:
         recs = [x for v in results.values() for x in v.records if x["ok"]]
@@ -204,12 +245,24 @@ def search(
             + ("" if max_ghost is None else ", or the ghost fraction exceeded --max-ghost")
             + "; relax a constraint or a --pin"
         )
-    for p in data["pareto"]:
+    for i, p in enumerate(data["pareto"], start=1):
         tag = f" [{p['variant']}]" if "variant" in p else ""
+        s = p.get("surrogate")
+        was = (
+            ""
+            if not s
+            else f" (1/{1 / s['efficiency_ratio']:.0f}, {s['dof_mm']:.2f} mm, "
+            f"{s['ghost_fraction']:.3f})"
+        )
+        flag = ""
+        if p.get("disagrees"):
+            flag += f"  ! surrogate off in {', '.join(p['disagrees'])}"
+        if p.get("exact_dominated_by"):
+            flag += f"  ! dominated by {p['exact_dominated_by']} front point(s) when exact"
         lines.append(
-            f"  holes {p['holes_um']} slabs {p['thicknesses_um']}: efficiency "
-            f"1/{1 / p['efficiency_ratio']:.0f}, DOF {p['dof_mm']:.2f} mm, ghosts "
-            f"{p['ghost_fraction']:.3f}{tag}"
+            f"  p{i:02d} holes {_nums(p['holes_um'])} slabs {_nums(p['thicknesses_um'])}: "
+            f"efficiency 1/{1 / p['efficiency_ratio']:.0f}, DOF {p['dof_mm']:.2f} mm, ghosts "
+            f"{p['ghost_fraction']:.3f}{was}{tag}{flag}"
         )
     for name, res in results.items():
         ref = res.reference
@@ -219,11 +272,44 @@ def search(
                 f"{ref['dof_mm']:.2f} mm, ghosts {ref['ghost_fraction']:.3f}, dominated by "
                 f"{ref.get('dominated_by', 0)} of its variant's designs"
             )
+    if export_designs is not None:
+        _export(results, data["pareto"], export_designs)
+        lines.append(f"wrote {len(data['pareto'])} design files and front.json to {export_designs}")
     emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_pareto, plot_pareto_variants
 
         save_plot(plot_pareto(r) if len(results) == 1 else plot_pareto_variants(results), plot)
+
+
+def _nums(values) -> str:
+    """[48.0, 40.0] -> "48/40"."""
+    return "/".join(f"{v:g}" for v in values)
+
+
+def _export(results: dict, front: list[dict], folder: Path) -> None:
+    """Every point of ``front`` as a design file, and front.json listing them; the folder
+    is written as a whole or not at all."""
+    from ..design import design_toml
+    from ..io.atomic import replace_folder
+    from ..io.files import to_json, write_atomic
+    from ..studies.search import front_designs
+
+    points = front_designs(results, front)
+    with replace_folder(folder) as tmp:
+        index = []
+        for p in points:
+            file = f"{p['name']}.toml"
+            write_atomic(tmp / file, design_toml(p["design"], tuple(p["provenance"])))
+            index.append(
+                {
+                    "file": file,
+                    "fingerprint": p["design"].fingerprint(),
+                    "provenance": p["provenance"],
+                }
+                | p["row"]
+            )
+        write_atomic(tmp / "front.json", to_json({"points": index}))
 
 
 @command()
@@ -310,8 +396,20 @@ def tolerance(
     dp = data["dof_mm"]
     lines.append(
         f"  DOF median {dp['p50']:.2f} mm (5-95 %: {dp['p5']:.2f}-{dp['p95']:.2f}), "
-        f"nominal {r.nominal['dof_mm']:.2f}"
+        f"nominal {r.nominal['dof_mm']:.2f} (surrogate)"
     )
+    ex = r.meta.get("nominal_exact")
+    if ex:
+        off = r.meta["nominal_disagrees"]
+        lines.append(
+            f"  nominal by the exact tracer (figure of record): DOF {ex['dof_mm']:.2f} mm, "
+            f"efficiency 1/{1 / ex['efficiency_ratio']:.0f}, ghosts {ex['ghost_fraction']:.3f}"
+            + (
+                f"; the surrogate is off beyond its stated accuracy in {', '.join(off)}"
+                if off
+                else "; the surrogate agrees within its stated accuracy"
+            )
+        )
     lines.append(
         "  most sensitive: "
         + ", ".join(

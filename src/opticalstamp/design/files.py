@@ -102,3 +102,16 @@ def load_design(spec: str | Path) -> AnyDesign:
             f"malformed TOML in {source}: tables or arrays nested too deeply"
         ) from None
     return design_from_dict(data, source)
+
+
+def design_toml(design: AnyDesign, comments: tuple[str, ...] = ()) -> str:
+    """The design as a design file's TOML text (read back by :func:`load_design` into the
+    same design, the same fingerprint), with ``comments`` as ``#`` lines at the top (the
+    provenance of a generated file; TOML comments are not part of the design)."""
+    import tomli_w
+
+    data = design.model_dump(mode="json", exclude_none=True)
+    if isinstance(design, RodLensDesign):
+        data = {"kind": RODLENS} | {k: v for k, v in data.items() if k != "kind"}
+    head = "".join(f"# {line}\n" for c in comments for line in c.splitlines())
+    return head + tomli_w.dumps(data)

@@ -27,6 +27,7 @@ from pydantic import (
 )
 
 from ..validate import InputError
+from .electronics import Electronics, electronics_field
 from .materials import CATALOGUE, WAVELENGTH_RANGE_UM, refractive_index
 
 A4_WIDTH_UM = 210_000.0
@@ -210,6 +211,7 @@ class Design(FrozenModel):
     slabs: Annotated[tuple[Slab, ...], Field(min_length=1)]
     reference_gap: Gap = Gap()
     object_medium: Medium = "air"
+    electronics: Electronics = electronics_field()  # illumination, exposure, sensor electronics
 
     @model_validator(mode="after")
     def _holes(self) -> Design:

@@ -27,6 +27,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from ..units import pitch_of_dpi
+from .electronics import Electronics, electronics_field
 from .materials import WAVELENGTH_RANGE_UM, refractive_index
 from .model import INDEX_RANGE, FrozenModel, Medium, Number, PositiveUm, Rows, content_hash
 
@@ -207,6 +208,7 @@ class RodLensDesign(FrozenModel):
     array: RodArray
     sensor: RodSensor = RodSensor()
     cover_glass: CoverGlass | None = None
+    electronics: Electronics = electronics_field()  # illumination, exposure, sensor electronics
 
     @model_validator(mode="after")
     def _glass_fits(self) -> RodLensDesign:

@@ -8,9 +8,11 @@ variant (new hole sizes and gaps, another resolution, fewer layers, one row of p
 larger sensitive area, the paper's unstated parameters) is a set of such changes, written
 once here.
 
-Conventions of the stack (as in the rest of opticalstamp): slabs are listed from the
-sensor up; hole sizes and misregistrations in :func:`with_stack` and :func:`stack_params`
-are listed object side first (the order of the search and the tolerancing).
+Conventions of the stack (as everywhere a person reads them): layers and slabs are listed
+and numbered object side first, from 1, as the paper numbers its aperture layers (layer
+1 faces the document): the hole sizes, misregistrations and slab thicknesses of
+:func:`with_stack` and :func:`stack_params`, the search's and the tolerancing's variables.
+Only the design file lists its slabs from the sensor up (the order the stack is built).
 """
 
 from __future__ import annotations
@@ -153,7 +155,7 @@ def stack_params(design: Design) -> dict:
     -------
     dict
         ``holes_um``: hole size of each mask (the smaller side; object side first);
-        ``thicknesses_um``: each slab's thickness (sensor first); ``offsets_um``: each
+        ``thicknesses_um``: each slab's thickness (object side first); ``offsets_um``: each
         mask's (dx, dy) misregistration (object side first); ``reference_gap_um``.
         ``with_stack(design, **stack_params(design))`` is ``design`` for square or
         circular holes.
@@ -161,7 +163,7 @@ def stack_params(design: Design) -> dict:
     masks = design.masks[::-1]
     return {
         "holes_um": [float(min(m.hole_width_um, m.hole_height_um)) for m in masks],
-        "thicknesses_um": [float(sl.thickness_um) for sl in design.slabs],
+        "thicknesses_um": [float(sl.thickness_um) for sl in design.slabs[::-1]],
         "offsets_um": [(float(m.offset_x_um), float(m.offset_y_um)) for m in masks],
         "reference_gap_um": float(design.reference_gap.thickness_um),
     }
@@ -185,7 +187,7 @@ def with_stack(
         diameter of a circular one. Rectangular holes are refused (they need a width and
         a height; make them square first with :func:`with_hole_shape`).
     thicknesses_um : sequence of float, optional
-        One thickness (um) per slab, sensor first.
+        One thickness (um) per slab, object side first (slab 1 carries layer 1).
     offsets_um : sequence of (float, float), optional
         Each mask's (dx, dy) misregistration (um), object side first.
     reference_gap_um : float, optional
@@ -215,8 +217,9 @@ def with_stack(
             changes[f"slabs.{i}.mask_top.offset_y_um"] = float(dy)
     if thicknesses_um is not None:
         _check_count(thicknesses_um, len(design.slabs), "thicknesses_um")
-        for i, t in enumerate(thicknesses_um):
-            changes[f"slabs.{i}.thickness_um"] = float(t)
+        n = len(design.slabs)  # object side first; the design file lists the sensor's first
+        for j, t in enumerate(thicknesses_um):
+            changes[f"slabs.{n - 1 - j}.thickness_um"] = float(t)
     if reference_gap_um is not None:
         changes["reference_gap.thickness_um"] = float(reference_gap_um)
     if name:

@@ -3,7 +3,8 @@
 - ``bars``: blocks of vertical bars (varying along x) at the paper's 100, 150, 200 and
   247 dpi (periods 508, 339, 254, 206 um; paper Fig. 11, 12), any list accepted;
 - ``edge``: a dark square tilted by 5 degrees (slanted-edge SFR, ISO 12233);
-- ``text``: 8-pt text (paper Fig. 8) with its ground-truth string;
+- ``text``: 8-pt text (paper Fig. 8) with its ground-truth string; any size, in a sans
+  (Pillow's built-in font) or a serif face (DejaVu Serif, shipped with matplotlib);
 - ``lines``: fine line work, a guilloche rosette with micro-lines (a paper-currency-like
   pattern, paper Fig. 9 analogue).
 Charts are drawn by exact area coverage (supersampling), at ``dpi`` (default 1200).
@@ -11,11 +12,17 @@ Charts are drawn by exact area coverage (supersampling), at ``dpi`` (default 120
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..units import mm_to_um, period_of_dpi, pitch_of_dpi
 
 KINDS = ("bars", "edge", "text", "lines")
+#: Type faces of :func:`text_chart`.
+FACES = ("sans", "serif")
+#: The serif face: a TrueType file that matplotlib (a dependency) ships in mpl-data.
+SERIF_FILE = "DejaVuSerif.ttf"
 
 TEXT = (
     "The lensless image scanner keeps a document sharp",
@@ -78,15 +85,56 @@ def edge_chart(
     return img
 
 
+class FontUnavailable(RuntimeError):
+    """The serif face's TrueType file is not where matplotlib ships it."""
+
+
+def serif_font_path() -> str:
+    """The path of DejaVu Serif in matplotlib's ``mpl-data/fonts/ttf`` folder.
+
+    Found from the installed package's location, without importing matplotlib (only the
+    plotting code may; tests/test_architecture.py); no system font folder is used, so the
+    face is the same on every machine that has the project's dependencies.
+    """
+    import importlib.util
+    import os
+
+    spec = importlib.util.find_spec("matplotlib")
+    for root in (spec.submodule_search_locations or []) if spec is not None else []:
+        path = os.path.join(root, "mpl-data", "fonts", "ttf", SERIF_FILE)
+        if os.path.isfile(path):
+            return path
+    raise FontUnavailable(
+        f"the serif face needs {SERIF_FILE}, which matplotlib ships in mpl-data/fonts/ttf; "
+        "it was not found (reinstall matplotlib: pip install --force-reinstall matplotlib)"
+    )
+
+
 def text_chart(
-    dpi: float = 1200.0, points: float = 8.0, lines=TEXT, margin_mm: float = 2.0
+    dpi: float = 1200.0,
+    points: float = 8.0,
+    lines=TEXT,
+    margin_mm: float = 2.0,
+    face: str = "sans",
 ) -> tuple[np.ndarray, str]:
-    """8-pt text (paper Fig. 8) and its ground truth; Pillow's built-in scalable font."""
+    """Text of ``points`` points (8 pt: paper Fig. 8) and its ground truth.
+
+    ``face``: ``sans``, Pillow's built-in scalable font (Aileron), or ``serif``, DejaVu Serif
+    from matplotlib's fonts (:func:`serif_font_path`; :class:`FontUnavailable` if absent).
+    The font size is the em of ``points`` at ``dpi`` (at least 6 pixels).
+    """
     from PIL import Image, ImageDraw, ImageFont
 
     _px(dpi)
+    if face not in FACES:
+        raise ValueError(f"face must be one of {', '.join(FACES)} (got {face!r})")
+    if not (math.isfinite(points) and 1 <= points <= 72):
+        raise ValueError(f"points must lie in [1, 72] (got {points})")
     size = max(6, int(round(points / 72 * dpi)))
-    font = ImageFont.load_default(size=size)
+    if face == "sans":
+        font = ImageFont.load_default(size=size)
+    else:
+        font = ImageFont.truetype(serif_font_path(), size)
     line_h = int(size * 1.35)
     m = int(round(mm_to_um(margin_mm) / pitch_of_dpi(dpi)))
     width = max(int(font.getlength(t)) for t in lines) + 2 * m

@@ -1,65 +1,24 @@
 """Illumination and the sensor's electronics: from etendue-weighted reflectance to counts.
 
-A used pixel that sees an etendue-weighted reflectance S (um^2 sr) of a document lit with
-illuminance E (lux) receives the luminous flux E/pi * S * 1e-12 (lm); a photon-rate factor
-(photons per second per lumen of the LED's light), the quantum efficiency and the exposure
-give the mean photo-electrons. Then, per pixel and line: photon shot noise (Poisson),
-PRNU (a fixed gain per pixel), dark signal with its shot noise and DSNU (a fixed offset per
-pixel), full-well clipping, read noise and an ADC of ``adc_bits`` over the full well with a
-black-level pedestal of ``black_level_dn`` (so that dark noise is not clipped at zero).
-
-Default values are typical orders of magnitude for a contact-image-sensor line, not a
-datasheet: 10 klux on the document (CIS light guides deliver 10^4 lux and more), 1 ms
-exposure per line, QE 0.5, 60 ke- full well, 30 e- read noise, 1 % PRNU, 20 e- DSNU, 1000
-e-/s dark current, 12-bit ADC, 9.1e15 photons/s per lumen (white LED: about 300 lm per
-radiometric W, mean photon energy 2.3 eV). Set them from your sensor and LED datasheets.
+The model (:class:`SensorModel`) is a design's ``[electronics]`` table,
+:class:`opticalstamp.design.electronics.Electronics`: illuminance, exposure, photon rate
+and quantum efficiency give the mean photo-electrons per um^2 sr of white. Then, per pixel
+and line: photon shot noise (Poisson), PRNU (a fixed gain per pixel), dark signal with its
+shot noise and DSNU (a fixed offset per pixel), full-well clipping, read noise and an ADC
+of ``adc_bits`` over the full well with a black-level pedestal of ``black_level_dn`` (so
+that dark noise is not clipped at zero). The defaults and their sources are in
+:mod:`opticalstamp.design.electronics`.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
 
+from ..design.electronics import Electronics
 
-class SensorModel(BaseModel):
-    """Illumination, exposure and sensor electronics (all validated, frozen)."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
-
-    illuminance_lux: float = Field(10_000.0, gt=0, le=1e7)
-    exposure_ms: float = Field(1.0, gt=0, le=1e4)
-    photons_per_lumen_s: float = Field(9.1e15, gt=0)
-    quantum_efficiency: float = Field(0.5, gt=0, le=1)
-    full_well_e: float = Field(60_000.0, gt=0)
-    read_noise_e: float = Field(30.0, ge=0)
-    prnu: float = Field(0.01, ge=0, lt=0.5)
-    dsnu_e: float = Field(20.0, ge=0)
-    dark_current_e_per_s: float = Field(1000.0, ge=0)
-    adc_bits: int = Field(12, ge=1, le=24)
-    black_level_dn: int = Field(64, ge=0)  # ADC pedestal: keeps the dark noise unclipped
-    exposure_duty: float = Field(1.0, gt=0, le=1)  # fraction of the line period exposed
-    channel_response: tuple[float, float, float] = (0.8, 1.0, 0.6)  # R, G, B relative
-
-    @property
-    def electrons_per_um2sr(self) -> float:
-        """Mean photo-electrons per um^2 sr of etendue-weighted white (reflectance 1)."""
-        return (
-            self.illuminance_lux
-            / np.pi
-            * 1e-12
-            * self.photons_per_lumen_s
-            * self.quantum_efficiency
-            * self.exposure_ms
-            * 1e-3
-        )
-
-    @property
-    def gain_e_per_dn(self) -> float:
-        return self.full_well_e / (2**self.adc_bits - 1)
-
-    @property
-    def dark_e(self) -> float:
-        return self.dark_current_e_per_s * self.exposure_ms * 1e-3
+#: Illumination, exposure and sensor electronics (validated, frozen): a design's
+#: ``electronics``, the same class.
+SensorModel = Electronics
 
 
 def fixed_pattern(model: SensorModel, n_pixels: int, rng: np.random.Generator):

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
 
@@ -59,6 +59,8 @@ class Work:
     kernel_rays : rays of the scan kernels
     ocr : read the simulated text scans with Tesseract (where it is installed)
     left_out, reduced : what a quick report leaves out and computes with less
+    paper : the paper's own sections (Fig. 1 concepts, the study of its unstated
+        parameters, the paper-vs-model table)
     """
 
     z_mm: tuple[float, ...]
@@ -74,10 +76,61 @@ class Work:
     ocr: bool
     left_out: tuple[str, ...] = ()
     reduced: tuple[str, ...] = ()
+    paper: bool = True
 
 
-def report_work(quick: bool = False, n_rays: int = RAYS_MAP) -> Work:
-    """The work of a full report (``n_rays`` for its maps), or of a quick one."""
+def report_work(
+    quick: bool = False,
+    n_rays: int = RAYS_MAP,
+    z_mm: tuple[float, ...] | None = None,
+    paper: bool = True,
+) -> Work:
+    """The work of a full report (``n_rays`` for its maps), or of a quick one.
+
+    ``z_mm``: the heights of the ghost landings and the spots (default 0 ... 4 mm); the
+    RMTF curves run at least as far. ``paper``: with the paper's own sections (its Fig. 1
+    concepts and the study of its unstated parameters).
+    """
+    work = _work(quick, n_rays)
+    changes: dict = {}
+    if z_mm is not None:
+        changes["z_mm"] = tuple(sorted(set(float(z) for z in z_mm)))
+        grid = work.lsf_z_mm if work.lsf_z_mm is not None else _default_rmtf_z()
+        step = grid[1] - grid[0]
+        top = max(changes["z_mm"][-1], grid[-1])
+        n = int(round(top / step))
+        changes["lsf_z_mm"] = tuple(round(i * step, 9) for i in range(n + 1))
+        if n * step < top - 1e-9:
+            changes["lsf_z_mm"] += (round((n + 1) * step, 9),)
+    if z_mm is not None and work.reduced:
+        zs = ", ".join(f"{z:g}" for z in changes["z_mm"])
+        changes["reduced"] = tuple(
+            x.replace("at Z = 0, 2, 4 mm", f"at Z = {zs} mm").replace(
+                "spots at Z = 0, 2, 4 mm", f"spots at Z = {zs} mm"
+            )
+            for x in work.reduced
+        )
+    if not paper:
+        changes["paper"] = False
+        changes["reduced"] = tuple(
+            x for x in changes.get("reduced", work.reduced) if "Fig. 1 concepts" not in x
+        )
+        changes["concept_rays"] = 0
+        changes["left_out"] = work.left_out + (
+            "the paper's own sections (its Fig. 1 concepts, the study of its unstated "
+            "parameters and the paper-vs-model table): not the paper's prototype "
+            "(report --paper-sections yes shows them)",
+        )
+    return replace(work, **changes)
+
+
+def _default_rmtf_z() -> tuple[float, ...]:
+    from ..analysis.rmtf import DEFAULT_Z_MM
+
+    return tuple(float(z) for z in DEFAULT_Z_MM)
+
+
+def _work(quick: bool, n_rays: int) -> Work:
     if not quick:
         return Work(
             z_mm=Z_MM,
@@ -133,6 +186,9 @@ def build_report(
     progress: bool = False,
     quick: bool = False,
     spec: str | None = None,
+    z_mm: tuple[float, ...] | None = None,
+    dpi: float = DOF_DPI,
+    paper_sections: bool | None = None,
 ) -> dict:
     """Run every analysis and write report.json, PNG figures and index.html to out_dir.
 
@@ -149,6 +205,15 @@ def build_report(
     quick : a quick report (:func:`report_work`): fewer rays, distances and pixels, no
         parameter study, search, tolerance study or OCR; labelled as such on the page
         and in report.json (``quick``, ``left_out``, ``reduced``)
+    spec : figures the design must meet (:func:`~opticalstamp.report.summary.parse_report_spec`);
+        its depth of field, light and ghost-radius bounds are also the tolerance study's
+        yield spec (:func:`tolerance_spec`)
+    z_mm : heights (mm) of the ghost landings and the spots (default 0 ... 4 mm); the RMTF
+        curves run at least as far
+    dpi : the chart (dpi) of the depth of field, the verdict, the search and the tolerance
+        study (default 200, the paper's)
+    paper_sections : the paper's own sections (its Fig. 1 concepts, the study of its
+        unstated parameters, the paper-vs-model table); None: only for the paper's presets
 
     Returns
     -------
@@ -156,6 +221,7 @@ def build_report(
         What report.json holds.
     """
     from . import plotting
+    from .paper import paper_vs_model
     from .summary import parse_report_spec, summary
 
     parse_report_spec(spec)  # a bad spec is refused before any work
@@ -163,8 +229,11 @@ def build_report(
 
     t0 = time.perf_counter()
     clock = _Clock()
-    work = report_work(quick, n_rays)
-    jobs = _studies(design, seed, fresnel) if work.studies else {}
+    if paper_sections is None:
+        paper_sections = is_paper_preset(design)
+    work = report_work(quick, n_rays, z_mm, paper_sections)
+    tol_spec = tolerance_spec(parse_report_spec(spec))
+    jobs = _studies(design, seed, fresnel, work, dpi, tol_spec) if work.studies else {}
     # the folder is replaced as a whole once everything is written, or not at all
     with replace_folder(Path(out_dir)) as tmp, _Background(jobs) as background:
         # one pilot per pixel for every traced analysis below, and each chunk of rays traced
@@ -203,11 +272,20 @@ def build_report(
             ]
         clock.lap("ghosts_spots_psf")
         with background.cores():
-            concepts = _concepts(design, g, work, seed=seed, fresnel=fresnel)
+            concepts = (
+                _concepts(design, g, work, seed=seed, fresnel=fresnel) if work.paper else None
+            )
         clock.lap("concepts")
         with background.cores():
             quality = _quality(
-                design, g, work, seed=seed, fresnel=fresnel, progress=progress, tracer=tracer
+                design,
+                g,
+                work,
+                seed=seed,
+                fresnel=fresnel,
+                progress=progress,
+                tracer=tracer,
+                dof_dpi=dpi,
             )
         clock.lap("quality")
         with background.cores():
@@ -296,6 +374,7 @@ def build_report(
             "rmtf_traced_own": quality["rmtf_own"].to_dict(),
             "chart_profiles": quality["profiles"],
             "efficiency": quality["efficiency_result"].to_dict(),
+            "signal": signal_and_noise(design, quality["efficiency_result"]),
             "diffraction": quality["slit_result"].to_dict() | {"budget": quality["budget"]},
             "parameter_study": st.to_dict() if st is not None else None,
             "scans": scans,
@@ -306,6 +385,7 @@ def build_report(
             "elapsed_s": time.perf_counter() - t0,
             "section_elapsed_s": clock.laps,
         }
+        data["paper_vs_model"] = paper_vs_model(data) if work.paper else None
         data["summary"] = summary(
             data,
             parse_report_spec(spec),
@@ -365,8 +445,9 @@ def _quality(
     fresnel: bool,
     progress: bool,
     tracer: PixelTracer,
+    dof_dpi: float = DOF_DPI,
 ) -> dict:
-    """RMTF and depth of field, chart profiles, efficiency, diffraction."""
+    """RMTF and depth of field (at ``dof_dpi``), chart profiles, efficiency, diffraction."""
     import numpy as np
 
     from ..analysis.diffraction import design_slit_case, diffraction_budget
@@ -382,7 +463,7 @@ def _quality(
     )
     from ..imaging.measure import measure_rmtf
 
-    dpis = list(PAPER_DPI)
+    dpis = list(PAPER_DPI) + ([] if float(dof_dpi) in PAPER_DPI else [float(dof_dpi)])
     periods = [period_of_dpi(d) for d in dpis]
     zs = np.asarray(DEFAULT_Z_MM if work.lsf_z_mm is None else work.lsf_z_mm)
     # all light and the own path alone from one trace per row
@@ -396,10 +477,10 @@ def _quality(
         progress=progress,
         tracer=tracer,
     )
-    res = rmtf_from_lsf(lsf, design, dpi=dpis, seed=seed)
-    own = rmtf_from_lsf(lsf_own, design, dpi=dpis, seed=seed)
+    res = rmtf_from_lsf(lsf, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
+    own = rmtf_from_lsf(lsf_own, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
     rect = all(m.shape != "circle" for m in design.masks)
-    par = rmtf(design, dpi=dpis, z_mm=zs, method="paraxial") if rect else own
+    par = rmtf(design, dpi=dpis, z_mm=zs, method="paraxial", dof_dpi=dof_dpi) if rect else own
     # Fig. 12 analogue: the merged line's waveform for the 200-dpi chart at 0.5 and 3.5 mm,
     # and the RMTF measured back from it as from an image
     ip = dpis.index(200.0)
@@ -466,10 +547,14 @@ def _scans(
     page = ScanSettings(surround=1.0, fresnel=fresnel, kernel_rays=work.kernel_rays)
     text, truth = text_chart(dpi)
     hm = shape_map("tilt:0:4", text.shape[0] * 25.4 / dpi, text.shape[1] * 25.4 / dpi)
+    ocr = work.ocr and tesseract_available()
+    # OCR of small text too, which the prototype loses past its depth of field (the 8-pt
+    # text it reads at every Z to 4.5 mm; docs/scan.md): 2.5-pt sans at 0.5 ... 4.5 mm
+    small_face, small_points, small_z = "sans", 2.5, (0.5, 1.5, 2.5, 3.5, 4.5)
     # the kernels of every scan below, from one trace per pixel row
     kernels = prepare_kernels(
         design,
-        z_mm=(0.5, 1.5, 2.5, 3.5),
+        z_mm=tuple(dict.fromkeys((0.5, 1.5, 2.5, 3.5) + (small_z if ocr else ()))),
         height_maps=[hm],
         settings=page,
         seed=seed,
@@ -480,17 +565,26 @@ def _scans(
         return simulate_scan(doc, dpi, design, seed=seed, settings=page, kernels=kernels, **kw)
 
     res: dict = {"text_panels": [], "ocr": [], "profiles": [], "bar_panels": []}
+
+    def read(r, z: float, truth: str, face: str, points: float) -> None:
+        from ..io.files import linear_to_srgb
+
+        try:
+            got = recognise(linear_to_srgb(r.image), r.dpi)
+        except OCRUnavailable:
+            return
+        cer = character_error_rate(truth, got)
+        res["ocr"].append({"face": face, "points": points, "z_mm": z, "cer": cer})
+
     for z in (0.5, 1.5, 2.5):
         r = scan(text, z_mm=z)
         res["text_panels"].append((f"Z = {z:g} mm", r.image))
-        if work.ocr and tesseract_available():
-            from ..io.files import linear_to_srgb
-
-            try:
-                got = recognise(linear_to_srgb(r.image), r.dpi)
-                res["ocr"].append({"z_mm": z, "cer": character_error_rate(truth, got)})
-            except OCRUnavailable:
-                pass
+        if ocr:
+            read(r, z, truth, "sans", 8.0)
+    if ocr:
+        small, small_truth = text_chart(dpi, small_points, face=small_face)
+        for z in small_z:
+            read(scan(small, z_mm=z), z, small_truth, small_face, small_points)
     bars = bar_chart(dpi, chart_dpi=(200.0,), block_mm=10.0, height_mm=4.0)
     # RMTF compared on the own path: the chart is a finite patch on a white page, so its
     # ghost background differs from the infinite chart of the computed RMTF
@@ -617,21 +711,51 @@ def _rodlens(design: Design, quality: dict, rod_rows: list | None, seed: int, fr
     }
 
 
-def _run_search(design: Design, seed: int):  # pragma: no cover - a background process
+def _run_search(design: Design, seed: int, dof_dpi: float):  # pragma: no cover - background
     """The compact design search of a report (the CLI's `search` runs the full budget)."""
-    from ..studies.search import search
+    from ..studies.search import search, verify_front
 
     dpi = dpi_of_pitch(output_pitch(design))
-    return search(
-        design, dpi=dpi, population=24, generations=10, seed=seed, ghost_rays=1 << 16, workers=1
+    res = search(
+        design,
+        dpi=dpi,
+        dof_dpi=dof_dpi,
+        population=24,
+        generations=10,
+        seed=seed,
+        ghost_rays=1 << 16,
+        workers=1,
     )
+    return verify_front(res, ghost_rays=1 << 18, lsf_rays=1 << 18, workers=1)
 
 
-def _run_tolerance(design: Design, seed: int):  # pragma: no cover - a background process
-    """The report's tolerance study (the CLI's `tolerance` runs more samples)."""
+def _run_tolerance(design: Design, seed: int, dpi: float, spec: str):  # pragma: no cover
+    """The report's tolerance study (the CLI's `tolerance` runs more samples); a
+    background process."""
     from ..studies.tolerance import tolerance
 
-    return tolerance(design, samples=200, seed=seed, spec="dof>=2.2,ghost<=0.2", workers=1)
+    return tolerance(design, samples=200, seed=seed, dpi=dpi, spec=spec, workers=1)
+
+
+#: The tolerance study's yield spec where the report's --spec bounds none of its figures.
+DEFAULT_TOLERANCE_SPEC = "dof>=2.2,ghost<=0.2"
+#: report --spec figures that the tolerance study evaluates -> its name for them
+_TOLERANCE_FIGURES = MappingProxyType(
+    {"dof": "dof", "light": "efficiency", "ghost_radius": "ghost_radius"}
+)
+
+
+def tolerance_spec(spec: list[tuple[str, str, float]]) -> str:
+    """The tolerance study's yield spec from a report spec (:func:`parse_report_spec`): its
+    bounds on the depth of field, the light and the ghost-free radius; the default
+    (``DEFAULT_TOLERANCE_SPEC``) when it bounds none of them."""
+    parts = [f"{_TOLERANCE_FIGURES[n]}{op}{v:g}" for n, op, v in spec if n in _TOLERANCE_FIGURES]
+    return ",".join(parts) or DEFAULT_TOLERANCE_SPEC
+
+
+def is_paper_preset(design: Design) -> bool:
+    """The design is one of the paper's presets (its prototype or its Fig. 1 concepts)."""
+    return design.fingerprint() in {load_design(n).fingerprint() for n in CONCEPTS}
 
 
 #: parts the parameter study is run in (each a background task): the study is the
@@ -640,16 +764,26 @@ def _run_tolerance(design: Design, seed: int):  # pragma: no cover - a backgroun
 STUDY_PARTS = 2
 
 
-def _studies(design: Design, seed: int, fresnel: bool = False) -> dict:
+def _studies(
+    design: Design,
+    seed: int,
+    fresnel: bool,
+    work: Work,
+    dpi: float = DOF_DPI,
+    tol_spec: str = DEFAULT_TOLERANCE_SPEC,
+) -> dict:
     """The report's studies as background jobs: name -> list of (function, arguments),
-    the tasks whose results make the job (:func:`_joined`). The search and the tolerance
-    study evaluate in closed form, which needs square holes."""
-    parts = [(i, STUDY_PARTS) for i in range(STUDY_PARTS)]
-    jobs = {"parameter_study": [(_run_study, (design, seed, fresnel, part)) for part in parts]}
+    the tasks whose results make the job (:func:`_joined`). The parameter study of the
+    paper's unstated parameters only with the paper's sections (``work.paper``); the
+    search and the tolerance study evaluate in closed form, which needs square holes."""
+    jobs = {}
+    if work.paper:
+        parts = [(i, STUDY_PARTS) for i in range(STUDY_PARTS)]
+        jobs["parameter_study"] = [(_run_study, (design, seed, fresnel, p)) for p in parts]
     jobs["rodlens"] = [(_run_rodlens, (seed, fresnel))]
     if all(m.shape != "circle" for m in design.masks):
-        jobs["search"] = [(_run_search, (design, seed))]
-        jobs["tolerance"] = [(_run_tolerance, (design, seed))]
+        jobs["search"] = [(_run_search, (design, seed, dpi))]
+        jobs["tolerance"] = [(_run_tolerance, (design, seed, dpi, tol_spec))]
     return jobs
 
 
@@ -758,3 +892,19 @@ class _Background:
             self._pool.terminate()
         self._pool.join()
         self._pool = None
+
+
+def signal_and_noise(design: Design, eff) -> dict:
+    """The report's "Signal and noise": a used pixel's electrons and temporal SNR at white
+    and at 18 % grey, its full-well fraction, and the exposure and line rate for the target
+    SNR at white (:func:`~opticalstamp.imaging.sensor.signal_budget`), with the design's
+    electronics and its own-path etendue per pixel (``eff``: the efficiency section's
+    :class:`~opticalstamp.analysis.efficiency.EfficiencyResult`; a white page adds its
+    ghost light)."""
+    from ..imaging.sensor import signal_budget
+
+    g = float(eff.etendue_own_um2sr)
+    return signal_budget(design.electronics, g) | {
+        "etendue_own_um2sr": g,
+        "electronics": design.electronics.model_dump(mode="json"),
+    }

@@ -11,10 +11,20 @@ from ..raytrace.stack import output_pitch
 
 def _scans_html(s: dict, pitch_um: float) -> str:
     sfr = [[x["z_mm"], x["axis"], x["mtf50_cy_per_mm"], x["sfr100"], x["sfr200"]] for x in s["sfr"]]
-    ocr = "".join(f"<li>Z = {o['z_mm']:g} mm: CER {o['cer']:.3f}</li>" for o in s["ocr"])
+    # OCR: a row per text (face, size), a column per Z
+    texts = list(dict.fromkeys((o.get("face", "sans"), o.get("points", 8.0)) for o in s["ocr"]))
+    zs = sorted({o["z_mm"] for o in s["ocr"]})
+    cer = {(o.get("face", "sans"), o.get("points", 8.0), o["z_mm"]): o["cer"] for o in s["ocr"]}
+    ocr_rows = [
+        [f"{p:g} pt {f}"] + [f"{cer[f, p, z]:.3f}" if (f, p, z) in cer else None for z in zs]
+        for f, p in texts
+    ]
     ocr_p = (
-        f"<p>Tesseract on these scans, character error rate:</p><ul>{ocr}</ul>"
-        if ocr
+        "<p>Tesseract on scans of the text chart, character error rate: the 8-pt text above "
+        "(paper Fig. 8) and the same text in smaller type, which shows where reading fails "
+        "past the depth of field (<code>opticalstamp ocr-eval</code> gives more sizes and "
+        "faces):</p>" + table(ocr_rows, ["text"] + [f"Z = {z:g} mm" for z in zs])
+        if ocr_rows
         else "<p>(tesseract not installed: no OCR)</p>"
     )
     prof = [
@@ -44,58 +54,104 @@ def _search_html(s: dict | None, t: dict | None, quick: bool = False) -> str:
     if s is None:
         why = "left out of this quick report" if quick else "needs square holes"
         return f"<h2>Design search and tolerancing</h2><p>({why})</p>"
+
+    def sur(p: dict, k: str):
+        return (p.get("surrogate") or {}).get(k)
+
+    def flags(p: dict) -> str:
+        out = list(p.get("disagrees") or [])
+        if p.get("exact_dominated_by"):
+            out.append(f"dominated by {p['exact_dominated_by']} (exact)")
+        return ", ".join(out)
+
     front = [
         [
-            str(p["holes_um"]),
-            str(p["thicknesses_um"]),
-            p["efficiency_ratio"],
-            1 / p["efficiency_ratio"],
+            "/".join(f"{v:g}" for v in p["holes_um"]),
+            "/".join(f"{v:g}" for v in p["thicknesses_um"]),
+            f"1/{1 / p['efficiency_ratio']:.0f}",
             p["dof_mm"],
+            sur(p, "dof_mm"),
             p["ghost_fraction"],
+            sur(p, "ghost_fraction"),
+            flags(p),
         ]
         for p in s["pareto"]
     ]
     ref = s["reference"]
-    sens = [
-        [r["error"], r["sigma"], r["d_dof_mm"], r.get("d_rmtf@2", None), r["d_ghost_fraction"]]
-        for r in t["sensitivity"][:10]
-    ]
-    rm = [
-        [z, v["p5"], v["p50"], v["p95"], t["nominal"]["rmtf_at"][z]]
-        for z, v in t["rmtf200"].items()
-    ]
+    verified = "verified_by" in s["meta"]
+    acc = s["meta"].get("surrogate_accuracy", {})
+    note = (
+        "Each point of the front was then traced exactly: the exact figures are the figures "
+        "of record, the surrogate's are beside them, and a point is flagged where they differ "
+        f"by more than the surrogate's measured accuracy (depth of field "
+        f"{acc.get('dof_mm', 0):g} mm where the ghost fraction is below 0.2, "
+        f"{acc.get('dof_mm_high_ghost', 0):g} mm above; docs/search.md)."
+        if verified
+        else "The front was not re-verified by the exact tracer."
+    )
+    if t is None:
+        tol = ""
+    else:
+        key = f"rmtf{t['dpi']:g}"
+        sens = [
+            [r["error"], r["sigma"], r["d_dof_mm"], r.get("d_rmtf@2", None), r["d_ghost_fraction"]]
+            for r in t["sensitivity"][:10]
+        ]
+        rm = [
+            [z, v["p5"], v["p50"], v["p95"], t["nominal"]["rmtf_at"][z]] for z, v in t[key].items()
+        ]
+        ex = t["meta"].get("nominal_exact")
+        nominal = ""
+        if ex:
+            off = t["meta"].get("nominal_disagrees") or []
+            nominal = (
+                f" The nominal design traced exactly: depth of field {ex['dof_mm']:.2f} mm "
+                f"(surrogate {t['nominal']['dof_mm']:.2f} mm), ghost fraction "
+                f"{ex['ghost_fraction']:.3f}"
+                + (
+                    f"; the surrogate is off beyond its accuracy in {', '.join(off)}."
+                    if off
+                    else "; the surrogate agrees within its accuracy."
+                )
+            )
+        yld = "not computed" if t["yield"] is None else f"{t['yield']:.1%}"
+        tol = f"""<h2>Tolerancing (paper §5)</h2>
+<p>{t["n_samples"]} Monte Carlo samples: misregistration {t["sigmas"]["misregistration_um"]:g}
+um, holes {t["sigmas"]["hole_um"]:g} um, plates and gaps {t["sigmas"]["thickness_um"]:g} um,
+tilt {t["sigmas"]["tilt_deg"]:g} deg (1 sigma), each evaluated by the
+{html.escape(t["meta"]["estimator"])}. Yield for {html.escape(t["spec"])}: {yld}.{nominal}
+Errors are named from the object side: dx1 is layer 1's x misregistration, slab1 the
+thickness of the slab under layer 1.</p>
+{table(rm, ["Z (mm)", f"RMTF {t['dpi']:g} dpi 5 %", "median", "95 %", "nominal"])}
+{table(sens, ["error", "sigma", "DOF change (mm)", "RMTF@2mm change", "ghost change"])}
+<img src="tolerance.png">
+"""
     return f"""<h2>Design search (paper §3)</h2>
 <p>NSGA-II over hole sizes and slab thicknesses ({s["n_evaluations"]} designs,
 {s["n_feasible"]} feasible: no ghost light within {s["meta"]["near_mm"]:g} mm, stack within
 {s["meta"]["budget_mm"]:g} mm, diffraction spill below {s["meta"]["max_spill"]:g}; a compact
-run, `opticalstamp search` runs 480). This design: efficiency 1/{1 / ref["efficiency_ratio"]:.0f},
-depth of field {ref["dof_mm"]:.2f} mm, dominated by {ref.get("dominated_by", 0)} of the designs
-found. Every design here is evaluated by the {html.escape(s["meta"]["estimator"])}: its depth
-of field can differ from the exact trace of the RMTF section (the Fresnel setting of the
-report does not apply).</p>
+run, `opticalstamp search` runs 480), ranked by the {html.escape(s["meta"]["estimator"])}.
+{note} This design: efficiency 1/{1 / ref["efficiency_ratio"]:.0f}, depth of field
+{ref["dof_mm"]:.2f} mm at {s["meta"]["dof_dpi"]:g} dpi, dominated by
+{ref.get("dominated_by", 0)} of the designs found (the Fresnel setting of the report does
+not apply). Layers and slabs object side first.</p>
 {
         table(
             front,
             [
-                "holes (um, object side first)",
-                "slabs (um, sensor first)",
+                "holes (um)",
+                "slabs (um)",
                 "efficiency",
-                "1/efficiency",
                 "DOF (mm)",
+                "DOF, surrogate",
                 "ghost fraction",
+                "ghosts, surrogate",
+                "flagged",
             ],
         )
     }
 <img src="pareto.png">
-<h2>Tolerancing (paper §5)</h2>
-<p>{t["n_samples"]} Monte Carlo samples: misregistration {t["sigmas"]["misregistration_um"]:g}
-um, holes {t["sigmas"]["hole_um"]:g} um, plates and gaps {t["sigmas"]["thickness_um"]:g} um,
-tilt {t["sigmas"]["tilt_deg"]:g} deg (1 sigma), each evaluated by the
-{html.escape(t["meta"]["estimator"])}. Yield for {html.escape(t["spec"])}: {t["yield"]:.1%}.</p>
-{table(rm, ["Z (mm)", "RMTF 5 %", "median", "95 %", "nominal"])}
-{table(sens, ["error", "sigma", "DOF change (mm)", "RMTF@2mm change", "ghost change"])}
-<img src="tolerance.png">
-"""
+{tol}"""
 
 
 def table(rows: list[list], head: list[str]) -> str:
@@ -161,7 +217,7 @@ def page(design: Design, d: dict) -> str:
             c["ghost_fraction"],
             c["nearest_ghost_um_z0"],
         ]
-        for c in d["concepts"]
+        for c in d["concepts"] or ()
     ]
     prov = d["provenance"]
     return f"""<!doctype html><html><head><meta charset="utf-8">
@@ -171,6 +227,7 @@ table{{border-collapse:collapse;margin:.5em 0}}td,th{{border:1px solid #bbb;padd
 font-size:13px;text-align:right}}img{{max-width:100%}}</style></head><body>
 <h1>opticalstamp report: {html.escape(design.name)}</h1>{_quick_html(d)}
 {_summary_html(d.get("summary"))}
+{_paper_html(d.get("paper_vs_model"))}
 <p>{html.escape(design.description)}</p>
 <p>design fingerprint {prov["design_fingerprint"]}, seed {prov["seed"]},
 opticalstamp {prov["opticalstamp_version"]}, Fresnel losses {"on" if prov["fresnel"] else "off"},
@@ -200,9 +257,11 @@ lands inside the virtual detector (&plusmn;{
         g["landing"][next(iter(g["landing"]))]["detector_half_um"]:g} um):</p>
 {table(land_rows, ["Z (mm)", "nearest (um)", "median (um)", "inside detector (um2 sr)"])}
 <img src="ghosts.png">
-<h3>The paper's Fig. 1 concepts</h3>
 {
-        table(
+        ""
+        if d["concepts"] is None
+        else "<h3>The paper's Fig. 1 concepts</h3>"
+        + table(
             conc,
             [
                 "design",
@@ -265,11 +324,16 @@ def _quick_html(d: dict) -> str:
 Left out:</p><ul>{out}</ul><p>Computed with less work:</p><ul>{less}</ul>"""
 
 
-def _study_html(st: dict | None) -> str:
-    """The parameter-study section (left out of a quick report)."""
+def _study_html(st: dict | None, quick: bool = False) -> str:
+    """The parameter-study section (left out of a quick report and of a report without
+    the paper's sections)."""
     if st is None:
-        return """<h2>The paper's unstated parameters</h2>
+        return (
+            """<h2>The paper's unstated parameters</h2>
 <p>(left out of this quick report)</p>"""
+            if quick
+            else ""
+        )
     st_rows = [
         [
             x["hole_shape"],
@@ -328,12 +392,15 @@ def _dof(res: dict, key: str) -> str:
 def _quality_html(d: dict) -> str:
     r, own, par = d["rmtf"], d["rmtf_traced_own"], d["rmtf_paraxial_own"]
     keys = list(r["rmtf_max"])
+    dk = f"{r['dof_dpi']:g}"
+    paper = d.get("paper_vs_model") is not None
     rows = [
-        [z] + [r["rmtf_max"][k][i] for k in keys] + [r["rmtf_max_se"]["200"][i]]
+        [z] + [r["rmtf_max"][k][i] for k in keys] + [r["rmtf_max_se"][dk][i]]
         for i, z in enumerate(r["z_mm"])
     ]
+    dof_keys = [dk] + [k for k in keys if k != dk]
     dof_rows = [
-        [name, _dof(res, "200"), _dof(res, "247"), _dof(res, "150")]
+        [name] + [_dof(res, k) for k in dof_keys]
         for name, res in (
             ("exact tracer, own + ghost light", r),
             ("exact tracer, own path only", own),
@@ -346,16 +413,21 @@ def _quality_html(d: dict) -> str:
     ]
     e = d["efficiency"]
     eff_rows = [
-        ["own + ghost", e["etendue_um2sr"], e["ratio"], 1 / e["ratio"], e["working_f_number"]],
         [
-            "own path",
+            "own path: the signal (the headline figure)",
             e["etendue_own_um2sr"],
             e["ratio_own"],
             1 / e["ratio_own"],
             e["working_f_number_own"],
         ],
-        ["paper (Fig. 13)", None, 1 / 36, 36.0, 60.0],
-    ]
+        [
+            "own + ghost light (ghost light is crosstalk)",
+            e["etendue_um2sr"],
+            e["ratio"],
+            1 / e["ratio"],
+            e["working_f_number"],
+        ],
+    ] + ([["paper (Fig. 13)", None, 1 / 36, 36.0, 60.0]] if paper else [])
     area_rows = [
         [
             a["sensitive_um"][0],
@@ -389,12 +461,12 @@ def _quality_html(d: dict) -> str:
 shifted in {r["shift_step_um"]:g} um steps; RMTF is the maximum over shifts ({r["method"]},
 ghost light {"included" if r["ghosts"] else "left out"}, {r["n_rays"]:,} rays per pixel row).
 Depth of field: largest Z with RMTF({r["dof_dpi"]:g} dpi) &ge; {r["dof_threshold"]:g}:
-<b>{_dof(r, "200")}</b> (paper: 3.5 mm measured).</p>
-{table(rows, ["Z (mm)"] + [f"{k} dpi" for k in keys] + ["SE (200 dpi)"])}
+<b>{_dof(r, dk)}</b>{" (paper: 3.5 mm measured)" if paper else ""}.{_spurious_html(r)}</p>
+{table(rows, ["Z (mm)"] + [f"{k} dpi" for k in keys] + [f"SE ({dk} dpi)"])}
 <img src="rmtf.png">
 <p>Depth of field (mm) by model: the paraxial closed form against the exact tracer shows
 how far the paraxial limit is off; the ghost light's uniform background lowers contrast.</p>
-{table(dof_rows, ["model", "200 dpi", "247 dpi", "150 dpi"])}
+{table(dof_rows, ["model"] + [f"{k} dpi" for k in dof_keys])}
 <h3>The 200-dpi chart as the merged line sees it (paper Fig. 12 c, d)</h3>
 <p>Signals of the pixels under the chart at the best shift; the RMTF measured back from
 this waveform as from an image agrees with the computed one.</p>
@@ -408,13 +480,18 @@ design's output pitch ({e["meta"]["reference_lens"]["pixel_um"]:.1f} um; the pap
 <p>Effect of the sensitive-area size (the paper expects 4x the light from 4x the area):</p>
 {table(area_rows, ["side (um)", "area ratio", "own-path gain", "total gain", "ghost fraction"])}
 <img src="efficiency.png">
+{signal_html(d.get("signal"), e)}
 <h2>Diffraction (paper Fig. 6)</h2>
 <p>This design's object-side hole as a slit: {df["slit_um"]:g} um in
 {html.escape(df["budget"]["layers"][0]["layer"])}, point source at Z = {df["z_mm"]:g} mm
 (R1 = {df["r1_um"]:.0f} um), observed at {html.escape(df["budget"]["layers"][0]["next"])}
 (R2 = {df["r2_um"]:.0f} um air-equivalent): geometric edge X =
-{df["geometric_edge_um"]:.2f} um. (The paper's Fig. 6, for its 48 um slit at R1 2000 um
-and R2 658 um: an edge of 32 um and about 7 % of the light outside it.)</p>
+{df["geometric_edge_um"]:.2f} um.{
+        " (The paper's Fig. 6, for its 48 um slit at R1 2000 um and R2 658 um: an edge of "
+        "32 um and about 7 % of the light outside it.)"
+        if paper
+        else ""
+    }</p>
 {table(slit_rows, ["wavelength (um)", "Fresnel number", "fraction outside the edge"])}
 <img src="diffraction.png">
 <p>Per-layer budget of this design (2-D holes, point source on the axis at
@@ -435,8 +512,65 @@ Z = {df["budget"]["z_mm"]:g} mm):</p>
         )
     }
 {warn}
-{_study_html(d["parameter_study"])}
+{_study_html(d["parameter_study"], d.get("quick", False))}
 """
+
+
+def signal_html(s: dict | None, eff: dict | None = None) -> str:
+    """The "Signal and noise" block: a used pixel's electrons and temporal SNR at white and
+    18 % grey with the design's electronics, and the exposure and line rate for the target
+    SNR. ``s``: report.json's "signal" (None: no block); ``eff``: its "efficiency" (for
+    the ghost light a white page adds)."""
+    if not s:
+        return ""
+
+    def num(v: float) -> str:  # whole numbers from 100 up, three digits below
+        return f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}"
+
+    el = s["electronics"]
+    grey = s["electrons_grey18"] / s["electrons_white"] if s["electrons_white"] > 0 else 0.18
+    well = el["full_well_e"]
+    dark = el["dark_current_e_per_s"] * el["exposure_ms"] * 1e-3
+    rows = [
+        [name, num(e), f"{100 * e / well:.3g} %", "clipped" if e + dark > well else f"{snr:.3g}"]
+        for name, e, snr in (
+            ("white", s["electrons_white"], s["snr_white"]),
+            (f"{100 * grey:.0f} % grey", s["electrons_grey18"], s["snr_grey18"]),
+        )
+    ]
+    ghost = ""
+    if eff and s["etendue_own_um2sr"] > 0:
+        more = eff["etendue_um2sr"] / s["etendue_own_um2sr"] - 1
+        ghost = f"; a white page adds its ghost light, {100 * more:.2g} % more"
+    target = (
+        f"SNR {s['target_snr_white']:g} at white needs an exposure of "
+        f"<b>{s['exposure_for_target_ms']:.3g} ms</b> per line: at most "
+        f"<b>{num(s['max_line_rate_for_target_hz'])} lines/s</b>"
+        + ("" if el["exposure_duty"] == 1 else f" (exposing {el['exposure_duty']:g} of a line)")
+    )
+    if s["saturates_at_target"]:
+        target += (
+            ", more than the full well holds: out of reach (a full well gives an SNR of at "
+            f"most about {math.sqrt(well):.0f})"
+        )
+    fill = 100 * s["full_well_fraction_white"]
+    warn = (
+        f"<p><b>warning:</b> white saturates the pixels ({fill:.0f} % of the full well with "
+        f"the dark signal): an exposure below {s['exposure_to_full_well_ms']:.3g} ms or less "
+        "light keeps it in range.</p>"
+        if s["saturated_white"]
+        else ""
+    )
+    return f"""<h3>Signal and noise</h3>
+<p>A used pixel with the design's electronics ({el["illuminance_lux"]:,.0f} lux on the
+page, {el["exposure_ms"]:.3g} ms per line, QE {el["quantum_efficiency"]:.2g},
+{well:,.0f} e- full well, {el["read_noise_e"]:.3g} e- read noise,
+{el["adc_bits"]}-bit ADC; a design file's <code>[electronics]</code>) and its own-path
+etendue of {s["etendue_own_um2sr"]:.4g} um&sup2;sr{ghost}. Temporal SNR: photon and dark
+shot noise, read noise, quantisation (the shading correction removes PRNU).</p>
+{table(rows, ["reflectance", "electrons", "of the full well", "SNR"])}
+<p>{target}.</p>
+{warn}"""
 
 
 #: The paper's statements on the rod-lens-array scanner (section 4 and 5).
@@ -531,6 +665,11 @@ def _stack_html(rows: list[dict] | None) -> str:
     )
 
 
+def _ratio(v: float) -> str:
+    """A small ratio as 1/N (0.0379 -> "1/26")."""
+    return f"1/{1 / v:.0f}" if v > 0 else "0"
+
+
 def _summary_html(s: dict | None) -> str:
     """The verdict card at the top of the report."""
     if not s:
@@ -542,7 +681,8 @@ def _summary_html(s: dict | None) -> str:
         if v is None:
             continue
         unit = f" {f['unit']}" if f["unit"] else ""
-        shown = f"{'≥ ' if f['bound'] else ''}{_fmt(float(v))}{unit}"
+        ratio = f["figure"] in ("light", "vs_rod_lens")  # written as 1/N
+        shown = f"{'≥ ' if f['bound'] else ''}{_ratio(v) if ratio else _fmt(float(v))}{unit}"
         c = f["check"]
         verdict = (
             "-"
@@ -553,7 +693,8 @@ def _summary_html(s: dict | None) -> str:
         what = f["what"] + (f" at {s['dof_dpi']:g} dpi" if f["figure"] == "dof" else "")
         row = [what, shown, verdict]
         if paper:
-            row.append("-" if f["paper"] is None else _fmt(f["paper"]))
+            p = f["paper"]
+            row.append("-" if p is None else (_ratio(p) if ratio else _fmt(p)))
         body.append(row)
     head = ["figure", "model", "spec"] + (["paper"] if paper else [])
     near = ", ".join(f"{v:.1f} mm at Z = {z} mm" for z, v in s["ghost_nearest_mm_by_z"].items())
@@ -571,4 +712,41 @@ def _summary_html(s: dict | None) -> str:
         + f"<p>Ghost light ({s['ghost_fraction']:.3g} of all light) lands no nearer than "
         f"{html.escape(near)} from the pixel's axis: the design is ghost-free within that "
         "radius; own-path light is the signal.</p></div>"
+    )
+
+
+def _spurious_html(r: dict) -> str:
+    """Where a chart's RMTF rises back over the threshold past its depth of field: contrast
+    after a reversal (spurious resolution), not counted in the depth of field."""
+    sp = {k: v for k, v in (r.get("spurious_mm") or {}).items() if v}
+    if not sp:
+        return ""
+    parts = [f"{k} dpi at " + ", ".join(f"{a:.2f}-{b:.2f} mm" for a, b in v) for k, v in sp.items()]
+    return (
+        " Spurious resolution (RMTF back over the threshold past the depth of field, "
+        "contrast after a reversal; not counted): " + "; ".join(parts) + "."
+    )
+
+
+def _paper_html(rows: list[dict] | None) -> str:
+    """The paper's statements on its prototype against the model's figures (computed)."""
+    if not rows:
+        return ""
+    body = [
+        [
+            r["section"],
+            r["statement"],
+            r["paper_text"] + (f" {r['unit']}" if r["unit"] and r["paper"] is not None else ""),
+            r["model_text"] + (f" {r['unit']}" if r["unit"] and r["model"] is not None else ""),
+            "-" if r["ratio"] is None else f"{r['ratio']:.2f}",
+            r["note"],
+        ]
+        for r in rows
+    ]
+    return (
+        "<h2>The paper against the model</h2><p>The paper's statements on its prototype "
+        "(Kawano 2016) and this report's figures for them, computed from report.json. "
+        "Differences come from parameters the paper does not state "
+        "(docs/paper-comparison.md); the model is not tuned to the paper.</p>"
+        + table(body, ["paper", "statement", "paper's figure", "model", "model / paper", "note"])
     )

@@ -16,6 +16,7 @@ import re
 from types import MappingProxyType
 
 from ..validate import InputError
+from .paper import PAPER
 
 #: Figures a spec may name: key -> (what, unit).
 FIGURES = MappingProxyType(
@@ -27,17 +28,6 @@ FIGURES = MappingProxyType(
         "vs_rod_lens": ("light vs a 1-row 12-degree rod-lens array", ""),
         "thickness": ("sensor to document reference", "mm"),
         "yield": ("tolerance yield", ""),
-    }
-)
-#: The paper's statements on its prototype (Kawano 2016: §4 measured depth of field, §5
-#: light efficiency 1/36 and working F 60, module 5 mm thick, ~1/100 of a rod-lens array).
-PAPER = MappingProxyType(
-    {
-        "dof": 3.5,
-        "light": 1 / 36,
-        "f_number": 60.0,
-        "vs_rod_lens": 1 / 100,
-        "thickness": 5.0,
     }
 )
 _SPEC_RE = re.compile(r"^([a-z_]+)(>=|<=)([-+0-9.eE]+)$")

@@ -174,8 +174,9 @@ def relative_to_first(rows: list[dict]) -> list[dict]:
 def text_scans(designs, *, heights_mm=TEXT_HEIGHTS_MM, seed: int = 0, fresnel: bool = False):
     """The same text (the built-in text chart's first half lines) scanned by each design at
     each height: [(title, image)] in design-major order, linear reflectance. Each scanner
-    is exposed so that white fills WHITE_FILL of the full well (a rod-lens array collects
-    about 100 times a stamp's light: at one exposure one of them would clip or starve)."""
+    has its design's electronics and is exposed so that white fills WHITE_FILL of the full
+    well (a rod-lens array collects about 100 times a stamp's light: at one exposure one
+    of them would clip or starve)."""
     from ..imaging.charts import text_chart
     from ..imaging.scan import ScanSettings, prepare_kernels, simulate_scan
     from ..imaging.sensor import exposure_for_white
@@ -190,8 +191,10 @@ def text_scans(designs, *, heights_mm=TEXT_HEIGHTS_MM, seed: int = 0, fresnel: b
             d, [heights_mm[0]], fresnel=fresnel, n_rays=base.kernel_rays, seed=seed
         )
         white = float(np.mean([k[0].own_etendue + k[0].ghost_etendue for k in groups]))
-        ms = exposure_for_white(base.sensor, white, WHITE_FILL)
-        st = base.model_copy(update={"sensor": base.sensor.model_copy(update={"exposure_ms": ms})})
+        ms = exposure_for_white(d.electronics, white, WHITE_FILL)
+        st = base.model_copy(
+            update={"sensor": d.electronics.model_copy(update={"exposure_ms": ms})}
+        )
         for z in heights_mm:
             r = simulate_scan(doc, TEXT_DPI, d, z_mm=z, settings=st, seed=seed, kernels=kern)
             panels.append((f"{d.name}, {z:g} mm", r.image))

@@ -30,11 +30,21 @@ from ..design import Design
 from ..raytrace.stack import output_pitch
 
 GHOST_Z_MM = (0.0, 1.0, 2.0, 3.0, 4.0)
+#: the RMTF curve of an evaluation runs on past ``z_mm`` until it crosses the threshold,
+#: up to this height (mm): beyond it the depth of field is reported as open-ended
+Z_LIMIT_MM = 20.0
 #: how :func:`evaluate_design` estimates, recorded with every figure of merit it makes
 SURROGATE = (
     "surrogate: paraxial closed-form own path + uniform ghost background (sampled ghost "
     "etendue), no Fresnel losses"
 )
+
+
+def extended_z(zs: np.ndarray) -> np.ndarray:
+    """The Z grid ``zs`` (from 0, even steps) run on to twice its length, at most to
+    ``Z_LIMIT_MM``, in the same step: for an RMTF that has not crossed its threshold yet."""
+    step = zs[1] - zs[0]
+    return np.round(np.arange(0.0, min(Z_LIMIT_MM, 2 * zs[-1]) + step / 2, step), 9)
 
 
 def rmtf_with_background(
@@ -81,6 +91,10 @@ def evaluate_design(
     nearest = [v["nearest_um"] for v in g.landing.values() if v["nearest_um"] is not None]
     near = min(nearest) / 1000.0 if nearest else math.inf
     curve = rmtf_with_background(design, dpi, zs, ghost)
+    while curve.min() >= dof_threshold and zs[-1] < Z_LIMIT_MM:
+        # the depth of field is a crossing, not the end of the range: go on in the same step
+        zs = extended_z(zs)
+        curve = rmtf_with_background(design, dpi, zs, ghost)
     at = {f"{z:g}": float(np.interp(z, zs, curve)) for z in rmtf_z_mm}
     diff = diffraction_budget(design, wavelengths_um=(wavelength_um,))
     spill = max(row["outside_shadow"][f"{wavelength_um:g}"] for row in diff["layers"])
@@ -94,6 +108,7 @@ def evaluate_design(
         "efficiency_ratio": own / reference_etendue(output_pitch(design)),
         "efficiency_ratio_total": tot / reference_etendue(output_pitch(design)),
         "dof_mm": depth_of_field(zs, curve, dof_threshold),
+        "dof_open_ended": bool(curve.min() >= dof_threshold),
         "rmtf_at": at,
         "nearest_ghost_mm": near,
         "near_ghost": near < near_mm,

@@ -17,6 +17,7 @@ the front is the same for any number of workers.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -28,6 +29,7 @@ from ..defaults import SEARCH_BUDGET_MM, SEARCH_GENERATIONS, SEARCH_NEAR_MM, SEA
 from ..design import (
     Design,
     design_from_dict,
+    replace,
     scale_to_dpi,
     stack_params,
     structural_variants,
@@ -39,6 +41,14 @@ from ..units import pitch_of_dpi
 from ..validate import InputError, check_number, check_seed
 from .evaluate import SURROGATE, evaluate_design
 from .runner import run_tasks, task_key
+from .verify import (
+    EXACT,
+    EXACT_GHOST_RAYS,
+    EXACT_LSF_RAYS,
+    SURROGATE_ACCURACY,
+    disagreements,
+    exact_figures,
+)
 
 #: a base whose output pitch is within this of 25.4 mm / dpi is searched as it is
 SAME_RESOLUTION = 0.01
@@ -49,10 +59,12 @@ class SearchSpace:
     hole_bounds_um: tuple[float, float]
     thickness_bounds_um: list[tuple[float, float]]
     thickness_step_um: float
-    pinned: dict = field(default_factory=dict)  # "hole0".., "t0".. -> value
+    pinned: dict = field(default_factory=dict)  # "hole1".., "slab1".. -> value
 
     def names(self, n_holes: int, n_slabs: int) -> list[str]:
-        return [f"hole{i}" for i in range(n_holes)] + [f"t{i}" for i in range(n_slabs)]
+        """The variables: ``hole1``.. (layer 1 = object side) and ``slab1``.. (slab 1 = the
+        object side's), object side first as every list of the stack."""
+        return [f"hole{i + 1}" for i in range(n_holes)] + [f"slab{i + 1}" for i in range(n_slabs)]
 
 
 def default_space(
@@ -180,8 +192,8 @@ def search(
     ``design`` gives the sensor, the glass, the number and order of slabs and masks and
     the reference gap (scale it to another resolution with
     :func:`~opticalstamp.design.variants.scale_to_dpi`).
-    ``pinned``: {"hole0": 48, "t2": 1000, ...} fixes variables (holes object side first,
-    thicknesses sensor first).
+    ``pinned``: {"hole1": 48, "slab1": 1000, ...} fixes variables (layers and slabs
+    numbered from the object side, :meth:`SearchSpace.names`).
     """
     check_seed(seed)
     import optuna
@@ -197,11 +209,11 @@ def search(
     if unknown:
         raise InputError(f"pinned: unknown variables {sorted(unknown)} (use {names})")
     for name, value in pins.items():
-        j = int(name[4:] if name.startswith("hole") else name[1:])
+        j = int(name[4:]) - 1
         lo, hi = sp.hole_bounds_um if name.startswith("hole") else sp.thickness_bounds_um[j]
         check_number(value, f"pinned {name} (--pin {name}=...)", lo, hi)
-    t_pins = {k: v for k, v in pins.items() if k.startswith("t")}
-    least = sum(t_pins.get(f"t{j}", sp.thickness_bounds_um[j][0]) for j in range(n_t))
+    t_pins = {k: v for k, v in pins.items() if k.startswith("slab")}
+    least = sum(t_pins.get(f"slab{j + 1}", sp.thickness_bounds_um[j][0]) for j in range(n_t))
     if t_pins and least > budget_um:
         raise InputError(
             f"pinned {', '.join(f'{k}={v:g}' for k, v in t_pins.items())}: the thinnest stack "
@@ -212,8 +224,8 @@ def search(
     base_json = design.model_dump(mode="json", exclude_none=True)
 
     def payload(params: dict) -> dict:
-        holes = [float(params[f"hole{j}"]) for j in range(n_h)]
-        ts = [float(params[f"t{j}"]) for j in range(n_t)]
+        holes = [float(params[f"hole{j + 1}"]) for j in range(n_h)]
+        ts = [float(params[f"slab{j + 1}"]) for j in range(n_t)]
         return {
             "base": base_json,
             "holes_um": holes,
@@ -226,14 +238,16 @@ def search(
     dists = {}
     for j in range(n_h):
         lo, hi = sp.hole_bounds_um
-        dists[f"hole{j}"] = optuna.distributions.IntDistribution(int(lo), int(hi))
+        dists[f"hole{j + 1}"] = optuna.distributions.IntDistribution(int(lo), int(hi))
     for j in range(n_t):
         lo, hi = sp.thickness_bounds_um[j]
-        dists[f"t{j}"] = optuna.distributions.FloatDistribution(lo, hi, step=sp.thickness_step_um)
+        dists[f"slab{j + 1}"] = optuna.distributions.FloatDistribution(
+            lo, hi, step=sp.thickness_step_um
+        )
     records = []
     p0 = stack_params(design)
-    base_params = {f"hole{j}": v for j, v in enumerate(p0["holes_um"])}
-    base_params |= {f"t{j}": v for j, v in enumerate(p0["thicknesses_um"])}
+    base_params = {f"hole{j + 1}": v for j, v in enumerate(p0["holes_um"])}
+    base_params |= {f"slab{j + 1}": v for j, v in enumerate(p0["thicknesses_um"])}
     if warm_start:  # the base design joins the first generation (NSGA-II breeds from it)
         start = {
             k: int(round(v)) if k.startswith("hole") else float(v)
@@ -330,25 +344,29 @@ def search(
     )
 
 
+#: The figures of a search record (besides its parameters).
+FIGURES = (
+    "efficiency_ratio",
+    "dof_mm",
+    "ghost_fraction",
+    "nearest_ghost_mm",
+    "diffraction_spill",
+    "stack_um",
+)
+
+
 def _row(
     params: dict, rec: dict | None, m: dict | None, feasible: bool, n_h: int, n_t: int
 ) -> dict:
     row = {
-        "holes_um": [float(params[f"hole{j}"]) for j in range(n_h)],
-        "thicknesses_um": [float(params[f"t{j}"]) for j in range(n_t)],
+        "holes_um": [float(params[f"hole{j + 1}"]) for j in range(n_h)],
+        "thicknesses_um": [float(params[f"slab{j + 1}"]) for j in range(n_t)],
         "ok": m is not None,
         "feasible": feasible,
         "error": None if rec is None or rec["ok"] else rec.get("error", "not run"),
     }
-    keys = (
-        "efficiency_ratio",
-        "dof_mm",
-        "ghost_fraction",
-        "nearest_ghost_mm",
-        "diffraction_spill",
-        "stack_um",
-    )
-    for k in keys:
+    row["rmtf_at"] = None if m is None else dict(m["rmtf_at"])
+    for k in FIGURES:
         v = None if m is None else m[k]
         # JSON (the journal) has no infinity: a missing nearest ghost means none at all
         row[k] = (
@@ -374,14 +392,7 @@ def search_dataset(res: SearchResult, design: Design, seed: int):
         "feasible": ("evaluation", np.array([r["feasible"] for r in recs], dtype=np.int8)),
         "on_front": ("evaluation", np.array([k in front for k in key], dtype=np.int8)),
     }
-    for k in (
-        "efficiency_ratio",
-        "dof_mm",
-        "ghost_fraction",
-        "nearest_ghost_mm",
-        "diffraction_spill",
-        "stack_um",
-    ):
+    for k in FIGURES:
         v = np.array([r[k] for r in recs], dtype=np.float64)
         data[k] = ("evaluation", np.where(np.isfinite(v), v, np.nan))
     return xr.Dataset(
@@ -396,7 +407,7 @@ def search_dataset(res: SearchResult, design: Design, seed: int):
             "dpi": res.dpi,
             "reference": res.reference,
             "meta": res.meta,
-            "layer_order": "holes: object side first; slabs: sensor first",
+            "layer_order": "holes and slabs: object side first (layer 1 faces the document)",
         },
     )
 
@@ -474,3 +485,155 @@ def merged_front(results: dict[str, SearchResult]) -> list[dict]:
         return []
     pts = np.array([[r["efficiency_ratio"], r["dof_mm"]] for r in rows])
     return sorted((rows[i] for i in pareto_front(pts)), key=lambda r: -r["dof_mm"])
+
+
+def _exact_payload(payload: dict) -> dict:
+    """Worker entry: the exact tracer's figures of a candidate built from plain data."""
+    base = design_from_dict(payload["base"], "search base")
+    d = with_stack(base, holes_um=payload["holes_um"], thicknesses_um=payload["thicknesses_um"])
+    return exact_figures(d, **payload["options"])
+
+
+def _verified(row: dict, exact: dict | None) -> dict:
+    """A record with the exact tracer's figures as its figures of record: the surrogate's
+    kept under ``surrogate``, the exact ones under ``exact``, and ``disagrees`` naming the
+    figures that differ by more than the surrogate's stated accuracy."""
+    if exact is None:
+        return row | {"estimator": SURROGATE, "exact": None, "disagrees": None}
+    sur = {k: row[k] for k in (*FIGURES, "rmtf_at")}
+    out = row | {
+        "estimator": EXACT,
+        "surrogate": sur,
+        "exact": exact,
+        "disagrees": disagreements(sur, exact),
+    }
+    for k in ("efficiency_ratio", "dof_mm", "ghost_fraction", "nearest_ghost_mm", "rmtf_at"):
+        out[k] = exact[k]
+    return out
+
+
+def verify_front(
+    res: SearchResult,
+    *,
+    ghost_rays: int = EXACT_GHOST_RAYS,
+    lsf_rays: int = EXACT_LSF_RAYS,
+    workers: int | None = None,
+    dask_address: str | None = None,
+    journal: Path | None = None,
+    progress: bool = False,
+) -> SearchResult:
+    """The search's front and base design re-verified by the exact tracer.
+
+    Each point of the front (and the base design) is traced exactly
+    (:func:`~opticalstamp.studies.verify.exact_figures`, the search's seed and chart):
+    its exact figures become the figures of record, the surrogate's are kept beside them,
+    and ``disagrees`` names the figures where the two differ by more than
+    ``SURROGATE_ACCURACY``. ``exact_dominated_by``: how many other points of the front
+    dominate it in the exact figures (the surrogate ranked it on the front; 0 where the
+    exact tracer agrees). Runs on the search's workers and journal, so it resumes.
+    """
+    if res.design is None:
+        raise ValueError("verify_front: the search result carries no design")
+    base_json = res.design.model_dump(mode="json", exclude_none=True)
+    options = {
+        "dpi": res.meta["dof_dpi"],
+        "near_mm": res.meta["near_mm"],
+        "ghost_rays": ghost_rays,
+        "lsf_rays": lsf_rays,
+        "seed": res.seed,
+    }
+    rows = list(res.pareto) + ([res.reference] if res.reference else [])
+    tasks = []
+    for r in rows:
+        p = {
+            "base": base_json,
+            "holes_um": r["holes_um"],
+            "thicknesses_um": r["thicknesses_um"],
+            "options": options,
+            "exact": True,
+        }
+        tasks.append((task_key(p), p))
+    recs = run_tasks(
+        _exact_payload,
+        tasks,
+        workers=workers,
+        dask_address=dask_address,
+        journal=journal,
+        progress=progress,
+        desc="exact re-verification",
+    )
+
+    def exact_of(i: int) -> dict | None:
+        rec = recs.get(tasks[i][0])
+        return rec["result"] if rec is not None and rec["ok"] else None
+
+    front = [_verified(r, exact_of(i)) for i, r in enumerate(res.pareto)]
+    pts = np.array([[r["efficiency_ratio"], r["dof_mm"]] for r in front]).reshape(-1, 2)
+    for r, p in zip(front, pts, strict=True):
+        r["exact_dominated_by"] = int((np.all(pts >= p, axis=1) & np.any(pts > p, axis=1)).sum())
+    reference = res.reference
+    if reference is not None:
+        reference = _verified(reference, exact_of(len(rows) - 1))
+    meta = res.meta | {
+        "verified_by": EXACT,
+        "surrogate_accuracy": dict(SURROGATE_ACCURACY),
+        "exact_ghost_rays": ghost_rays,
+        "exact_lsf_rays": lsf_rays,
+    }
+    return dataclasses.replace(res, pareto=front, reference=reference, meta=meta)
+
+
+def front_designs(results: dict[str, SearchResult], front: list[dict]) -> list[dict]:
+    """Every point of ``front`` (rows of :func:`merged_front` or of one search's
+    ``pareto``) as a design of its own: ``{"name", "design", "row", "provenance"}``.
+
+    The design is the searched base (of the point's variant) with the point's holes and
+    slabs; its name is the base's with ``-pNN`` (NN: the point's rank by depth of field,
+    from 01), its description says where it comes from; ``provenance`` lists the search's
+    settings and the point's surrogate and exact figures (the lines a design file writes
+    as comments).
+    """
+    from .. import __version__
+
+    out = []
+    for i, row in enumerate(front, start=1):
+        res = results[row["variant"]] if "variant" in row else next(iter(results.values()))
+        base = res.design
+        name = f"{base.name}-p{i:02d}"
+        desc = (
+            f"Pareto point {i} of {len(front)} of a design search of {base.name} "
+            f"(seed {res.seed}, {res.dpi:g} dpi, depth of field at "
+            f"{res.meta['dof_dpi']:g} dpi): holes {row['holes_um']} um (layer 1 first), "
+            f"slabs {row['thicknesses_um']} um (object side first)"
+        )
+        d = with_stack(base, holes_um=row["holes_um"], thicknesses_um=row["thicknesses_um"])
+        d = replace(d, name=name, description=desc)
+        sur = row.get("surrogate") or {k: row[k] for k in (*FIGURES, "rmtf_at")}
+        prov = [
+            f"exported by opticalstamp {__version__} search --export-designs",
+            f"search: base {base.name} (fingerprint {base.fingerprint()}), seed {res.seed}, "
+            f"{res.dpi:g} dpi, {len(res.records)} designs, constraints near_mm "
+            f"{res.meta['near_mm']:g}, budget_mm {res.meta['budget_mm']:g}, max_spill "
+            f"{res.meta['max_spill']:g}"
+            + (f", max_ghost {res.meta['max_ghost']:g}" if res.meta["max_ghost"] else ""),
+            f"point {i} of {len(front)}"
+            + (f" (variant {row['variant']})" if "variant" in row else ""),
+            "surrogate: efficiency {:.5f}, DOF {:.3f} mm, ghost fraction {:.4f}".format(
+                sur["efficiency_ratio"], sur["dof_mm"], sur["ghost_fraction"]
+            ),
+        ]
+        if row.get("exact"):
+            e = row["exact"]
+            prov.append(
+                "exact tracer (figure of record): efficiency {:.5f}, DOF {:.3f} mm, ghost "
+                "fraction {:.4f}{}".format(
+                    e["efficiency_ratio"],
+                    e["dof_mm"],
+                    e["ghost_fraction"],
+                    f"; differs from the surrogate in {', '.join(row['disagrees'])}"
+                    if row["disagrees"]
+                    else "",
+                )
+            )
+        out.append({"name": name, "design": d, "row": row, "provenance": prov})
+    return out

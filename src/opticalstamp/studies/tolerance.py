@@ -29,16 +29,20 @@ from ..raytrace.stack import lattice_of
 from ..validate import check_seed
 from .evaluate import SURROGATE, evaluate_design
 from .runner import run_tasks, task_key
+from .verify import disagreements, exact_figures
 
 DEFAULT_SIGMAS = TOLERANCE_SIGMAS
-SPEC_RE = re.compile(r"^(dof|ghost|efficiency|rmtf@[0-9.]+)(>=|<=)(-?[0-9.]+)$")
+SPEC_RE = re.compile(r"^(dof|ghost_radius|ghost|efficiency|rmtf@[0-9.]+)(>=|<=)(-?[0-9.]+)$")
 
 
 def error_names(design: Design) -> list[str]:
     n_m, n_s = len(design.masks), len(design.slabs)
-    names = [f"dx{i}" for i in range(n_m)] + [f"dy{i}" for i in range(n_m)]
-    names += [f"hole{i}" for i in range(n_m)] + [f"t{j}" for j in range(n_s)] + ["tilt"]
-    return names
+    """The errors' names, layers and slabs numbered from the object side (``dx1``: layer
+    1's x misregistration; ``slab1``: the thickness of the object side's slab). The slabs
+    come sensor first in this list (the order of the random draws, unchanged)."""
+    names = [f"dx{i + 1}" for i in range(n_m)] + [f"dy{i + 1}" for i in range(n_m)]
+    names += [f"hole{i + 1}" for i in range(n_m)] + [f"slab{n_s - j}" for j in range(n_s)]
+    return names + ["tilt"]
 
 
 def _sigma_vector(design: Design, sigmas: dict) -> np.ndarray:
@@ -59,17 +63,17 @@ def draw_errors(design: Design, index: int, seed: int, sigmas: dict) -> dict:
 
 
 def apply_errors(design: Design, errors: dict) -> Design:
-    """The design built with the given errors (masks object side first, slabs sensor
-    first; the tilt lengthens the first slab at the array's end). Misregistration errors
-    add to the design's own mask offsets."""
-    p = stack_params(design)
-    holes = [max(1.0, h + errors.get(f"hole{i}", 0.0)) for i, h in enumerate(p["holes_um"])]
-    ts = [max(1.0, t + errors.get(f"t{j}", 0.0)) for j, t in enumerate(p["thicknesses_um"])]
+    """The design built with the given errors (names of :func:`error_names`; the tilt
+    lengthens the sensor's slab at the array's end). Misregistration errors add to the
+    design's own mask offsets."""
+    p = stack_params(design)  # object side first
+    holes = [max(1.0, h + errors.get(f"hole{i + 1}", 0.0)) for i, h in enumerate(p["holes_um"])]
+    ts = [max(1.0, t + errors.get(f"slab{j + 1}", 0.0)) for j, t in enumerate(p["thicknesses_um"])]
     lat = lattice_of(design)
     half_len = max(abs(lat.k_lo), abs(lat.k_hi)) * lat.pitch
-    ts[0] = max(1.0, ts[0] + half_len * math.tan(math.radians(errors.get("tilt", 0.0))))
+    ts[-1] = max(1.0, ts[-1] + half_len * math.tan(math.radians(errors.get("tilt", 0.0))))
     offs = [
-        (dx + errors.get(f"dx{i}", 0.0), dy + errors.get(f"dy{i}", 0.0))
+        (dx + errors.get(f"dx{i + 1}", 0.0), dy + errors.get(f"dy{i + 1}", 0.0))
         for i, (dx, dy) in enumerate(p["offsets_um"])
     ]
     return with_stack(design, holes_um=holes, thicknesses_um=ts, offsets_um=offs)
@@ -81,7 +85,9 @@ def _evaluate_payload(payload: dict) -> dict:
 
 
 def parse_spec(text: str | None) -> list[tuple[str, str, float]]:
-    """'dof>=2.2,ghost<=0.2,rmtf@2>=0.3,efficiency>=0.03' -> [(metric, op, value)]."""
+    """'dof>=2.2,ghost<=0.2,rmtf@2>=0.3,efficiency>=0.03,ghost_radius>=5' -> [(metric, op,
+    value)]: depth of field (mm), ghost fraction, own light vs the F/10 lens, RMTF at Z mm,
+    nearest ghost light on the object plane (mm)."""
     if not text:
         return []
     out = []
@@ -89,8 +95,8 @@ def parse_spec(text: str | None) -> list[tuple[str, str, float]]:
         m = SPEC_RE.match(part)
         if not m:
             raise ValueError(
-                f"spec: cannot read {part!r} (use dof, ghost, efficiency or rmtf@Z with >= or "
-                "<= and a number, comma-separated)"
+                f"spec: cannot read {part!r} (use dof, ghost, ghost_radius, efficiency or "
+                "rmtf@Z with >= or <= and a number, comma-separated)"
             )
         out.append((m.group(1), m.group(2), float(m.group(3))))
     return out
@@ -101,6 +107,8 @@ def _metric(res: dict, name: str) -> float:
         return res["dof_mm"]
     if name == "ghost":
         return res["ghost_fraction"]
+    if name == "ghost_radius":  # mm; infinite where no ghost light lands at all
+        return res["nearest_ghost_mm"]
     if name == "efficiency":
         return res["efficiency_ratio"]
     z = float(name.split("@")[1])
@@ -287,8 +295,15 @@ def tolerance(
     dask_address: str | None = None,
     journal=None,
     progress: bool = False,
+    verify: bool = True,
 ) -> ToleranceResult:
-    """Monte Carlo of assembly errors, sensitivity table and yield (see module doc)."""
+    """Monte Carlo of assembly errors, sensitivity table and yield (see module doc).
+
+    ``verify``: the nominal design is also traced exactly
+    (:func:`~opticalstamp.studies.verify.exact_figures`); its figures are in
+    ``meta["nominal_exact"]`` and the figures where the surrogate is off beyond its stated
+    accuracy in ``meta["nominal_disagrees"]`` (the samples are the surrogate's).
+    """
     check_seed(seed)
     sg = DEFAULT_SIGMAS | (sigmas or {})
     if any(v < 0 for v in sg.values()):
@@ -379,8 +394,17 @@ def tolerance(
         sensitivity=table,
         spec=spec or "",
         yield_fraction=yld,
-        meta={"ghost_rays": ghost_rays, "estimator": SURROGATE},
+        meta={"ghost_rays": ghost_rays, "estimator": SURROGATE}
+        | _nominal_exact(design, nominal, dpi, z_mm, seed, verify),
     )
+
+
+def _nominal_exact(design: Design, nominal: dict, dpi: float, z_mm, seed: int, verify: bool):
+    """The nominal design's exact figures beside the surrogate's (see :func:`tolerance`)."""
+    if not verify:
+        return {}
+    ex = exact_figures(design, dpi=dpi, rmtf_z_mm=tuple(float(z) for z in z_mm), seed=seed)
+    return {"nominal_exact": ex, "nominal_disagrees": disagreements(nominal, ex)}
 
 
 def tolerance_dataset(res: ToleranceResult, design: Design):

@@ -375,15 +375,33 @@ def plot_pareto(res, title: str = ""):
             label="feasible",
         )
     if res.pareto:
-        f = sorted(res.pareto, key=lambda r: r["dof_mm"])
+        # the front as the surrogate ranked it; where it was re-verified, each point's exact
+        # figures too, joined to it (the exact ones are the figures of record)
+        sur = [r.get("surrogate") or r for r in res.pareto]
+        order = sorted(range(len(sur)), key=lambda i: sur[i]["dof_mm"])
         ax.plot(
-            [r["dof_mm"] for r in f],
-            [r["efficiency_ratio"] for r in f],
+            [sur[i]["dof_mm"] for i in order],
+            [sur[i]["efficiency_ratio"] for i in order],
             "o-",
             c="C3",
             ms=4,
-            label="Pareto front",
+            label="Pareto front (surrogate)",
         )
+        ex = [(s, r) for s, r in zip(sur, res.pareto, strict=True) if r.get("exact")]
+        if ex:
+            for s, r in ex:
+                ax.plot([s["dof_mm"], r["dof_mm"]], [s["efficiency_ratio"], r["efficiency_ratio"]],
+                        c="C3", lw=0.6, ls=":")  # fmt: skip
+            ax.plot(
+                [r["dof_mm"] for _, r in ex],
+                [r["efficiency_ratio"] for _, r in ex],
+                "D",
+                mfc="none",
+                c="C3",
+                ms=6,
+                ls="none",
+                label="the same points, exact tracer",
+            )
     if res.reference:
         ax.plot(
             res.reference["dof_mm"],
