@@ -544,7 +544,9 @@ def _scans(
 
     dpi = work.scan_dpi
     # the charts are printed on a larger white page; Fresnel losses as in the analyses
-    page = ScanSettings(surround=1.0, fresnel=fresnel, kernel_rays=work.kernel_rays)
+    page = ScanSettings(
+        surround=1.0, fresnel=fresnel, kernel_rays=work.kernel_rays, sensor=design.electronics
+    )
     text, truth = text_chart(dpi)
     hm = shape_map("tilt:0:4", text.shape[0] * 25.4 / dpi, text.shape[1] * 25.4 / dpi)
     ocr = work.ocr and tesseract_available()
@@ -647,7 +649,7 @@ def _scans(
         p | {"x_mm": p["x_mm"].tolist(), "profile": p["profile"].tolist()} for p in res["profiles"]
     ]
     res["settings"] = (
-        f"default sensor model, noise on, ghost light on, white surround, seed {seed}"
+        f"the design's sensor electronics, noise on, ghost light on, white surround, seed {seed}"
         + ("" if work.ocr else f"; {dpi:g}-dpi charts, no OCR (quick report)")
     )
     return res
