@@ -262,7 +262,9 @@ def ghosts(
     ]
     for zk, v in r.landing.items():
         lines.append(
-            f"Z = {zk} mm: nearest ghost light {v['nearest_um']} um from the axis, "
+            f"Z = {zk} mm: nearest ghost light "
+            + ("none" if v["nearest_um"] is None else f"{v['nearest_um'] / 1000:.2f} mm")
+            + " from the axis, "
             f"{v['within_detector_um2sr']:.3g} um^2 sr inside +-{detector_um:g} um"
         )
     for p in r.paths[:10]:
