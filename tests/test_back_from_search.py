@@ -150,7 +150,7 @@ def test_paper_vs_model_rows_from_numbers():
             "extent_x_um": [114.0, 245.0, 376.0],
             "meta": {"cell_um": 84.6},
         },
-        "ghosts": {"landing": {"0": {"within_detector_um2sr": 0.0}}},
+        "ghosts": {"landing": {"0": {"within_detector_um2sr": 0.0, "nearest_um": 6100.0}}},
         "rmtf": {"dof_dpi": 200.0, "dof_mm": {"200": 2.48}},
         "efficiency": {"ratio_own": 0.0379, "working_f_number_own": 51.4, "sensitive_area": []},
         "stack": [{"z_top_um": 2850.0}],

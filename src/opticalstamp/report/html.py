@@ -7,6 +7,8 @@ import math
 
 from ..design import Design
 from ..raytrace.stack import output_pitch
+from .paper import one_in
+from .summary import PAPER
 
 
 def _scans_html(s: dict, pitch_um: float) -> str:
@@ -573,13 +575,6 @@ shot noise, read noise, quantisation (the shading correction removes PRNU).</p>
 {warn}"""
 
 
-#: The paper's statements on the rod-lens-array scanner (section 4 and 5).
-PAPER_LIGHT_RATIO = 100.0  # rod-lens array / stamp
-PAPER_LIGHT_RATIO_CUSTOM = 25.0  # with a sensor customised for the stamp (4x area)
-PAPER_ROD_THICKNESS_MM = 15.0  # "at least"
-PAPER_STAMP_THICKNESS_MM = 5.0
-
-
 def rodlens_html(r: dict | None) -> str:
     """The report's "stamp against a rod-lens array" section: the paper's statements next
     to the model's for each rod-lens design, and which class the paper's figure fits.
@@ -608,9 +603,9 @@ def rodlens_html(r: dict | None) -> str:
     body.append(
         [
             f"paper (stamp: {stamp['name']})",
-            f"about 1/{PAPER_LIGHT_RATIO:.0f}",
-            f"1/{PAPER_LIGHT_RATIO_CUSTOM:.0f}",
-            f">= {PAPER_ROD_THICKNESS_MM:g} (stamp {PAPER_STAMP_THICKNESS_MM:g})",
+            f"about {one_in(PAPER['vs_rod_lens'])}",
+            one_in(PAPER["vs_rod_lens_4x_area"]),
+            f">= {PAPER['rod_lens_thickness_min']:g} (stamp {PAPER['thickness']:g})",
             "-",
         ]
     )
@@ -623,7 +618,9 @@ def rodlens_html(r: dict | None) -> str:
     ]
     best = min(
         rods,
-        key=lambda r: abs(math.log(r["light_vs_f10"] / stamp["light_vs_f10"] / PAPER_LIGHT_RATIO)),
+        key=lambda r: abs(
+            math.log(r["light_vs_f10"] / stamp["light_vs_f10"] * PAPER["vs_rod_lens"])
+        ),
     )
     fit = best["light_vs_f10"] / stamp["light_vs_f10"]
     return (
@@ -665,11 +662,6 @@ def _stack_html(rows: list[dict] | None) -> str:
     )
 
 
-def _ratio(v: float) -> str:
-    """A small ratio as 1/N (0.0379 -> "1/26")."""
-    return f"1/{1 / v:.0f}" if v > 0 else "0"
-
-
 def _summary_html(s: dict | None) -> str:
     """The verdict card at the top of the report."""
     if not s:
@@ -682,7 +674,7 @@ def _summary_html(s: dict | None) -> str:
             continue
         unit = f" {f['unit']}" if f["unit"] else ""
         ratio = f["figure"] in ("light", "vs_rod_lens")  # written as 1/N
-        shown = f"{'≥ ' if f['bound'] else ''}{_ratio(v) if ratio else _fmt(float(v))}{unit}"
+        shown = f"{'≥ ' if f['bound'] else ''}{one_in(v) if ratio else _fmt(float(v))}{unit}"
         c = f["check"]
         verdict = (
             "-"
@@ -694,7 +686,7 @@ def _summary_html(s: dict | None) -> str:
         row = [what, shown, verdict]
         if paper:
             p = f["paper"]
-            row.append("-" if p is None else (_ratio(p) if ratio else _fmt(p)))
+            row.append("-" if p is None else (one_in(p) if ratio else _fmt(p)))
         body.append(row)
     head = ["figure", "model", "spec"] + (["paper"] if paper else [])
     near = ", ".join(f"{v:.1f} mm at Z = {z} mm" for z, v in s["ghost_nearest_mm_by_z"].items())

@@ -10,22 +10,10 @@ the model is not tuned to the paper.
 from __future__ import annotations
 
 import math
-from types import MappingProxyType
 
 import numpy as np
 
-#: The paper's statements on its prototype used by the report's verdict (§4 measured depth
-#: of field, §5 light efficiency 1/36 and working F 60, module 5 mm thick, ~1/100 of a
-#: rod-lens array).
-PAPER = MappingProxyType(
-    {
-        "dof": 3.5,
-        "light": 1 / 36,
-        "f_number": 60.0,
-        "vs_rod_lens": 1 / 100,
-        "thickness": 5.0,
-    }
-)
+from .summary import PAPER, headline_figures
 
 
 def _interp(xs: list, ys: list, x: float) -> float | None:
@@ -60,17 +48,21 @@ def _row(
     }
 
 
+def one_in(v: float) -> str:
+    """A small ratio as 1/N (0.0379 -> "1/26")."""
+    return f"1/{1 / v:.0f}" if v > 0 else "0"
+
+
 def _text(fmt: str, v: float) -> str:
-    """``fmt`` applied to ``v``; ``"1/{:.0f}"`` writes the reciprocal (1/36)."""
-    if fmt.startswith("1/"):
-        return fmt.format(1 / v) if v > 0 else "0"
-    return fmt.format(v)
+    """``fmt`` applied to ``v``; ``"1/N"`` writes the ratio as :func:`one_in` does."""
+    return one_in(v) if fmt == "1/N" else fmt.format(v)
 
 
 def paper_vs_model(data: dict) -> list[dict]:
     """One row per statement of the paper that the report's numbers test (report.json's
     ``paper_vs_model``); a row whose figure the report did not compute says so."""
     rows = []
+    fig = headline_figures(data)
     diff = data.get("diffraction") or {}
     edge = diff.get("geometric_edge_um")
     outside = (diff.get("fraction_outside") or {}).get("0.4")
@@ -128,29 +120,27 @@ def paper_vs_model(data: dict) -> list[dict]:
             "the paper's detector size is unstated; ghost light lands further away",
         )
     )
-    r = data.get("rmtf") or {}
-    key = f"{r.get('dof_dpi', 200.0):g}"
-    dof = (r.get("dof_mm") or {}).get(key)
+    key = f"{data['rmtf']['dof_dpi']:g}"
     rows.append(
         _row(
             "§5, Fig. 11",
             f"depth of field, RMTF >= 0.3 at {key} dpi (measured)",
             PAPER["dof"],
-            dof,
+            fig["dof"],
             "mm",
             "{:.2f}",
             "unstated: hole shape and the light-guide gap (docs/metrics.md)",
         )
     )
-    eff = data.get("efficiency") or {}
+    eff = data["efficiency"]
     rows.append(
         _row(
             "§5, Fig. 13",
             "light vs the F/10 lens (own path)",
             PAPER["light"],
-            eff.get("ratio_own"),
+            fig["light"],
             "",
-            "1/{:.0f}",
+            "1/N",
             "1/36 with circular holes and Fresnel losses (docs/metrics.md)",
         )
     )
@@ -159,14 +149,12 @@ def paper_vs_model(data: dict) -> list[dict]:
             "§5, Fig. 13",
             "working F-number",
             PAPER["f_number"],
-            eff.get("working_f_number_own"),
+            fig["f_number"],
             "",
             "{:.0f}",
         )
     )
-    gains = [
-        a["gain_own_vs_design"] for a in eff.get("sensitive_area", []) if a["area_scale"] == 4.0
-    ]
+    gains = [a["gain_own_vs_design"] for a in eff["sensitive_area"] if a["area_scale"] == 4.0]
     rows.append(
         _row(
             "§5",
@@ -178,19 +166,15 @@ def paper_vs_model(data: dict) -> list[dict]:
             "the holes, not the pixel, limit the beam",
         )
     )
-    rod = data.get("rodlens") or {}
-    rod_rows = rod.get("rows") or []
-    vs_rod = (
-        rod_rows[0]["light_vs_f10"] / rod_rows[1]["light_vs_f10"] if len(rod_rows) > 1 else None
-    )
+    rod_rows = (data.get("rodlens") or {}).get("rows") or []
     rows.append(
         _row(
             "§4",
             "light vs a rod-lens array",
             PAPER["vs_rod_lens"],
-            vs_rod,
+            fig["vs_rod_lens"],
             "",
-            "1/{:.0f}",
+            "1/N",
             "against the 1-row 12-degree preset (docs/rodlens.md)",
         )
     )
@@ -198,20 +182,19 @@ def paper_vs_model(data: dict) -> list[dict]:
         _row(
             "§4",
             "a rod-lens array is at least 15 mm thick",
-            15.0,
+            PAPER["rod_lens_thickness_min"],
             rod_rows[1]["thickness_mm"] if len(rod_rows) > 1 else None,
             "mm",
             "{:.1f}",
             "sensor to document, no cover glass",
         )
     )
-    stack = data.get("stack") or []
     rows.append(
         _row(
             "§5",
             "module thickness",
             PAPER["thickness"],
-            stack[0]["z_top_um"] / 1000 if stack else None,
+            fig["thickness"],
             "mm",
             "{:.2f}",
             "the model: sensor to document reference, without a housing",
