@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from edges import assert_clean_refusal, run
-from opticalstamp.analysis.rmtf import depth_of_field, spurious_ranges
+from opticalstamp.analysis.rmtf import depth_of_field, rmtf, spurious_ranges
 from opticalstamp.design import design_toml, load_design, stack_params, with_stack
 from opticalstamp.report.build import (
     DEFAULT_TOLERANCE_SPEC,
@@ -107,7 +107,10 @@ def test_spurious_resolution_is_reported_not_counted():
     z = np.linspace(0, 5, 11)
     r = np.array([0.9, 0.8, 0.6, 0.4, 0.2, 0.05, 0.2, 0.35, 0.4, 0.31, 0.1])
     assert depth_of_field(z, r) == pytest.approx(1.5 + 0.5 * 0.1 / 0.2)
-    assert spurious_ranges(z, r) == [[3.5, 4.5]]
+    # the ends are the interpolated crossings: up between 3.0 and 3.5, down past 4.5
+    got = spurious_ranges(z, r)
+    assert got == [[pytest.approx(3.0 + 0.5 * 0.1 / 0.15), pytest.approx(4.5 + 0.5 * 0.01 / 0.21)]]
+    assert spurious_ranges(z[:-1], r[:-1]) == [[pytest.approx(3.0 + 0.5 * 0.1 / 0.15), 4.5]]
     assert spurious_ranges(z, np.linspace(1, 0.5, 11)) == []
 
 
@@ -203,3 +206,25 @@ def test_cli_report_refuses_bad_options(tmp_path):
     ):
         res = run([*args, "-o", str(tmp_path / "r")])
         assert_clean_refusal(res, (name,), tmp_path)
+
+
+@pytest.mark.parametrize("holes", [(48, 40, 40), (60, 48, 48), (70, 40, 40)])
+def test_crossings_refined_as_on_a_fine_grid(holes):
+    """The depth of field and the spurious ranges found on the 0.25 mm grid with the
+    refinement equal those on a grid 8 times finer (closed form: no noise), including a
+    spurious range (70/40/40, 300 dpi, threshold 0.1: 1.78-1.88 mm) narrower than the
+    grid step; without the refinement that range is missed."""
+    d = with_stack(load_design("paper2016"), holes_um=holes)
+    kw = {"method": "paraxial", "dpi": (150, 200, 247, 300), "dof_threshold": 0.1}
+    z = np.arange(0, 6.01, 0.25)
+    got = rmtf(d, z_mm=z, refine=8, **kw)
+    fine = rmtf(d, z_mm=np.arange(0, 6.001, 0.25 / 8), refine=0, **kw)
+    coarse = rmtf(d, z_mm=z, refine=0, **kw)
+    assert got.z_mm == coarse.z_mm and got.rmtf_max == coarse.rmtf_max  # the grid as given
+    for k in fine.dof_mm:
+        assert got.dof_mm[k] == pytest.approx(fine.dof_mm[k], abs=1e-9)
+        assert len(got.spurious_mm[k]) == len(fine.spurious_mm[k])
+        for a, b in zip(got.spurious_mm[k], fine.spurious_mm[k], strict=True):
+            assert a == pytest.approx(b, abs=1e-9)
+    if holes == (70, 40, 40):
+        assert fine.spurious_mm["300"] and not coarse.spurious_mm["300"]

@@ -175,3 +175,24 @@ def test_tolerance_dataset(paper):
     assert float(ds.yield_fraction) == before["yield"]
     assert ds.attrs["sigma_tilt_deg"] == 0.02 and ds.attrs["spec"] == "dof>=2"
     assert ds.attrs["estimator"] == r.meta["estimator"]
+
+
+def test_ghost_median_beyond_the_bins_is_a_lower_bound(paper):
+    """The median landing distance counts the overflow bin's light; where the median falls
+    in it (all ghost light beyond 34 mm at Z = 20 mm) it is the bins' end, flagged as a
+    lower bound, never a bin centre past the end."""
+    g = analyse_ghosts(paper, z_mm=(0.0, 4.0, 20.0), n_rays=1 << 18, seed=2)
+    ds = g.to_dataset()
+    end = ds.attrs["distance_overflow_um"]
+    for z, land in g.landing.items():
+        h = np.asarray(land["etendue_by_distance_um2sr"])
+        c = np.cumsum(h) / h.sum()
+        beyond = bool(c[-2] < 0.5)  # half the light or more lies beyond the regular bins
+        assert land["median_beyond"] is beyond
+        assert bool(ds.median_beyond.sel(z_mm=float(z))) is beyond
+        if beyond:
+            assert land["median_um"] == pytest.approx(end)
+        else:  # a regular bin's centre, where the cumulative share first reaches 1/2
+            i = int(np.searchsorted(c, 0.5))
+            assert land["median_um"] == pytest.approx((i + 0.5) * ds.attrs["bin_um"])
+    assert bool(ds.median_beyond.sel(z_mm=20.0)) and not bool(ds.median_beyond.sel(z_mm=0.0))

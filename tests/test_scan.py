@@ -67,8 +67,9 @@ def _electrons(r, st: SensorModel, row: int = 0) -> np.ndarray:
 
 def test_black_page_gives_zero_plus_expected_noise(paper):
     sm = SensorModel()
-    doc = np.zeros((400, 400))
-    r = simulate_scan(doc, 1200.0, paper, z_mm=1.0, seed=1, ghosts=False)
+    doc = np.zeros((400, 400))  # a black page with the lid open (a black surround)
+    st = ScanSettings(surround=0.0)
+    r = simulate_scan(doc, 1200.0, paper, z_mm=1.0, seed=1, ghosts=False, settings=st)
     assert abs(r.image.mean()) < 5e-4
     white_e = (r.white[0] - r.dark[0]).mean() * sm.gain_e_per_dn
     sigma_e = np.sqrt(sm.read_noise_e**2 + sm.dark_e + sm.gain_e_per_dn**2 / 12)

@@ -49,6 +49,8 @@ def test_chart_then_scan_writes_png_tiff_json(tmp_path):
         assert num / den == pytest.approx(25400 / 84.6, rel=1e-4)
     meta = json.loads((tmp_path / "s.json").read_text())
     assert meta["design"] == "paper2016" and meta["seed"] == 0 and "opticalstamp_version" in meta
+    # one default with the report: the page on a white surround (a scanner's lid)
+    assert meta["settings"]["surround"] == 1.0
 
 
 def test_measure_rmtf_on_a_scanned_tiff(tmp_path):

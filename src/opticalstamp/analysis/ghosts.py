@@ -80,7 +80,8 @@ class GhostResult:
         Variables: ``landing_um2sr`` (z_mm, distance_um), ghost etendue per distance bin
         from the pixel's axis; ``landing_overflow_um2sr`` (z_mm), the last bin of
         ``landing[z]["etendue_by_distance_um2sr"]``, which holds every distance beyond the
-        regular bins (>= ``distance_overflow_um``); ``nearest_um``, ``median_um``,
+        regular bins (>= ``distance_overflow_um``); ``nearest_um``, ``median_um`` (with
+        ``median_beyond`` where the median lies in the overflow bin and is its lower edge),
         ``within_detector_um2sr``, ``within_detector_se`` (z_mm); per path
         ``path_etendue_um2sr``, ``path_etendue_se``, ``path_share`` (of all ghost
         etendue), ``path_n_rays``, ``emission_angle_lo_deg``, ``emission_angle_hi_deg``,
@@ -122,7 +123,16 @@ class GhostResult:
                 um2sr | {"long_name": "ghost etendue landing at >= distance_overflow_um"},
             ),
             "nearest_um": ("z_mm", per_z("nearest_um"), um),
-            "median_um": ("z_mm", per_z("median_um"), um),
+            "median_um": (
+                "z_mm",
+                per_z("median_um"),
+                um | {"long_name": "median landing distance (a lower bound where median_beyond)"},
+            ),
+            "median_beyond": (
+                "z_mm",
+                np.array([bool(v.get("median_beyond", False)) for v in land], dtype=bool),
+                {"units": "1", "long_name": "median in the overflow bin: median_um its lower edge"},
+            ),
             "within_detector_um2sr": ("z_mm", per_z("within_detector_um2sr"), um2sr),
             "within_detector_se": ("z_mm", per_z("within_detector_se"), um2sr),
             "path_etendue_um2sr": ("path", per_path(lambda p: p.etendue_um2sr), um2sr),
@@ -344,11 +354,13 @@ def analyse_ghosts(
         e_in = estimate(inside[iz], inside2[iz], n)
         h = hist[iz] / n
         nz = np.flatnonzero(h)
+        median, beyond = _weighted_quantile(h, 0.5, bin_um)
         landing[_zkey(z)] = {
             "bin_um": bin_um,
             "etendue_by_distance_um2sr": h.tolist(),
             "nearest_um": _finite(nearest[iz].min(initial=np.inf)),
-            "median_um": _weighted_quantile(h, 0.5, bin_um),
+            "median_um": median,
+            "median_beyond": beyond,
             "within_detector_um2sr": e_in.value,
             "within_detector_se": e_in.se,
             "detector_half_um": detector_half_um,
@@ -398,13 +410,18 @@ def _ghost_estimate(sums: KeyedSums, own: int, n: int) -> Estimate:
     return estimate(float(sums.s1[keep].sum()), float(sums.s2[keep].sum()), n)
 
 
-def _weighted_quantile(h: np.ndarray, q: float, bin_um: float) -> float | None:
+def _weighted_quantile(h: np.ndarray, q: float, bin_um: float) -> tuple[float | None, bool]:
+    """The q-quantile of the landing distance (a bin centre) and whether it is only a
+    lower bound: where it falls in the last bin, the overflow, which holds every distance
+    beyond the regular bins, the quantile is that bin's lower edge, at least."""
     tot = h.sum()
     if tot <= 0:
-        return None
+        return None, False
     c = np.cumsum(h) / tot
     i = int(np.searchsorted(c, q))
-    return (i + 0.5) * bin_um
+    if i >= h.size - 1:  # in the overflow bin
+        return (h.size - 1) * bin_um, True
+    return (i + 0.5) * bin_um, False
 
 
 def _plane_names(path) -> list[str]:

@@ -17,7 +17,7 @@ each batch at the full estimate's best shift, their spread over sqrt(n_batches).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -150,15 +150,20 @@ def depth_of_field(z_mm: np.ndarray, rmtf: np.ndarray, threshold: float = DOF_TH
     below = np.flatnonzero(r < threshold)
     if below.size == 0:
         return float(z[-1])
-    i = below[0]
+    return _crossing(z, r, int(below[0]), threshold)
+
+
+def _crossing(z: np.ndarray, r: np.ndarray, i: int, threshold: float) -> float:
+    """Z where the RMTF crosses ``threshold`` between samples i - 1 and i (linear)."""
     return float(z[i - 1] + (r[i - 1] - threshold) / (r[i - 1] - r[i]) * (z[i] - z[i - 1]))
 
 
 def spurious_ranges(
     z_mm: np.ndarray, rmtf: np.ndarray, threshold: float = DOF_THRESHOLD
 ) -> list[list[float]]:
-    """Ranges [from, to] of Z (mm, sampled points) past the depth of field where the RMTF
-    is back at or above the threshold.
+    """Ranges [from, to] of Z (mm) past the depth of field where the RMTF is back at or
+    above the threshold; each end is the crossing interpolated linearly between samples
+    (the last Z where the RMTF is still over the threshold there).
 
     The RMTF (paper Eq. 1) is a modulation, blind to the sign of the contrast: past a zero
     of the transfer function the bars come back reversed (dark where the chart is light),
@@ -172,14 +177,62 @@ def spurious_ranges(
         return []
     out: list[list[float]] = []
     start = None
-    for i in range(int(below[0]), z.size):
+    for i in range(int(below[0]) + 1, z.size):
         if r[i] >= threshold and start is None:
-            start = float(z[i])
-        if start is not None and (r[i] < threshold or i == z.size - 1):
-            end = float(z[i - 1] if r[i] < threshold else z[i])
-            out.append([start, end])
+            start = _crossing(z, r, i, threshold)
+        if start is not None and r[i] < threshold:
+            out.append([start, _crossing(z, r, i, threshold)])
             start = None
+    if start is not None:
+        out.append([start, float(z[-1])])
     return out
+
+
+def crossing_brackets(results, steps: int = 8) -> np.ndarray:
+    """Z (mm) that resolve the threshold crossings of RMTF results finer: ``steps - 1``
+    points inside every grid interval where an RMTF curve crosses its threshold (the
+    depth of field, the ends of spurious ranges) and on both sides of every sampled
+    local maximum below the threshold past the first crossing (where a narrow spurious
+    range may hide between samples), over all charts of all ``results``. Empty where
+    nothing crosses. A range narrower than the grid step that leaves no local maximum
+    in the samples is still missed: a finer grid finds it."""
+    fine: set[float] = set()
+    for res in results:
+        z = np.asarray(res.z_mm, dtype=np.float64)
+        for curve in res.rmtf_max.values():
+            r = np.asarray(curve, dtype=np.float64)
+            above = r >= res.dof_threshold
+            cross = np.flatnonzero(above[1:] != above[:-1])
+            spans = [(i, i + 1) for i in cross]
+            if cross.size:
+                peak = np.flatnonzero((r[1:-1] >= r[:-2]) & (r[1:-1] >= r[2:]) & ~above[1:-1]) + 1
+                spans += [(i - 1, i + 1) for i in peak if i > cross[0]]
+            for a, b in spans:
+                grid = np.linspace(z[a], z[b], steps * (b - a) + 1)[1:-1]
+                fine.update(g for g in grid.round(9).tolist() if g not in set(z.tolist()))
+    return np.array(sorted(fine), dtype=np.float64)
+
+
+def refine_crossings(res: RMTFResult, fine_lsf: FoldedLSF, design: Design) -> RMTFResult:
+    """``res`` with its depth of field and spurious ranges taken from its curves merged
+    with the RMTF at ``fine_lsf``'s Z (the same periods, light and rays; from
+    :func:`crossing_brackets`): crossings interpolated over a finer step where the RMTF
+    changes fast. The curves on the grid stay as they were; the finer samples are kept
+    in ``meta["refined"]``."""
+    if fine_lsf.z_mm.size == 0:
+        return res
+    cur = rmtf_curves(fine_lsf, design, window_um=res.window_um, shift_step_um=res.shift_step_um)
+    z_all = np.concatenate([np.asarray(res.z_mm, dtype=np.float64), fine_lsf.z_mm])
+    order = np.argsort(z_all, kind="stable")
+    dof, spurious, refined = dict(res.dof_mm), dict(res.spurious_mm), {}
+    for i, key in enumerate(_key(d) for d in res.dpi):
+        r_all = np.concatenate([np.asarray(res.rmtf_max[key]), cur["max"][i]])[order]
+        if not res.dof_open_ended.get(key):
+            dof[key] = depth_of_field(z_all[order], r_all, res.dof_threshold)
+        spurious[key] = spurious_ranges(z_all[order], r_all, res.dof_threshold)
+        refined[key] = cur["max"][i].tolist()
+    meta = res.meta | {"refined": {"z_mm": fine_lsf.z_mm.tolist(), "rmtf_max": refined}}
+    return replace(res, dof_mm=dof, spurious_mm=spurious, meta=meta)
 
 
 @dataclass(frozen=True)
@@ -292,6 +345,7 @@ def rmtf(
     dof_dpi: float = DOF_DPI,
     progress: bool = False,
     tracer: PixelTracer | None = None,
+    refine: int = 8,
 ) -> RMTFResult:
     """RMTF of paper Eq. 1 for bar charts of the given dpi versus Z, and depth of field.
 
@@ -305,6 +359,9 @@ def rmtf(
     dof_threshold, dof_dpi : depth of field = largest Z with RMTF(dof_dpi) >= threshold
     tracer : a :class:`~opticalstamp.raytrace.pixel.PixelTracer` of this design whose
         pilot runs are reused (analyses of one report share one)
+    refine : the threshold crossings (depth of field, spurious ranges) are found again
+        with the RMTF at ``refine - 1`` more Z inside each grid interval where a curve
+        crosses (:func:`refine_crossings`; the same rays); 0 or 1: on the grid alone
     """
     dpis = [float(d) for d in dpi]
     if dof_dpi not in dpis:
@@ -316,10 +373,15 @@ def rmtf(
     periods = np.array([period_of_dpi(d) for d in dpis])
     zs = np.asarray(z_mm, dtype=np.float64)
     check_rmtf_memory(design, periods.max(), zs.size, window_um, shift_step_um)
-    if method == "trace":
-        lsf = traced_folded_lsf(
+    if method not in ("trace", "paraxial"):
+        raise ValueError(f"method must be 'trace' or 'paraxial' (got {method!r})")
+
+    def lsf_at(z: np.ndarray) -> FoldedLSF:
+        if method == "paraxial":
+            return paraxial_folded_lsf(design, z_mm=z, periods_um=periods)
+        return traced_folded_lsf(
             design,
-            z_mm=zs,
+            z_mm=z,
             periods_um=periods,
             n_rays=n_rays,
             seed=seed,
@@ -328,12 +390,9 @@ def rmtf(
             progress=progress,
             tracer=tracer,
         )
-    elif method == "paraxial":
-        lsf = paraxial_folded_lsf(design, z_mm=zs, periods_um=periods)
-    else:
-        raise ValueError(f"method must be 'trace' or 'paraxial' (got {method!r})")
-    return rmtf_from_lsf(
-        lsf,
+
+    res = rmtf_from_lsf(
+        lsf_at(zs),
         design,
         dpi=dpis,
         seed=seed,
@@ -342,6 +401,8 @@ def rmtf(
         dof_threshold=dof_threshold,
         dof_dpi=dof_dpi,
     )
+    fine = crossing_brackets([res], refine) if refine > 1 else np.zeros(0)
+    return refine_crossings(res, lsf_at(fine), design) if fine.size else res
 
 
 def rmtf_from_lsf(

@@ -177,8 +177,13 @@ def scan(
         ),
     ] = 0.0,
     surround: Annotated[
-        float, typer.Option(help="reflectance outside the page, 0 to 1", callback=number(0, 1))
-    ] = 0.0,
+        float,
+        typer.Option(
+            help="reflectance outside the page, 0 to 1 (1: white, a page under the lid, as "
+            "in the report; 0: an open lid)",
+            callback=number(0, 1),
+        ),
+    ] = 1.0,
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
 ) -> None:
@@ -332,15 +337,13 @@ def ocr_eval(
     from ..io.files import linear_to_srgb, provenance
 
     d = open_design(design, kinds=BOTH_KINDS)
-    settings = None  # an image: as `scan` scans it
+    # as `scan` scans it: the design's electronics, a white surround as in the report
+    settings = ScanSettings(sensor=d.electronics)
     if image is None:
         for name, given in (("--text", text), ("--dpi", dpi)):
             if given is not None:
                 fail(f"{name}: goes with IMAGE (without IMAGE the built-in text charts are read)")
         sizes, faces = _ocr_charts(points, face)
-        # the chart printed on a larger white page, as in the report: a dark surround's
-        # edge is read as stray characters ('|', '_') that are no loss of sharpness
-        settings = ScanSettings(surround=1.0)
     else:
         for name, given in (("--points", points), ("--face", face)):
             if given is not None:

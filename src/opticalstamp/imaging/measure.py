@@ -40,6 +40,7 @@ def measure_rmtf(
     rows: tuple[int, int] | None = None,
     min_periods: int = 3,
     tolerance: float = 0.2,
+    min_contrast: float = 1e-4,
 ) -> list[dict]:
     """Find the bar blocks of a chart image and measure RMTF = (Imax-Imin)/(Imax+Imin).
 
@@ -50,7 +51,9 @@ def measure_rmtf(
     (within ``tolerance``, at least 1.5 px) form a block. Imax and Imin are the maximum
     and minimum of the profile inside the block, leaving out its first and last bar
     (edge effects), as the paper does for Fig. 12; ``rmtf_bar_mean`` uses the mean of
-    the per-bar extremes instead.
+    the per-bar extremes instead. Crossings where the local envelope's contrast
+    (max - min)/(max + min) is below ``min_contrast`` are ripple on a flat field (a white
+    margin's rounding), not bars, and are left out.
 
     Returns one dict per block: period_um, dpi (one bar = one dot), start_px, stop_px,
     n_periods, imax, imin, rmtf, rmtf_bar_mean.
@@ -64,6 +67,8 @@ def measure_rmtf(
     lo = ndimage.minimum_filter1d(p, win, mode="nearest")
     mid = ndimage.uniform_filter1d((hi + lo) / 2, win, mode="nearest")
     c = _crossings(p, mid)
+    env = (hi - lo)[c.astype(int)]
+    c = c[env > min_contrast * np.maximum((hi + lo)[c.astype(int)], 1e-300)]
     # group by full periods (white + black run: immune to a threshold's duty-cycle bias)
     per = c[2:] - c[:-2]
     blocks, start = [], 0

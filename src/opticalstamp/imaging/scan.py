@@ -54,7 +54,8 @@ class ScanSettings(BaseModel):
     illumination_profile: tuple[tuple[float, float], ...] | None = None  # (x_mm, rel)
     speed_error: float = Field(0.0, gt=-0.5, lt=0.5)  # relative scan-speed error
     speed_jitter: float = Field(0.0, ge=0, lt=0.5)  # relative rms per line
-    surround: float = Field(0.0, ge=0, le=1)  # reflectance outside the document
+    # reflectance outside the document: white, a page under a scanner lid (0: an open lid)
+    surround: float = Field(1.0, ge=0, le=1)
     z_step_mm: float = Field(0.25, gt=0, le=2)
     calibration_z_mm: float = Field(0.0, ge=0, le=10)
     calibration_lines: int = Field(32, ge=1, le=4096)

@@ -457,7 +457,9 @@ def _quality(
         DEFAULT_Z_MM,
         PAPER_DPI,
         chart_waveform,
+        crossing_brackets,
         period_of_dpi,
+        refine_crossings,
         rmtf,
         rmtf_from_lsf,
     )
@@ -479,6 +481,19 @@ def _quality(
     )
     res = rmtf_from_lsf(lsf, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
     own = rmtf_from_lsf(lsf_own, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
+    fine = crossing_brackets([res, own])  # the crossings again on a finer Z step
+    if fine.size:
+        fine_lsf, fine_own = traced_folded_lsf_pair(
+            design,
+            z_mm=fine,
+            periods_um=periods,
+            n_rays=work.lsf_rays,
+            seed=seed,
+            fresnel=fresnel,
+            tracer=tracer,
+        )
+        res = refine_crossings(res, fine_lsf, design)
+        own = refine_crossings(own, fine_own, design)
     rect = all(m.shape != "circle" for m in design.masks)
     par = rmtf(design, dpi=dpis, z_mm=zs, method="paraxial", dof_dpi=dof_dpi) if rect else own
     # Fig. 12 analogue: the merged line's waveform for the 200-dpi chart at 0.5 and 3.5 mm,

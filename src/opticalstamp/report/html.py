@@ -185,7 +185,12 @@ def page(design: Design, d: dict) -> str:
         for p in g["paths"][:15]
     ]
     land_rows = [
-        [z, v["nearest_um"], v["median_um"], v["within_detector_um2sr"]]
+        [
+            z,
+            v["nearest_um"],
+            f"≥ {v['median_um']:.0f}" if v.get("median_beyond") else v["median_um"],
+            v["within_detector_um2sr"],
+        ]
         for z, v in g["landing"].items()
     ]
     spot_rows = [

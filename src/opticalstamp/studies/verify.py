@@ -20,7 +20,7 @@ import numpy as np
 
 from ..analysis.efficiency import reference_etendue
 from ..analysis.ghosts import analyse_ghosts
-from ..analysis.rmtf import DEFAULT_Z_MM, depth_of_field, rmtf
+from ..analysis.rmtf import DEFAULT_Z_MM, rmtf
 from ..design import Design
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import output_pitch
@@ -103,7 +103,7 @@ def exact_figures(
         "ghost_fraction": g.ghost_fraction,
         "efficiency_ratio": own / ref,
         "efficiency_ratio_total": (own + ghost) / ref,
-        "dof_mm": depth_of_field(zs, curve, dof_threshold),
+        "dof_mm": r.dof_mm[key],  # the crossing on a finer step (rmtf's refinement)
         "dof_open_ended": bool(curve.min() >= dof_threshold),
         "rmtf_at": {f"{z:g}": float(np.interp(z, zs, curve)) for z in rmtf_z_mm},
         "rmtf_se_max": float(max(r.rmtf_max_se[key])),
