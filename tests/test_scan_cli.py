@@ -205,3 +205,18 @@ def test_user_illumination_profile_is_corrected_by_shading(tmp_path):
     a = tifffile.imread(tmp_path / "a.tif").astype(float)
     b = tifffile.imread(tmp_path / "b.tif").astype(float)
     assert np.abs(a - b).max() <= 2  # 16-bit rounding
+
+
+def test_chart_text_of_any_size_and_face(tmp_path):
+    """`chart text --points 2.5 --face serif` writes the chart ocr-eval reads at that size
+    (the same pixels as text_chart) and its ground truth beside it."""
+    from opticalstamp.imaging.charts import text_chart
+
+    _ok(_run("chart", "text", "-o", tmp_path / "t.png", "--points", "2.5", "--face", "serif"))
+    want, truth = text_chart(1200.0, 2.5, face="serif")
+    with Image.open(tmp_path / "t.png") as im:
+        got = np.asarray(im)
+    assert got.shape == want.shape and (tmp_path / "t.txt").read_text() == truth + "\n"
+    _ok(_run("chart", "text", "-o", tmp_path / "t8.png"))
+    with Image.open(tmp_path / "t8.png") as im:
+        assert im.size[0] > 2 * got.shape[1]  # 8-pt sans by default: a larger chart

@@ -269,14 +269,34 @@ def chart(
     dpi: Annotated[
         float, typer.Option(help="resolution of the chart, 100 to 4800", callback=number(100, 4800))
     ] = 1200.0,
+    points: Annotated[
+        float | None,
+        typer.Option(
+            help="text size (pt) of the text chart, 1 to 24 (default 8; 2.5 shows the "
+            "prototype's depth of field)",
+            callback=number(1, 24),
+        ),
+    ] = None,
+    face: Annotated[
+        str | None,
+        typer.Option(help="type face of the text chart: sans (default) or serif (DejaVu Serif)"),
+    ] = None,
 ) -> None:
-    """Write a built-in test chart (bar charts, slanted edge, 8-pt text, fine lines)."""
+    """Write a built-in test chart (bar charts, slanted edge, text, fine lines); the text
+    chart's ground truth goes beside it as .txt."""
     from ..imaging.charts import KINDS, make_chart
     from ..io.files import write_atomic, write_png
 
     if kind not in KINDS:
         fail(f"KIND: must be one of {', '.join(KINDS)} (got {kind!r})")
-    img, text = make_chart(kind, dpi)
+    if kind != "text":
+        for name, given in (("--points", points), ("--face", face)):
+            if given is not None:
+                fail(f"{name}: for the text chart only (got KIND {kind!r})")
+    sizes, faces = _ocr_charts(f"{points if points is not None else 8.0:g}", face or "sans")
+    if len(faces) != 1:
+        fail(f"--face: one face for a chart (got {face!r})")
+    img, text = make_chart(kind, dpi, sizes[0], faces[0])
     write_png(output, img, dpi)
     if text is not None:
         write_atomic(output.with_suffix(".txt"), text + "\n")

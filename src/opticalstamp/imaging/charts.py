@@ -175,14 +175,16 @@ def line_chart(
     return img
 
 
-def make_chart(kind: str, dpi: float = 1200.0) -> tuple[np.ndarray, str | None]:
-    """A chart by name, with the ground-truth text for ``text``."""
+def make_chart(
+    kind: str, dpi: float = 1200.0, points: float = 8.0, face: str = "sans"
+) -> tuple[np.ndarray, str | None]:
+    """A chart by name, with the ground-truth text for ``text`` (of ``points`` in ``face``)."""
     if kind == "bars":
         return bar_chart(dpi), None
     if kind == "edge":
         return edge_chart(dpi), None
     if kind == "text":
-        return text_chart(dpi)
+        return text_chart(dpi, points, face=face)
     if kind == "lines":
         return line_chart(dpi), None
     raise ValueError(f"chart kind must be one of {', '.join(KINDS)} (got {kind!r})")
