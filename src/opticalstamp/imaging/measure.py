@@ -26,6 +26,30 @@ def _profile(image: np.ndarray, axis: int, rows: tuple[int, int] | None) -> np.n
     return img[r0:r1].mean(axis=0)
 
 
+def _rows(image: np.ndarray, axis: int, rows: tuple[int, int] | None) -> np.ndarray:
+    """The rows that :func:`_profile` averages, as [row, position]."""
+    img = np.asarray(image, dtype=np.float64)
+    img = img.T if axis == 1 else img
+    r0, r1 = rows if rows is not None else (img.shape[0] // 4, max(img.shape[0] * 3 // 4, 1))
+    return img[r0:r1]
+
+
+def _fundamental(
+    p: np.ndarray, rows: np.ndarray, a: float, b: float, period_px: float
+) -> tuple[float, float]:
+    """Amplitude of the fundamental fitted over [a, b] of profile ``p`` and the contrast
+    to noise 2 amplitude / sigma, sigma the rms along the bars (inf where there is no
+    noise)."""
+    i = np.arange(int(np.ceil(a)), int(np.floor(b)) + 1)
+    i = i[(i >= 0) & (i < p.size)]
+    ph = 2 * np.pi * i / period_px
+    m = np.column_stack([np.cos(ph), np.sin(ph), np.ones_like(ph)])
+    coef = np.linalg.lstsq(m, p[i], rcond=None)[0]
+    amp = float(np.hypot(coef[0], coef[1]))
+    sigma = float(rows[:, i].std(axis=0, ddof=1).mean()) if rows.shape[0] > 1 else 0.0
+    return amp, (2 * amp / sigma if sigma > 0 else float("inf"))
+
+
 def _crossings(p: np.ndarray, mid: np.ndarray) -> np.ndarray:
     d = p - mid
     i = np.flatnonzero(np.signbit(d[:-1]) != np.signbit(d[1:]))
@@ -55,12 +79,22 @@ def measure_rmtf(
     (max - min)/(max + min) is below ``min_contrast`` are ripple on a flat field (a white
     margin's rounding), not bars, and are left out.
 
+    Measures that restoration cannot fool (an RMTF pinned at 1 by overshoot clipped to
+    [0, 1] can): ``amplitude``, the fundamental's amplitude fitted (least squares, a cos
+    + b sin + c at the block's period) over the block's interior; ``amplitude_rel``, the
+    same over the ideal's, 2/pi, the fundamental of black 0 and white 1 bars (what a
+    perfect scanner band-limited to the image's grid reads); ``cnr``, contrast to noise,
+    2 amplitude over the noise (the standard deviation along the bars, which are
+    constant along them; the mean over the block's columns); ``overshoot``, how far the
+    profile goes above white (1) or below black (0).
+
     Returns one dict per block: period_um, dpi (one bar = one dot), start_px, stop_px,
-    n_periods, imax, imin, rmtf, rmtf_bar_mean.
+    n_periods, imax, imin, rmtf, rmtf_bar_mean, amplitude, amplitude_rel, cnr, overshoot.
     """
     if not dpi or dpi <= 0:
         raise ValueError(f"dpi must be > 0 (got {dpi})")
     p = _profile(image, axis, rows)
+    block2d = _rows(image, axis, rows)
     px_um = pitch_of_dpi(dpi)
     win = max(3, int(round(ENVELOPE_UM / px_um)))
     hi = ndimage.maximum_filter1d(p, win, mode="nearest")
@@ -97,6 +131,8 @@ def measure_rmtf(
         bm_hi = float(np.mean(ext_hi)) if ext_hi else imax
         bm_lo = float(np.mean(ext_lo)) if ext_lo else imin
         period = period_px * px_um
+        fit = _fundamental(p, block2d, a, b, period_px)
+        ideal = 2 / np.pi  # the band-limited chart's fundamental (black 0, white 1)
         out.append(
             {
                 "period_um": period,
@@ -108,6 +144,10 @@ def measure_rmtf(
                 "imin": imin,
                 "rmtf": (imax - imin) / (imax + imin) if imax + imin > 0 else 0.0,
                 "rmtf_bar_mean": (bm_hi - bm_lo) / (bm_hi + bm_lo) if bm_hi + bm_lo > 0 else 0.0,
+                "amplitude": fit[0],
+                "amplitude_rel": fit[0] / ideal,
+                "cnr": fit[1],
+                "overshoot": max(imax - 1.0, -imin, 0.0),
             }
         )
     return out
