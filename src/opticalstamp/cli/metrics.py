@@ -276,7 +276,7 @@ def diffraction(
         save_plot(plot_diffraction(r), plot)
 
 
-def _image(path: Path, dpi: float | None, linear: bool | None, min_px: int = 8):
+def read_scan_image(path: Path, dpi: float | None, linear: bool | None, min_px: int = 8):
     """An image checked from its header (``min_px`` pixels a side at least) and read,
     decoded to linear values as its file says (``linear`` None) or as the user says."""
     from ..io.files import ImageError, image_encoding, read_image
@@ -330,7 +330,7 @@ def measure_rmtf(
 
     if axis not in ("x", "y"):
         fail(f"--axis: must be x or y (got {axis!r})")
-    img, use = _image(image, dpi, linear)
+    img, use = read_scan_image(image, dpi, linear)
     blocks = run(img, use, axis="xy".index(axis))
     if not blocks:
         fail(f"{image}: no bar blocks found (need >= 3 periods of equal bars along {axis})")
@@ -359,7 +359,7 @@ def sfr(
     """Slanted-edge SFR (ISO 12233 e-SFR) of an image: curve, MTF50, 100/200-dpi values."""
     from ..imaging.measure import sfr as run
 
-    img, use = _image(image, dpi, linear, min_px=16)
+    img, use = read_scan_image(image, dpi, linear, min_px=16)
     if roi:
         box = float_list(roi, "--roi", 0, 1e6)
         if len(box) != 4:

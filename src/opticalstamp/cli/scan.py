@@ -185,6 +185,13 @@ def scan(
         ),
     ] = 1.0,
     fresnel: FresnelOpt = False,
+    restore: Annotated[
+        str | None,
+        typer.Option(
+            help="also restore the scan: wiener, rl or tv (written as NAME-restored.png, "
+            ".tif, .json)"
+        ),
+    ] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Simulate the scanner's output for a document at a float height (paper Figs. 8, 9),
@@ -195,6 +202,15 @@ def scan(
     from ..io.files import encode_png, encode_tiff16, provenance, to_json, write_set
 
     png, tif, sidecar = _scan_outputs(output)
+    if restore is not None:
+        from ..imaging.restore import METHODS
+
+        if restore not in METHODS:
+            fail(f"--restore: must be one of {', '.join(METHODS)} (got {restore!r})")
+        if color:
+            fail("--restore: restoration takes a grey scan (not with --color)")
+        restored_out = output.with_name(output.stem + "-restored" + output.suffix)
+        _scan_outputs(restored_out)
     d = open_design(design, kinds=BOTH_KINDS)
     st = _settings(
         illumination,
@@ -230,6 +246,7 @@ def scan(
         "output_dpi": r.dpi,
         "settings": r.meta["settings"],
         "height_map_spec": height_map,
+        "design_source": design,
     }
     write_set(
         {
@@ -244,6 +261,21 @@ def scan(
         f"{r.image.shape[1]} x {r.image.shape[0]} pixels at {r.dpi:.1f} dpi",
         err=True,
     )
+    if restore is not None:
+        from .restore import restore_and_write
+
+        meta["restored"] = restore_and_write(
+            r.image,
+            r.dpi,
+            d,
+            z=z,
+            hm=hm,
+            method=restore,
+            settings=st,
+            seed=seed,
+            output=restored_out,
+            extra={"input": str(png), "design_source": design, "height_map_spec": height_map},
+        )["restoration"]
     sg = r.meta["signal"]
     lines = [
         f"signal: {sg['electrons_white']:,.0f} e- at white ({sg['full_well_fraction_white']:.0%} "

@@ -95,12 +95,12 @@ class OutputKernel:
         (cycles per output pixel), normalised to 1 at zero frequency: the optics' MTF
         with its sign, sampled by the output cell."""
         hy, hx = self.own.shape[1] // 2, self.own.shape[2] // 2
-        a = np.arange(-hy, hy + 1)[:, None]
-        b = np.arange(-hx, hx + 1)[None, :]
         k = self.own.mean(axis=0)
-        nu_x = np.asarray(nu_x, dtype=np.float64)
-        ph = np.exp(-2j * np.pi * (np.multiply.outer(nu_x, b) + np.asarray(nu_y) * a[..., None]))
-        return (k * ph).sum(axis=(-2, -1)).real / k.sum()
+        nu = np.atleast_1d(np.asarray(nu_x, dtype=np.float64))
+        ph_x = np.exp(-2j * np.pi * np.outer(nu, np.arange(-hx, hx + 1)))
+        ph_y = np.exp(-2j * np.pi * float(nu_y) * np.arange(-hy, hy + 1))
+        t = np.einsum("ab,a,nb->n", k, ph_y, ph_x).real / k.sum()
+        return t if np.ndim(nu_x) else t[0]
 
 
 def _phase_and_offset(x_pix: np.ndarray, p: float, n_phases: int) -> tuple[int, float]:

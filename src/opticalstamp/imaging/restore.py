@@ -36,8 +36,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import fft as sfft
 
-from ..imaging.sensor import SensorModel
-from .outputkernel import OutputKernel, ghost_background
+from ..design import Design
+from .heightmap import Z_RANGE_MM
+from .heightmap import sample as sample_height
+from .outputkernel import OutputKernel, ghost_background, output_kernel
+from .scan import ScanSettings, prepare_kernels, scan_levels, scan_pitch
+from .sensor import SensorModel
 
 METHODS = ("wiener", "rl", "tv")
 #: rms error of the output-grid model on text (docs/restore.md: the page's detail finer
@@ -207,6 +211,16 @@ def _crop(a: np.ndarray, grid: Grid) -> np.ndarray:
     return a[grid.py : grid.py + grid.h, grid.px : grid.px + grid.w]
 
 
+def blur(page: np.ndarray, ok: OutputKernel) -> np.ndarray:
+    """The forward model's own-path blur A f of a page on the output grid (reflect-padded
+    at the edges; no ghost light, no noise): what :func:`restore` inverts."""
+    f = np.asarray(page, dtype=np.float64)
+    grid = _grid(f.shape, ok)
+    b = _polyphase(_kernel_ft(ok, grid))
+    out = sfft.ifft2(_apply(b, sfft.fft2(_pad(f, grid), workers=-1)), workers=-1).real
+    return _crop(out, grid)
+
+
 def prior_spectrum(grid: Grid, variance: float = PRIOR_VARIANCE, corner: float = PRIOR_CORNER):
     """S(nu) = c / (|nu|^2 + nu0^2), per pixel, c such that its mean over the DFT grid
     (the variance of a page of this prior) is ``variance``."""
@@ -332,3 +346,104 @@ def _tv_admm(
         uy += gy - zy
         ux += gx - zx
     return sfft.ifft2(f_ft, workers=-1).real
+
+
+def restore_scan(
+    image: np.ndarray,
+    design: Design,
+    *,
+    z_mm: float | None = None,
+    height_map: np.ndarray | None = None,
+    method: str = "wiener",
+    settings: ScanSettings | None = None,
+    seed: int = 0,
+    model_error: float = MODEL_ERROR,
+    iterations: int | None = None,
+    ghosts: bool = True,
+) -> Restored:
+    """Restore a grey scan of ``design`` (shading corrected, white = 1) made at the float
+    height ``z_mm`` or over ``height_map`` (mm, any resolution, covering the scan), with
+    the kernels :func:`~opticalstamp.imaging.scan.simulate_scan` uses for ``settings`` and
+    ``seed``; the noise from the settings' sensor and ``model_error``.
+
+    A height map: the scan is restored with the kernels of every level (``settings``'
+    Z step) and each pixel takes the restorations of the two levels around its height,
+    weighted linearly, as the scan simulation blends its kernels (a spatially varying
+    kernel, piecewise).
+    """
+    st = settings or ScanSettings()
+    g = np.asarray(image, dtype=np.float64)
+    if g.ndim != 2 or min(g.shape) < 4:
+        raise ValueError(
+            f"image: must be a 2-D grey scan, 4 pixels a side at least (got {g.shape})"
+        )
+    if (z_mm is None) == (height_map is None):
+        raise ValueError("z_mm: give a float height or a height map (one of them)")
+    if z_mm is not None and not Z_RANGE_MM[0] <= z_mm <= Z_RANGE_MM[1]:
+        raise ValueError(
+            f"z_mm: must lie in {list(Z_RANGE_MM)} mm, the kernels' range (got {z_mm})"
+        )
+    if height_map is not None:
+        hm = np.asarray(height_map, dtype=np.float64)
+        if not np.all(np.isfinite(hm)) or hm.min() < Z_RANGE_MM[0] or hm.max() > Z_RANGE_MM[1]:
+            raise ValueError(f"height_map: heights must be finite and lie in {list(Z_RANGE_MM)} mm")
+    levels = scan_levels(z_mm, height_map, st.z_step_mm)
+    cache = prepare_kernels(
+        design,
+        z_mm=[z_mm] if z_mm is not None else [],
+        height_maps=[height_map] if height_map is not None else [],
+        settings=st,
+        seed=seed,
+        ghosts=ghosts,
+    )
+    kern = cache.lookup(
+        design,
+        levels,
+        source=st.kernel,
+        ghosts=ghosts,
+        n_rays=st.kernel_rays,
+        seed=seed,
+        fresnel=st.fresnel,
+    )
+    out = np.zeros_like(g)
+    metas = []
+    if height_map is not None:
+        p = scan_pitch(design)
+        h_mm, w_mm = g.shape[0] * p / 1000, g.shape[1] * p / 1000
+        centres_y = (np.arange(g.shape[0]) + 0.5) * p
+        centres_x = (np.arange(g.shape[1]) + 0.5) * p
+        z_loc = sample_height(hm, h_mm, w_mm, centres_y, centres_x)
+    for il, zl in enumerate(levels):
+        ok = output_kernel(
+            design, zl, settings=st, seed=seed, ghosts=ghosts, kernels=[[row[il]] for row in kern]
+        )
+        sigma = noise_sigma(st.sensor, ok.white, model_error)
+        if height_map is None:
+            wts = None
+        else:
+            wts = np.clip(1 - np.abs(z_loc - zl) / st.z_step_mm, 0, 1)
+            if not wts.any():
+                continue
+        r = restore(
+            g,
+            ok,
+            method=method,
+            sigma=sigma,
+            iterations=iterations,
+            surround=st.surround,
+        )
+        out += r.image if wts is None else r.image * wts
+        metas.append(r.meta)
+    meta = dict(metas[0]) | {
+        "z_mm": z_mm,
+        "height_map": height_map is not None,
+        "levels_mm": levels,
+        "model_error": model_error,
+        "seed": seed,
+        "design": design.name,
+        "design_fingerprint": design.fingerprint(),
+        "settings": st.model_dump(mode="json"),
+    }
+    return Restored(
+        out, method, float("nan") if z_mm is None else float(z_mm), metas[0]["sigma"], meta
+    )
