@@ -170,14 +170,33 @@ def _normal(b: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a, n
 
 
-def _solve(b: np.ndarray, d: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """(A^H A + diag(d)) F = rhs, group by group of R coupled frequencies."""
+def _solver(b: np.ndarray, d: np.ndarray):
+    """rhs -> F solving (A^H A + diag(d)) F = rhs, group by group of R coupled
+    frequencies; the groups' inverses are formed once (closed form for R = 2)."""
     r_ = b.shape[0]
     if r_ == 1:
-        return rhs / (np.abs(b[0]) ** 2 + d)
+        inv = 1.0 / (np.abs(b[0]) ** 2 + d)
+        return lambda rhs: rhs * inv
     _, n = _normal(b, d)
-    x = np.linalg.solve(n, _groups(rhs, r_)[..., None])[..., 0]
-    return _ungroup(x)
+    if r_ == 2:
+        det = n[..., 0, 0] * n[..., 1, 1] - n[..., 0, 1] * n[..., 1, 0]
+        i00, i01 = n[..., 1, 1] / det, -n[..., 0, 1] / det
+        i10, i11 = -n[..., 1, 0] / det, n[..., 0, 0] / det
+
+        def solve2(rhs: np.ndarray) -> np.ndarray:
+            g = _groups(rhs, 2)
+            x0 = i00 * g[..., 0] + i01 * g[..., 1]
+            x1 = i10 * g[..., 0] + i11 * g[..., 1]
+            return _ungroup(np.stack([x0, x1], axis=-1))
+
+        return solve2
+    inv = np.linalg.inv(n)
+    return lambda rhs: _ungroup(np.einsum("ykab,ykb->yka", inv, _groups(rhs, r_)))
+
+
+def _solve(b: np.ndarray, d: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """(A^H A + diag(d)) F = rhs (see :func:`_solver`)."""
+    return _solver(b, d)(rhs)
 
 
 def wiener_noise_gain(
@@ -327,7 +346,8 @@ def _tv_admm(
     dy, dx = _grad_ft(grid)
     d = rho * (np.abs(dy) ** 2 + np.abs(dx) ** 2)
     ahg = _apply_h(b, sfft.fft2(g, workers=-1))
-    f_ft = _solve(b, d + 1e-9, ahg)
+    solve = _solver(b, d + 1e-9)
+    f_ft = solve(ahg)
     zy = sfft.ifft2(dy * f_ft, workers=-1).real
     zx = sfft.ifft2(dx * f_ft, workers=-1).real
     uy, ux = np.zeros_like(zy), np.zeros_like(zx)
@@ -336,7 +356,7 @@ def _tv_admm(
             np.conj(dy) * sfft.fft2(zy - uy, workers=-1)
             + np.conj(dx) * sfft.fft2(zx - ux, workers=-1)
         )
-        f_ft = _solve(b, d + 1e-9, rhs)
+        f_ft = solve(rhs)
         gy = sfft.ifft2(dy * f_ft, workers=-1).real
         gx = sfft.ifft2(dx * f_ft, workers=-1).real
         vy_, vx_ = gy + uy, gx + ux
