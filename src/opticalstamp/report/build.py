@@ -298,6 +298,9 @@ def build_report(
                 own_lsf=quality.pop("lsf_own"),
             )
         clock.lap("scans")
+        with background.cores():
+            restoration = _restoration(design, work, seed=seed, fresnel=fresnel, tracer=tracer)
+        clock.lap("restoration")
         figures = {
             "stack.png": plot_stack(design),
             "ghosts.png": plotting.plot_ghosts(g),
@@ -320,6 +323,12 @@ def build_report(
             ),
             "scan_tilt.png": plotting.plot_scan_panels(
                 scans.pop("tilt_panels"), "text on a page tilted from 0 to 4 mm"
+            ),
+            "restore_curves.png": plotting.plot_restoration(restoration["study"]),
+            "restore_text.png": plotting.plot_scan_panels(
+                restoration.pop("panels"),
+                f"{restoration['panel_points']:g}-pt text, scanned and restored (crops)",
+                cols=restoration["panel_cols"],
             ),
         }
         for name, fig in figures.items():  # while the studies run on
@@ -378,6 +387,7 @@ def build_report(
             "diffraction": quality["slit_result"].to_dict() | {"budget": quality["budget"]},
             "parameter_study": st.to_dict() if st is not None else None,
             "scans": scans,
+            "restoration": restoration,
             "search": sr.to_dict() if sr is not None else None,
             "tolerance": tr.to_dict() if tr is not None else None,
             "rodlens": rodlens,
@@ -668,6 +678,86 @@ def _scans(
         + ("" if work.ocr else f"; {dpi:g}-dpi charts, no OCR (quick report)")
     )
     return res
+
+
+def _restoration(
+    design: Design, work: Work, *, seed: int, fresnel: bool, tracer: PixelTracer
+) -> dict:
+    """Restoration with the known blur (issue 13): the study against height, text crops
+    raw and restored, OCR of small text before and after."""
+    import numpy as np
+
+    from ..imaging.charts import text_chart
+    from ..imaging.ocr import OCRUnavailable, character_error_rate, recognise, tesseract_available
+    from ..imaging.outputkernel import output_kernel
+    from ..imaging.restore import METHODS, MODEL_ERROR, noise_sigma, restore
+    from ..imaging.scan import ScanSettings, prepare_kernels, simulate_scan
+    from ..io.files import linear_to_srgb
+    from ..studies.restoration import STUDY_Z_MM, restoration_study
+
+    page = ScanSettings(
+        surround=1.0, fresnel=fresnel, kernel_rays=work.kernel_rays, sensor=design.electronics
+    )
+    quick = not work.studies
+    methods = ("wiener",) if quick else METHODS
+    study = restoration_study(
+        design,
+        z_mm=(1.5, 3.0, 4.5) if quick else STUDY_Z_MM,
+        methods=methods,
+        settings=page,
+        seed=seed,
+        tracer=tracer,
+    )
+    dpi = work.scan_dpi
+    panel_z = (2.5, 3.5, 4.5)
+    # OCR where it tells: 2.5-pt text past the depth of field, 6-pt text at the end
+    reads = ((2.5, 3.5), (2.5, 4.5), (6.0, 4.5)) if work.ocr and tesseract_available() else ()
+    kernels = prepare_kernels(design, z_mm=panel_z, settings=page, seed=seed, tracer=tracer)
+    ocr_methods = ("wiener",) if quick else ("wiener", "tv")
+    panels, ocr = [], []
+    charts = {p: text_chart(dpi, p) for p in dict.fromkeys((6.0,) + tuple(p for p, _ in reads))}
+
+    def restored(img, z, methods, region=None):
+        ok = output_kernel(design, z, settings=page, seed=seed, kernels=kernels)
+        sigma = noise_sigma(page.sensor, ok.white, MODEL_ERROR)
+        part = img if region is None else img[region]
+        out = {"raw": part}
+        for m in methods:
+            out[m] = restore(part, ok, method=m, sigma=sigma, surround=1.0).image
+        return out
+
+    for z in panel_z:
+        r = simulate_scan(
+            charts[6.0][0], dpi, design, z_mm=z, seed=seed, settings=page, kernels=kernels
+        )
+        h, w = r.image.shape
+        crop = (slice(h // 8, h // 8 + max(h // 3, 8)), slice(w // 20, w // 20 + w // 3))
+        m = 48  # restore the crop with a margin of context, then cut the margin off
+        region = tuple(slice(max(c.start - m, 0), c.stop + m) for c in crop)
+        inner = tuple(
+            slice(c.start - rg.start, c.stop - rg.start) for c, rg in zip(crop, region, strict=True)
+        )
+        for name, img in restored(r.image, z, methods, region).items():
+            panels.append((f"{name}, Z = {z:g} mm", np.clip(img[inner], 0, 1)))
+    for points, z in reads:
+        doc, truth = charts[points]
+        r = simulate_scan(doc, dpi, design, z_mm=z, seed=seed, settings=page, kernels=kernels)
+        for name, img in restored(r.image, z, ocr_methods).items():
+            try:
+                got = recognise(linear_to_srgb(np.clip(img, 0, 1)), r.dpi)
+            except OCRUnavailable:
+                continue
+            cer = character_error_rate(truth, got)
+            ocr.append({"points": points, "z_mm": z, "version": name, "cer": cer})
+    return {
+        "study": study,
+        "panels": panels,
+        "panel_cols": 1 + len(methods),
+        "panel_points": 6.0,
+        "ocr": ocr,
+        "settings": "the design's electronics, noise and ghost light on, white surround, "
+        f"seed {seed}; the height known",
+    }
 
 
 def _one_numba_thread() -> None:  # pragma: no cover - runs in the background processes

@@ -71,6 +71,7 @@ def restoration_study(
     threshold: float = AMPLITUDE_THRESHOLD,
     cnr_floor: float = CNR_FLOOR,
     model_error: float = MODEL_ERROR,
+    tracer=None,
 ) -> dict:
     """Amplitude, contrast to noise, overshoot and noise gain against height, raw and per
     method, and each one's restored depth of field (see the module's docstring)."""
@@ -78,7 +79,7 @@ def restoration_study(
     zs = [float(z) for z in z_mm]
     chart = bar_chart(CHART_DPI, chart_dpi=(dpi,), block_mm=6.0, height_mm=6.0)
     white = np.ones((240, 360), np.float32)
-    cache = prepare_kernels(design, z_mm=zs, settings=st, seed=seed)
+    cache = prepare_kernels(design, z_mm=zs, settings=st, seed=seed, tracer=tracer)
     names = ["raw", *methods]
     series = {n: {"amplitude_rel": [], "cnr": [], "overshoot": [], "noise_gain": []} for n in names}
     transfer, sigmas = [], []
@@ -114,12 +115,24 @@ def restoration_study(
             zs, series[n]["amplitude_rel"], series[n]["cnr"], threshold, cnr_floor
         )
         dof[n] = {"dof_mm": v, "open_ended": open_ended}
-    t = np.asarray(transfer)
+    # the ceiling: the own transfer at the chart's frequency on a finer, longer Z grid
+    z_fine = [round(v, 6) for v in np.arange(0.0, max(zs) + 1.5 + 1e-9, 0.125)]
+    own_cache = prepare_kernels(
+        design, z_mm=z_fine, settings=st, seed=seed, ghosts=False, tracer=tracer
+    )
+    t = np.array(
+        [
+            output_kernel(
+                design, z, settings=st, seed=seed, ghosts=False, kernels=own_cache
+            ).transfer(pitch / period_of_dpi(dpi))
+            for z in z_fine
+        ]
+    )
     sign = np.flatnonzero(np.signbit(t[1:]) != np.signbit(t[:-1]))
     zero = None
     if sign.size:
         i = int(sign[0])
-        zero = float(zs[i] + t[i] / (t[i] - t[i + 1]) * (zs[i + 1] - zs[i]))
+        zero = float(z_fine[i] + t[i] / (t[i] - t[i + 1]) * (z_fine[i + 1] - z_fine[i]))
     return {
         "design": design.name,
         "fingerprint": design.fingerprint(),
@@ -133,5 +146,7 @@ def restoration_study(
         "series": series,
         "dof": dof,
         "transfer": transfer,
+        "transfer_z_mm": z_fine,
+        "transfer_fine": t.tolist(),
         "transfer_zero_mm": zero,
     }

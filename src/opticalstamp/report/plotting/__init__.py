@@ -335,6 +335,39 @@ def plot_scan_panels(
     return fig
 
 
+def plot_restoration(res: dict):
+    """Restoration against height: the fundamental's amplitude (of the band-limited
+    ideal's) raw and per method with the restored-DOF threshold, contrast to noise with its
+    floor, and the own path's transfer at the chart's frequency (the ceiling)."""
+    z = np.asarray(res["z_mm"])
+    fig, axes = _subplots(1, 3, figsize=(13, 3.6))
+    for name, s in res["series"].items():
+        dof = res["dof"][name]
+        label = f"{name}: DOF {'>= ' if dof['open_ended'] else ''}{dof['dof_mm']:.2f} mm"
+        style = "k-o" if name == "raw" else "-o"
+        axes[0].plot(z, s["amplitude_rel"], style, ms=3, label=label)
+        axes[1].semilogy(z, np.maximum(s["cnr"], 1e-2), style, ms=3, label=name)
+    axes[0].axhline(res["threshold"], color="grey", ls="--", lw=1)
+    axes[0].set_ylabel(f"{res['dpi']:g}-dpi amplitude / ideal")
+    axes[0].legend(fontsize=7)
+    axes[1].axhline(res["cnr_floor"], color="grey", ls="--", lw=1)
+    axes[1].set_ylabel("contrast to noise")
+    axes[2].plot(res["transfer_z_mm"], res["transfer_fine"], "k-", lw=1.2)
+    axes[2].plot(z, res["transfer"], "ko", ms=3)
+    axes[2].axhline(0, color="grey", lw=0.8)
+    zero = res.get("transfer_zero_mm")
+    axes[2].set_title(
+        f"own transfer at {res['dpi']:g} dpi"
+        + (f": zero at {zero:.2f} mm" if zero is not None else ": no zero in range"),
+        fontsize=9,
+    )
+    for ax in axes:
+        ax.set_xlabel("Z (mm)")
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
 def plot_scan_profiles(profiles: list[dict]):
     """Profiles across the simulated 200-dpi chart scans (paper Fig. 12 c, d)."""
     fig, axes = _subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
