@@ -11,11 +11,12 @@ import tifffile
 from tests.edges import assert_clean_refusal, run
 
 from opticalstamp.design import load_design
-from opticalstamp.imaging.charts import bar_chart
+from opticalstamp.imaging.charts import bar_chart, text_chart
 from opticalstamp.imaging.measure import measure_rmtf
 from opticalstamp.imaging.outputkernel import output_kernel
 from opticalstamp.imaging.restore import (
     blur,
+    estimate_height,
     restore,
     restore_scan,
     wiener_noise_gain,
@@ -172,6 +173,10 @@ def test_restore_bad_inputs(tmp_path):
         (["restore", tmp_path / "plain.tif", "-o", out / "r.tif"], ("--z",)),
         (["restore", tmp_path / "plain.tif", "-o", out / "r.tif", "--z", "12"], ("--z",)),
         (
+            ["restore", tmp_path / "plain.tif", "-o", out / "r.tif", "--estimate-height"],
+            ("--estimate-height",),
+        ),
+        (
             ["restore", tmp_path / "plain.tif", "-o", out / "r.tif", "--z", "1", "--method", "x"],
             ("--method",),
         ),
@@ -182,3 +187,21 @@ def test_restore_bad_inputs(tmp_path):
     cases.append((["restore", tmp_path / "nan.tif", "-o", out / "r.tif", "--z", "1"], ("nan.tif",)))
     for args, names in cases:
         assert_clean_refusal(run(args), names, out)
+
+
+@pytest.mark.parametrize("z", [1.0, 3.1])
+def test_height_estimated_from_text_or_refused(paper, z):
+    """Black-and-white text: the height whose restoration is most black-and-white is the
+    scan's to +0.3 mm (measured: 0.0-0.3 mm high; docs/restore.md). A blank page and a
+    smooth grey one are refused, with the reason."""
+    doc, _ = text_chart(1200.0, 4.0)
+    r = simulate_scan(doc, 1200.0, paper, z_mm=z, seed=5)
+    est = estimate_height(r.image, paper)
+    assert est.refused is None and -0.1 <= est.z_mm - z <= 0.3, est
+    if z == 1.0:
+        blank = simulate_scan(np.ones((300, 400), np.float32), 1200.0, paper, z_mm=z, seed=5)
+        assert estimate_height(blank.image, paper).refused
+        yy, xx = np.mgrid[0:600, 0:800]
+        smooth = (0.5 + 0.3 * np.sin(xx / 150) * np.cos(yy / 200)).astype(np.float32)
+        s = simulate_scan(smooth, 1200.0, paper, z_mm=z, seed=5)
+        assert estimate_height(s.image, paper).refused

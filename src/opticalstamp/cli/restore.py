@@ -69,7 +69,8 @@ def restore_and_write(
     except ValueError as err:
         fail(str(err).replace("z_mm:", "--z:").replace("height_map:", "--height-map:"))
     meta = provenance(d, seed) | {"restoration": r.meta, "output_dpi": dpi} | extra
-    meta["clipped_fraction"] = float(np.mean((r.image < 0) | (r.image > 1)))
+    # overshoot past black or white by more than 5 % of white, clipped in the files
+    meta["clipped_fraction"] = float(np.mean((r.image < -0.05) | (r.image > 1.05)))
     out = np.clip(r.image, 0.0, 1.0)
     write_set(
         {
@@ -115,6 +116,14 @@ def restore(
             help="preset name or design TOML file (default: the sidecar's, else paper2016)",
         ),
     ] = None,
+    estimate_height: Annotated[
+        bool,
+        typer.Option(
+            "--estimate-height",
+            help="find the height from the scan itself (black-and-white pages; refused where "
+            "the evidence is weak) instead of --z or the sidecar's",
+        ),
+    ] = False,
     linear: LinearOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
@@ -147,7 +156,21 @@ def restore(
     if st is None:
         st = ScanSettings(sensor=d.electronics)
     hm = None
-    if height_map is None and z is None:
+    estimate = None
+    if estimate_height:
+        from ..imaging.restore import estimate_height as find_height
+
+        if z is not None or height_map is not None:
+            fail("--estimate-height: not with --z or --height-map")
+        try:
+            est = find_height(img, d, settings=st, seed=seed)
+        except ValueError as err:
+            fail(f"{scan}: {err}")
+        if est.refused:
+            fail(f"--estimate-height: {est.refused}; give --z")
+        z = est.z_mm
+        estimate = {"z_mm": est.z_mm, "contrast": est.contrast}
+    elif height_map is None and z is None:
         if side.get("height_map"):
             height_map = side.get("height_map_spec")
             if height_map is None:
@@ -166,7 +189,12 @@ def restore(
             )
         except HeightMapError as err:
             fail(str(err))
-    extra = {"input": str(scan), "design_source": spec, "height_map_spec": height_map}
+    extra = {
+        "input": str(scan),
+        "design_source": spec,
+        "height_map_spec": height_map,
+        "height_estimate": estimate,
+    }
     meta = restore_and_write(
         img, dpi, d, z=z, hm=hm, method=method, settings=st, seed=seed, output=output, extra=extra
     )
@@ -174,11 +202,12 @@ def restore(
     lines = [
         f"restored {scan} ({method}) at "
         + (
-            f"Z = {z:g} mm"
+            f"Z = {z:.2f} mm" + (" (estimated from the scan)" if estimate else "")
             if hm is None
             else f"heights {r['levels_mm'][0]:g}-{r['levels_mm'][-1]:g} mm"
         )
         + f" with design {d.name}: noise {r['sigma']:.4f} per pixel (sensor and model error "
-        f"{r['model_error']:g}), {meta['clipped_fraction']:.1%} of the pixels clipped to [0, 1]"
+        f"{r['model_error']:g}); {meta['clipped_fraction']:.1%} of the pixels overshoot by "
+        "more than 5 % (clipped in the files)"
     ]
     emit(meta, as_json, lines)
