@@ -67,9 +67,16 @@ def noise_sigma(sensor: SensorModel, white_etendue_um2sr: float, model_error: fl
     return float(np.sqrt(var_e / white**2 + model_error**2))
 
 
+#: rows' kernels that differ by less than this (relative to the largest value) are one
+#: kernel: the merged image is shift-invariant to far below the model error, and real
+#: FFTs in single precision do (the prototype's rows: 1e-4 to 5e-4)
+STATIONARY_TOLERANCE = 2e-3
+
+
 @dataclass(frozen=True)
 class Grid:
-    """The padded FFT grid of one restoration: the image sits at [py:py+h, px:px+w]."""
+    """The padded FFT grid of one restoration: the image sits at [py:py+h, px:px+w];
+    ``real``: real FFTs (one kernel), else complex ones (R coupled phases)."""
 
     shape: tuple[int, int]
     py: int
@@ -77,76 +84,145 @@ class Grid:
     h: int
     w: int
     phases: int
+    real: bool = False
 
     @property
     def nu(self) -> tuple[np.ndarray, np.ndarray]:
+        """Frequencies (cycles per pixel) of the grid's spectra (half a spectrum in x for
+        real FFTs)."""
         ny, nx = self.shape
-        return sfft.fftfreq(ny)[:, None], sfft.fftfreq(nx)[None, :]
+        fx = sfft.rfftfreq(nx) if self.real else sfft.fftfreq(nx)
+        return sfft.fftfreq(ny)[:, None], fx[None, :]
+
+    def spectrum_mean(self, a: np.ndarray) -> float:
+        """The mean of a symmetric spectrum ``a`` (on :attr:`nu`) over the whole DFT grid."""
+        if not self.real:
+            return float(a.mean())
+        nx = self.shape[1]
+        w = np.full(a.shape[1], 2.0)
+        w[0] = 1.0
+        if nx % 2 == 0:
+            w[-1] = 1.0
+        return float((a * w).sum() / (self.shape[0] * nx))
 
 
-def _grid(shape: tuple[int, int], ok: OutputKernel) -> Grid:
+def _grid(shape: tuple[int, int], ok: OutputKernel, stationary: bool = False) -> Grid:
     hy, hx = ok.own.shape[1] // 2, ok.own.shape[2] // 2
-    r = ok.phases
+    r = 1 if stationary else ok.phases
     py = 2 * hy + 8
-    px = r * int(np.ceil((2 * hx + 8) / r))  # keeps each column's phase
-    ny = sfft.next_fast_len(shape[0] + 2 * py)
+    px = ok.phases * int(np.ceil((2 * hx + 8) / ok.phases))  # keeps each column's phase
+    ny = sfft.next_fast_len(shape[0] + 2 * py, real=stationary)
     nx = shape[1] + 2 * px
     while True:
-        nx = sfft.next_fast_len(nx)
+        nx = sfft.next_fast_len(nx, real=stationary)
         if nx % r == 0:
             break
         nx += 1
-    return Grid((ny, nx), py, px, shape[0], shape[1], r)
+    return Grid((ny, nx), py, px, shape[0], shape[1], r, stationary)
 
 
-def _kernel_ft(ok: OutputKernel, grid: Grid) -> np.ndarray:
-    """(R, ny, nx) DFTs of the phases' own kernels, centred at the origin."""
-    ny, nx = grid.shape
-    hy, hx = ok.own.shape[1] // 2, ok.own.shape[2] // 2
-    out = np.empty((ok.phases, ny, nx), np.complex128)
-    for r in range(ok.phases):
-        z = np.zeros((ny, nx))
-        z[: 2 * hy + 1, : 2 * hx + 1] = ok.own[r]
-        out[r] = sfft.fft2(np.roll(z, (-hy, -hx), axis=(0, 1)), workers=-1)
-    return out
+class _Blur:
+    """The own blur A on a padded grid, in the Fourier domain, with its adjoint and the
+    solver of the normal equations (see the module's docstring)."""
 
+    def __init__(self, ok: OutputKernel, grid: Grid):
+        self.grid = grid
+        ny, nx = grid.shape
+        hy, hx = ok.own.shape[1] // 2, ok.own.shape[2] // 2
+        kernels = ok.own.mean(axis=0, keepdims=True) if grid.real else ok.own
+        kft = []
+        for k in kernels:
+            z = np.zeros((ny, nx), np.float32 if grid.real else np.float64)
+            z[: 2 * hy + 1, : 2 * hx + 1] = k
+            z = np.roll(z, (-hy, -hx), axis=(0, 1))
+            kft.append(self.fft(z))
+        if grid.real:
+            self.b = kft[0][None]
+        else:  # B_q = (1/R) sum_r w^(-q r) K_r^
+            r_ = len(kft)
+            w = np.exp(-2j * np.pi * np.outer(np.arange(r_), np.arange(r_)) / r_)
+            self.b = np.einsum("qr,ryx->qyx", w, np.asarray(kft)) / r_
 
-def _polyphase(kft: np.ndarray) -> np.ndarray:
-    """B_q = (1/R) sum_r w^(-q r) K_r^ for q < R."""
-    r_ = kft.shape[0]
-    w = np.exp(-2j * np.pi * np.outer(np.arange(r_), np.arange(r_)) / r_)  # [q, r]
-    return np.einsum("qr,ryx->qyx", w, kft) / r_
+    @property
+    def own(self) -> float:
+        """The own light's share: the kernels' sum (mean over phases)."""
+        return float(self.b[0, 0, 0].real)
 
+    def fft(self, x: np.ndarray) -> np.ndarray:
+        if self.grid.real:
+            return sfft.rfft2(np.asarray(x, np.float32), workers=-1)
+        return sfft.fft2(x, workers=-1)
 
-def _apply(b: np.ndarray, f_ft: np.ndarray) -> np.ndarray:
-    """G = A F in the Fourier domain (see the module's docstring)."""
-    r_, nx = b.shape[0], f_ft.shape[-1]
-    out = b[0] * f_ft
-    for q in range(1, r_):
-        out += np.roll(b[q] * f_ft, q * nx // r_, axis=-1)
-    return out
+    def ifft(self, x: np.ndarray) -> np.ndarray:
+        if self.grid.real:
+            return sfft.irfft2(x, s=self.grid.shape, workers=-1)
+        return sfft.ifft2(x, workers=-1).real
 
+    def fwd(self, f_ft: np.ndarray) -> np.ndarray:
+        """G = A F."""
+        b = self.b
+        r_, nx = b.shape[0], f_ft.shape[-1]
+        out = b[0] * f_ft
+        for q in range(1, r_):
+            out += np.roll(b[q] * f_ft, q * nx // r_, axis=-1)
+        return out
 
-def _apply_h(b: np.ndarray, y_ft: np.ndarray) -> np.ndarray:
-    """A^H Y in the Fourier domain."""
-    r_, nx = b.shape[0], y_ft.shape[-1]
-    out = np.conj(b[0]) * y_ft
-    for q in range(1, r_):
-        out += np.conj(b[q]) * np.roll(y_ft, -q * nx // r_, axis=-1)
-    return out
+    def adj(self, y_ft: np.ndarray) -> np.ndarray:
+        """A^H Y."""
+        b = self.b
+        r_, nx = b.shape[0], y_ft.shape[-1]
+        out = np.conj(b[0]) * y_ft
+        for q in range(1, r_):
+            out += np.conj(b[q]) * np.roll(y_ft, -q * nx // r_, axis=-1)
+        return out
 
+    def group_matrix(self) -> np.ndarray:
+        """(ny, N/R, R, R): A[s, t] = B_{(s - t) mod R}[k_t] of each frequency group
+        {k0 + t N/R}."""
+        r_, ny, nx = self.b.shape
+        m = nx // r_
+        bg = self.b.reshape(r_, ny, r_, m)  # (q, ny, t, k0)
+        a = np.empty((ny, m, r_, r_), np.complex128)
+        for s in range(r_):
+            for t in range(r_):
+                a[:, :, s, t] = bg[(s - t) % r_, :, t, :]
+        return a
 
-def _group_matrix(b: np.ndarray) -> np.ndarray:
-    """(ny, N/R, R, R): A[s, t] = B_{(s - t) mod R}[k_t] of each frequency group
-    {k0 + t N/R}."""
-    r_, ny, nx = b.shape
-    m = nx // r_
-    bg = b.reshape(r_, ny, r_, m)  # (q, ny, t, k0)
-    a = np.empty((ny, m, r_, r_), np.complex128)
-    for s in range(r_):
-        for t in range(r_):
-            a[:, :, s, t] = bg[(s - t) % r_, :, t, :]
-    return a
+    def normal(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The groups' A and A^H A + diag(d)."""
+        r_ = self.b.shape[0]
+        a = self.group_matrix()
+        n = np.empty_like(a)
+        for i in range(r_):  # explicit sums: einsum is slow on these small matrices
+            for j in range(r_):
+                n[..., i, j] = sum(np.conj(a[..., s, i]) * a[..., s, j] for s in range(r_))
+        dg = _groups(np.broadcast_to(d, self.b.shape[1:]), r_)
+        for i in range(r_):
+            n[..., i, i] += dg[..., i]
+        return a, n
+
+    def solver(self, d: np.ndarray):
+        """rhs -> F solving (A^H A + diag(d)) F = rhs, group by group of R coupled
+        frequencies; the groups' inverses are formed once (closed form for R = 2)."""
+        r_ = self.b.shape[0]
+        if r_ == 1:
+            inv = (1.0 / (np.abs(self.b[0]) ** 2 + d)).astype(self.b.real.dtype)
+            return lambda rhs: rhs * inv
+        _, n = self.normal(d)
+        if r_ == 2:
+            det = n[..., 0, 0] * n[..., 1, 1] - n[..., 0, 1] * n[..., 1, 0]
+            i00, i01 = n[..., 1, 1] / det, -n[..., 0, 1] / det
+            i10, i11 = -n[..., 1, 0] / det, n[..., 0, 0] / det
+
+            def solve2(rhs: np.ndarray) -> np.ndarray:
+                g = _groups(rhs, 2)
+                x0 = i00 * g[..., 0] + i01 * g[..., 1]
+                x1 = i10 * g[..., 0] + i11 * g[..., 1]
+                return _ungroup(np.stack([x0, x1], axis=-1))
+
+            return solve2
+        inv = np.linalg.inv(n)
+        return lambda rhs: _ungroup(np.einsum("ykab,ykb->yka", inv, _groups(rhs, r_)))
 
 
 def _groups(x: np.ndarray, r_: int) -> np.ndarray:
@@ -160,43 +236,9 @@ def _ungroup(x: np.ndarray) -> np.ndarray:
     return np.moveaxis(x, 2, 1).reshape(ny, m * r_)
 
 
-def _normal(b: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The groups' A and A^H A + diag(d)."""
-    r_ = b.shape[0]
-    a = _group_matrix(b)
-    n = np.einsum("yksa,yksb->ykab", np.conj(a), a)
-    idx = np.arange(r_)
-    n[:, :, idx, idx] += _groups(np.broadcast_to(d, b.shape[1:]), r_)
-    return a, n
-
-
-def _solver(b: np.ndarray, d: np.ndarray):
-    """rhs -> F solving (A^H A + diag(d)) F = rhs, group by group of R coupled
-    frequencies; the groups' inverses are formed once (closed form for R = 2)."""
-    r_ = b.shape[0]
-    if r_ == 1:
-        inv = 1.0 / (np.abs(b[0]) ** 2 + d)
-        return lambda rhs: rhs * inv
-    _, n = _normal(b, d)
-    if r_ == 2:
-        det = n[..., 0, 0] * n[..., 1, 1] - n[..., 0, 1] * n[..., 1, 0]
-        i00, i01 = n[..., 1, 1] / det, -n[..., 0, 1] / det
-        i10, i11 = -n[..., 1, 0] / det, n[..., 0, 0] / det
-
-        def solve2(rhs: np.ndarray) -> np.ndarray:
-            g = _groups(rhs, 2)
-            x0 = i00 * g[..., 0] + i01 * g[..., 1]
-            x1 = i10 * g[..., 0] + i11 * g[..., 1]
-            return _ungroup(np.stack([x0, x1], axis=-1))
-
-        return solve2
-    inv = np.linalg.inv(n)
-    return lambda rhs: _ungroup(np.einsum("ykab,ykb->yka", inv, _groups(rhs, r_)))
-
-
-def _solve(b: np.ndarray, d: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """(A^H A + diag(d)) F = rhs (see :func:`_solver`)."""
-    return _solver(b, d)(rhs)
+def _operator(shape: tuple[int, int], ok: OutputKernel) -> _Blur:
+    stationary = ok.phases == 1 or ok.row_difference <= STATIONARY_TOLERANCE
+    return _Blur(ok, _grid(shape, ok, stationary))
 
 
 def wiener_noise_gain(
@@ -205,25 +247,23 @@ def wiener_noise_gain(
     """The Wiener restoration's noise gain on white noise, closed form: the rms of the
     restored noise over the rms of the scan's, sqrt(sum |W|^2 / N) over the DFT grid,
     W = (A^H A + D)^-1 A^H of each frequency group."""
-    grid = _grid(shape, ok)
-    b = _polyphase(_kernel_ft(ok, grid))
-    d = sigma**2 / prior_spectrum(grid, prior_variance)
-    if b.shape[0] == 1:
-        w2 = np.abs(b[0]) ** 2 / (np.abs(b[0]) ** 2 + d) ** 2
-        return float(np.sqrt(w2.mean()))
-    a, n = _normal(b, d)
+    op = _operator(shape, ok)
+    d = sigma**2 / prior_spectrum(op.grid, prior_variance)
+    if op.b.shape[0] == 1:
+        b2 = np.abs(op.b[0]).astype(np.float64) ** 2
+        return float(np.sqrt(op.grid.spectrum_mean(b2 / (b2 + d) ** 2)))
+    a, n = op.normal(d)
     w = np.linalg.solve(n, np.conj(np.swapaxes(a, -1, -2)))
-    return float(np.sqrt((np.abs(w) ** 2).sum() / np.prod(grid.shape)))
+    return float(np.sqrt((np.abs(w) ** 2).sum() / np.prod(op.grid.shape)))
 
 
 def _pad(img: np.ndarray, grid: Grid) -> np.ndarray:
     ny, nx = grid.shape
-    out = np.pad(
+    return np.pad(
         img,
         ((grid.py, ny - grid.h - grid.py), (grid.px, nx - grid.w - grid.px)),
         mode="reflect" if min(img.shape) > 1 else "edge",
     )
-    return out
 
 
 def _crop(a: np.ndarray, grid: Grid) -> np.ndarray:
@@ -232,12 +272,11 @@ def _crop(a: np.ndarray, grid: Grid) -> np.ndarray:
 
 def blur(page: np.ndarray, ok: OutputKernel) -> np.ndarray:
     """The forward model's own-path blur A f of a page on the output grid (reflect-padded
-    at the edges; no ghost light, no noise): what :func:`restore` inverts."""
+    at the edges; no ghost light, no noise): what :func:`restore` inverts. The rows'
+    kernels are kept apart here, whatever their difference."""
     f = np.asarray(page, dtype=np.float64)
-    grid = _grid(f.shape, ok)
-    b = _polyphase(_kernel_ft(ok, grid))
-    out = sfft.ifft2(_apply(b, sfft.fft2(_pad(f, grid), workers=-1)), workers=-1).real
-    return _crop(out, grid)
+    op = _Blur(ok, _grid(f.shape, ok, ok.phases == 1))
+    return _crop(op.ifft(op.fwd(op.fft(_pad(f, op.grid)))), op.grid).astype(np.float64)
 
 
 def prior_spectrum(grid: Grid, variance: float = PRIOR_VARIANCE, corner: float = PRIOR_CORNER):
@@ -245,7 +284,7 @@ def prior_spectrum(grid: Grid, variance: float = PRIOR_VARIANCE, corner: float =
     (the variance of a page of this prior) is ``variance``."""
     vy, vx = grid.nu
     shape = 1.0 / (vy**2 + vx**2 + corner**2)
-    return variance * shape / shape.mean()
+    return variance * shape / grid.spectrum_mean(shape)
 
 
 @dataclass(frozen=True)
@@ -276,7 +315,9 @@ def restore(
     The ghost light is removed as a background computed from the scan
     (:func:`~opticalstamp.imaging.outputkernel.ghost_background`, with ``surround`` the
     reflectance around the page, None: the scan's edges repeated); the own blur is
-    deconvolved on a reflect-padded grid. The result is not clipped (overshoot shows).
+    deconvolved on a reflect-padded grid, with one kernel where the rows' differ by less
+    than :data:`STATIONARY_TOLERANCE` (real FFTs, single precision) and each row's kernel
+    solved exactly otherwise. The result is not clipped (overshoot shows).
     """
     g = np.asarray(image, dtype=np.float64)
     if g.ndim != 2:
@@ -288,20 +329,19 @@ def restore(
     if not sigma > 0:
         raise ValueError(f"sigma: must be > 0 (got {sigma})")
     bkg = ghost_background(g, ok, surround)
-    grid = _grid(g.shape, ok)
-    b = _polyphase(_kernel_ft(ok, grid))
+    op = _operator(g.shape, ok)
+    grid = op.grid
     n_it = iterations
     if method == "wiener":
         d = sigma**2 / prior_spectrum(grid, prior_variance)
-        gft = sfft.fft2(_pad(g - bkg, grid), workers=-1)
-        f = sfft.ifft2(_solve(b, d, _apply_h(b, gft)), workers=-1).real
+        f = op.ifft(op.solver(d)(op.adj(op.fft(_pad(g - bkg, grid)))))
         n_it = 0
     elif method == "rl":
         n_it = RL_ITERATIONS if iterations is None else iterations
-        f = _richardson_lucy(_pad(g, grid), _pad(bkg, grid), b, n_it)
+        f = _richardson_lucy(_pad(g, grid), _pad(bkg, grid), op, n_it)
     else:
         n_it = TV_ITERATIONS if iterations is None else iterations
-        f = _tv_admm(_pad(g - bkg, grid), b, grid, sigma, tv_scale, n_it)
+        f = _tv_admm(_pad(g - bkg, grid), op, sigma, tv_scale, n_it)
     meta = {
         "method": method,
         "z_mm": ok.z_mm,
@@ -309,63 +349,57 @@ def restore(
         "iterations": n_it,
         "phases": ok.phases,
         "row_difference": ok.row_difference,
+        "shift_invariant": grid.real,
         "ghost_fraction": ok.ghost_fraction,
         "prior_variance": prior_variance,
         "prior_corner": PRIOR_CORNER,
         "tv_scale": tv_scale,
         "surround": surround,
     }
-    return Restored(_crop(f, grid), method, ok.z_mm, sigma, meta)
+    return Restored(_crop(f, grid).astype(np.float64), method, ok.z_mm, sigma, meta)
 
 
-def _richardson_lucy(g: np.ndarray, bkg: np.ndarray, b: np.ndarray, n_it: int) -> np.ndarray:
-    g = np.maximum(g, 1e-6)
-    norm = sfft.ifft2(_apply_h(b, sfft.fft2(np.ones_like(g), workers=-1)), workers=-1).real
-    norm = np.maximum(norm, 1e-12)
-    own = b[0, 0, 0].real  # the own light's share: sum of the kernels (mean over phases)
-    f = np.full_like(g, max(float((g - bkg).mean()) / own, 1e-3))
+def _richardson_lucy(g: np.ndarray, bkg: np.ndarray, op: _Blur, n_it: int) -> np.ndarray:
+    dtype = np.float32 if op.grid.real else np.float64
+    g = np.maximum(g, 1e-6).astype(dtype)
+    bkg = bkg.astype(dtype)
+    norm = np.maximum(op.ifft(op.adj(op.fft(np.ones_like(g)))), 1e-12)
+    f = np.full_like(g, max(float((g - bkg).mean()) / op.own, 1e-3))
     for _ in range(n_it):
-        est = sfft.ifft2(_apply(b, sfft.fft2(f, workers=-1)), workers=-1).real + bkg
+        est = op.ifft(op.fwd(op.fft(f))) + bkg
         ratio = g / np.maximum(est, 1e-9)
-        f = f * sfft.ifft2(_apply_h(b, sfft.fft2(ratio, workers=-1)), workers=-1).real / norm
+        f = f * op.ifft(op.adj(op.fft(ratio))) / norm
     return f
 
 
-def _grad_ft(grid: Grid) -> tuple[np.ndarray, np.ndarray]:
-    vy, vx = grid.nu
-    return np.exp(2j * np.pi * vy) - 1, np.exp(2j * np.pi * vx) - 1  # forward differences
-
-
-def _tv_admm(
-    g: np.ndarray, b: np.ndarray, grid: Grid, sigma: float, tv_scale: float, n_it: int
-) -> np.ndarray:
+def _tv_admm(g: np.ndarray, op: _Blur, sigma: float, tv_scale: float, n_it: int) -> np.ndarray:
     """min 1/(2 sigma^2) |A f - g|^2 + |grad f|_1 / beta (isotropic), by ADMM on
     z = grad f; each f-step the R x R Fourier solve."""
     lam = sigma**2 / tv_scale  # weight of |grad f|_1 against 1/2 |A f - g|^2
     rho = 4 * lam / max(tv_scale, 1e-6)
-    dy, dx = _grad_ft(grid)
+    vy, vx = op.grid.nu
+    dtype = np.complex64 if op.grid.real else np.complex128
+    dy = (np.exp(2j * np.pi * vy) - 1).astype(dtype)  # forward differences
+    dx = (np.exp(2j * np.pi * vx) - 1).astype(dtype)
     d = rho * (np.abs(dy) ** 2 + np.abs(dx) ** 2)
-    ahg = _apply_h(b, sfft.fft2(g, workers=-1))
-    solve = _solver(b, d + 1e-9)
+    ahg = op.adj(op.fft(g))
+    solve = op.solver(d + 1e-9)
     f_ft = solve(ahg)
-    zy = sfft.ifft2(dy * f_ft, workers=-1).real
-    zx = sfft.ifft2(dx * f_ft, workers=-1).real
+    zy = op.ifft(dy * f_ft)
+    zx = op.ifft(dx * f_ft)
     uy, ux = np.zeros_like(zy), np.zeros_like(zx)
     for _ in range(n_it):
-        rhs = ahg + rho * (
-            np.conj(dy) * sfft.fft2(zy - uy, workers=-1)
-            + np.conj(dx) * sfft.fft2(zx - ux, workers=-1)
-        )
+        rhs = ahg + rho * (np.conj(dy) * op.fft(zy - uy) + np.conj(dx) * op.fft(zx - ux))
         f_ft = solve(rhs)
-        gy = sfft.ifft2(dy * f_ft, workers=-1).real
-        gx = sfft.ifft2(dx * f_ft, workers=-1).real
+        gy = op.ifft(dy * f_ft)
+        gx = op.ifft(dx * f_ft)
         vy_, vx_ = gy + uy, gx + ux
         mag = np.sqrt(vy_**2 + vx_**2)
         shrink = np.maximum(1 - (lam / rho) / np.maximum(mag, 1e-12), 0)
         zy, zx = vy_ * shrink, vx_ * shrink
         uy += gy - zy
         ux += gx - zx
-    return sfft.ifft2(f_ft, workers=-1).real
+    return op.ifft(f_ft)
 
 
 def restore_scan(
