@@ -159,6 +159,13 @@ def search(
             "accuracy are flagged)",
         ),
     ] = True,
+    objective: Annotated[
+        str,
+        typer.Option(
+            help="the depth maximised with the light: dof (the depth of field) or "
+            "restored-dof (after Wiener restoration with the known blur, closed form)"
+        ),
+    ] = "dof",
     export_designs: Annotated[
         Path | None,
         typer.Option(
@@ -172,6 +179,7 @@ def search(
     """Search hole sizes and gaps for ghost-free, bright, deep designs (paper §3)."""
     from ..io.files import provenance, save_dataset
     from ..studies.search import (
+        OBJECTIVES,
         journal_of,
         merged_front,
         search_base,
@@ -181,6 +189,8 @@ def search(
         verify_front,
     )
 
+    if objective not in OBJECTIVES:
+        fail(f"--objective: must be one of {', '.join(OBJECTIVES)} (got {objective!r})")
     _check_dask(dask)
     d = open_design(design)
     base = search_base(d, dpi)
@@ -202,6 +212,7 @@ def search(
             workers=workers,
             dask_address=dask,
             progress=not as_json,
+            objective=objective,
         )
         if verify:
             results = {
@@ -259,10 +270,15 @@ def search(
             flag += f"  ! surrogate off in {', '.join(p['disagrees'])}"
         if p.get("exact_dominated_by"):
             flag += f"  ! dominated by {p['exact_dominated_by']} front point(s) when exact"
+        restored = (
+            f", restored DOF {p['restored_dof_mm']:.2f} mm"
+            if objective == "restored-dof" and p.get("restored_dof_mm") is not None
+            else ""
+        )
         lines.append(
             f"  p{i:02d} holes {_nums(p['holes_um'])} slabs {_nums(p['thicknesses_um'])}: "
-            f"efficiency 1/{1 / p['efficiency_ratio']:.0f}, DOF {p['dof_mm']:.2f} mm, ghosts "
-            f"{p['ghost_fraction']:.3f}{was}{tag}{flag}"
+            f"efficiency 1/{1 / p['efficiency_ratio']:.0f}, DOF {p['dof_mm']:.2f} mm"
+            f"{restored}, ghosts {p['ghost_fraction']:.3f}{was}{tag}{flag}"
         )
     for name, res in results.items():
         ref = res.reference

@@ -74,8 +74,12 @@ def evaluate_design(
     ghost_rays: int = 1 << 17,
     seed: int = 0,
     wavelength_um: float | None = None,
+    restored: bool = False,
 ) -> dict:
-    """Efficiency, depth of field, RMTF at chosen Z, ghosts and diffraction of a design.
+    """Efficiency, depth of field, RMTF at chosen Z, ghosts and diffraction of a design;
+    with ``restored``, also the depth of field after Wiener restoration with the known
+    blur (``restored_dof_mm``, closed form:
+    :func:`~opticalstamp.studies.restoration.restored_dof_closed_form`; else None).
 
     The estimator is the *surrogate* (recorded in the result as ``"estimator"``): the own
     path in paraxial closed form, ghost light as a uniform background from a sampled
@@ -99,8 +103,16 @@ def evaluate_design(
     diff = diffraction_budget(design, wavelengths_um=(wavelength_um,))
     spill = max(row["outside_shadow"][f"{wavelength_um:g}"] for row in diff["layers"])
     tot = own + ghost
+    restored_dof = None
+    if restored:
+        from .restoration import restored_dof_closed_form
+
+        restored_dof = restored_dof_closed_form(
+            design, dpi=dpi, ghost_fraction=ghost / tot if tot > 0 else 0.0
+        )["dof_mm"]
     return {
         "estimator": SURROGATE,
+        "restored_dof_mm": restored_dof,
         "etendue_own_um2sr": own,
         "etendue_ghost_um2sr": ghost,
         "ghost_fraction": ghost / tot if tot > 0 else 0.0,

@@ -150,3 +150,66 @@ def restoration_study(
         "transfer_fine": t.tolist(),
         "transfer_zero_mm": zero,
     }
+
+
+def restored_dof_closed_form(
+    design: Design,
+    *,
+    dpi: float = DOF_DPI,
+    ghost_fraction: float = 0.0,
+    settings: ScanSettings | None = None,
+    z_step_mm: float = 0.25,
+    z_max_mm: float = 20.0,
+    threshold: float = AMPLITUDE_THRESHOLD,
+    cnr_floor: float = CNR_FLOOR,
+    model_error: float = MODEL_ERROR,
+) -> dict:
+    """The Wiener restored depth of field in closed form, for a search (no scan, no trace):
+    at each height the own path's transfer T at the chart's frequency (paraxial closed
+    form, rectangular holes), H = (1 - ghost fraction) T, the restored amplitude over the
+    ideal's |H|^2 / (|H|^2 + sigma^2 / S) (the Wiener chain at that frequency), and the
+    contrast to noise 2 (2/pi) amplitude / (sigma_sensor G), G the Wiener noise gain on
+    white noise (closed form); the depth of field by the rule of
+    :func:`restoration_study` (its simulated figure for the prototype: docs/restore.md).
+    Heights run in ``z_step_mm`` until a criterion fails or ``z_max_mm``.
+    """
+    from ..imaging.restore import Grid, prior_spectrum, wiener_noise_gain
+
+    base = settings or ScanSettings(sensor=design.electronics)
+    st = base.model_copy(update={"kernel": "paraxial"})
+    n = 128
+    sub = Grid((n, n), 0, 0, n, n, 1, False)
+    prior = prior_spectrum(sub)
+    nu = None
+    zs, amp, cnr = [], [], []
+    z = 0.0
+    while z <= z_max_mm + 1e-9:
+        ok = output_kernel(design, z, settings=st, ghosts=False)
+        if nu is None:
+            nu = ok.pitch_um / period_of_dpi(dpi)
+            s_nu = float(np.interp(nu, np.fft.fftfreq(n)[: n // 2], prior[0, : n // 2]))
+            white = ok.white / (1 - ghost_fraction) if ghost_fraction < 1 else ok.white
+            sigma = noise_sigma(st.sensor, white, model_error)
+            sensor_sigma = noise_sigma(st.sensor, white, 0.0)
+        h = (1 - ghost_fraction) * float(ok.transfer(nu))
+        a = h * h / (h * h + sigma**2 / s_nu)
+        zs.append(round(z, 9))
+        amp.append(a)
+        if a < threshold:  # the crossing: the noise gain is not needed
+            cnr.append(0.0 if len(cnr) == 0 else cnr[-1])
+            break
+        gain = wiener_noise_gain(replace_own(ok, 1 - ghost_fraction), (n, n), sigma)
+        cnr.append(2 * (2 / np.pi) * a / (sensor_sigma * gain))
+        if cnr[-1] < cnr_floor:
+            break
+        z += z_step_mm
+    dof, open_ended = crossing_dof(zs, amp, cnr, threshold, cnr_floor)
+    return {"dof_mm": dof, "open_ended": open_ended, "z_mm": zs, "amplitude_rel": amp, "cnr": cnr}
+
+
+def replace_own(ok, share: float):
+    """``ok`` with its own kernels scaled to sum to ``share`` (the ghost light's share
+    taken off)."""
+    from dataclasses import replace
+
+    return replace(ok, own=ok.own * (share / ok.own_fraction))

@@ -22,6 +22,7 @@ import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 
@@ -186,8 +187,13 @@ def search(
     dask_address: str | None = None,
     journal=None,
     progress: bool = False,
+    objective: str = "dof",
 ) -> SearchResult:
     """NSGA-II search of hole sizes and thicknesses; returns every evaluation and the front.
+
+    ``objective``: the depth maximised with the light, "dof" (the depth of field) or
+    "restored-dof" (the depth of field after Wiener restoration with the known blur,
+    closed form: designs whose transfer function keeps the chart's frequency alive).
 
     ``design`` gives the sensor, the glass, the number and order of slabs and masks and
     the reference gap (scale it to another resolution with
@@ -220,7 +226,12 @@ def search(
             f"with these pins is {least:g} um, over the budget of {budget_um:g} um "
             "(--budget-mm): every design would be infeasible"
         )
+    if objective not in OBJECTIVES:
+        raise InputError(f"objective: must be one of {', '.join(OBJECTIVES)} (got {objective!r})")
+    depth = OBJECTIVES[objective]
     options = {"dpi": dof_dpi, "near_mm": near_mm, "ghost_rays": ghost_rays}
+    if depth != "dof_mm":
+        options["restored"] = True
     base_json = design.model_dump(mode="json", exclude_none=True)
 
     def payload(params: dict) -> dict:
@@ -291,7 +302,7 @@ def search(
                 cons = _feasible(m, budget_um, max_ghost, max_spill)
                 for name, c in zip(CONSTRAINTS, cons, strict=True):
                     t.set_constraint(name, c)  # <= 0: satisfied (NSGA-II's constrained domination)
-                study.tell(t, [m["efficiency_ratio"], m["dof_mm"]])
+                study.tell(t, [m["efficiency_ratio"], m[depth]])
                 records.append(_row(params, rec, m, all(c <= 0 for c in cons), n_h, n_t))
     ok = [r for r in records if r["feasible"]]
     # one entry per distinct design on the front
@@ -301,8 +312,8 @@ def search(
     ok = list(uniq.values())
     front = []
     if ok:
-        pts = np.array([[r["efficiency_ratio"], r["dof_mm"]] for r in ok])
-        front = sorted((ok[i] for i in pareto_front(pts)), key=lambda r: -r["dof_mm"])
+        pts = np.array([[r["efficiency_ratio"], r[depth]] for r in ok])
+        front = sorted((ok[i] for i in pareto_front(pts)), key=lambda r: -r[depth])
     reference = None
     if ref_rec["ok"]:
         m = ref_rec["result"]
@@ -315,8 +326,8 @@ def search(
             n_t,
         )
         if ok:
-            pts = np.array([[r["efficiency_ratio"], r["dof_mm"]] for r in ok])
-            p = np.array([reference["efficiency_ratio"], reference["dof_mm"]])
+            pts = np.array([[r["efficiency_ratio"], r[depth]] for r in ok])
+            p = np.array([reference["efficiency_ratio"], reference[depth]])
             dom = np.all(pts >= p, axis=1) & np.any(pts > p, axis=1)
             reference["dominated_by"] = int(dom.sum())
     return SearchResult(
@@ -329,6 +340,7 @@ def search(
         reference=reference,
         meta={
             "estimator": SURROGATE,
+            "objective": depth,
             "dof_dpi": dof_dpi,
             "budget_mm": budget_mm,
             "near_mm": near_mm,
@@ -348,11 +360,21 @@ def search(
 FIGURES = (
     "efficiency_ratio",
     "dof_mm",
+    "restored_dof_mm",
     "ghost_fraction",
     "nearest_ghost_mm",
     "diffraction_spill",
     "stack_um",
 )
+#: the depth objective of a search: the depth of field, or the depth of field after
+#: Wiener restoration with the known blur (co-design of optics and computation)
+OBJECTIVES = MappingProxyType({"dof": "dof_mm", "restored-dof": "restored_dof_mm"})
+
+
+def depth_key(res) -> str:
+    """The record key of a search's depth objective (``dof_mm`` unless it searched for
+    the restored depth of field)."""
+    return res.meta.get("objective", "dof_mm")
 
 
 def _row(
@@ -367,7 +389,7 @@ def _row(
     }
     row["rmtf_at"] = None if m is None else dict(m["rmtf_at"])
     for k in FIGURES:
-        v = None if m is None else m[k]
+        v = None if m is None else m.get(k)
         # JSON (the journal) has no infinity: a missing nearest ghost means none at all
         row[k] = (
             float(v)
@@ -483,8 +505,9 @@ def merged_front(results: dict[str, SearchResult]) -> list[dict]:
     rows = [r | {"variant": name} for name, res in results.items() for r in res.pareto]
     if not rows:
         return []
-    pts = np.array([[r["efficiency_ratio"], r["dof_mm"]] for r in rows])
-    return sorted((rows[i] for i in pareto_front(pts)), key=lambda r: -r["dof_mm"])
+    depth = depth_key(next(iter(results.values())))
+    pts = np.array([[r["efficiency_ratio"], r[depth]] for r in rows])
+    return sorted((rows[i] for i in pareto_front(pts)), key=lambda r: -r[depth])
 
 
 def _exact_payload(payload: dict) -> dict:
@@ -568,7 +591,8 @@ def verify_front(
         return rec["result"] if rec is not None and rec["ok"] else None
 
     front = [_verified(r, exact_of(i)) for i, r in enumerate(res.pareto)]
-    pts = np.array([[r["efficiency_ratio"], r["dof_mm"]] for r in front]).reshape(-1, 2)
+    depth = depth_key(res)
+    pts = np.array([[r["efficiency_ratio"], r[depth]] for r in front]).reshape(-1, 2)
     for r, p in zip(front, pts, strict=True):
         r["exact_dominated_by"] = int((np.all(pts >= p, axis=1) & np.any(pts > p, axis=1)).sum())
     reference = res.reference

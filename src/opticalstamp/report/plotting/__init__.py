@@ -388,11 +388,12 @@ def plot_scan_profiles(profiles: list[dict]):
 def plot_pareto(res, title: str = ""):
     """Search: every feasible design, the Pareto front, and the base design."""
     fig, ax = _subplots(figsize=(7, 4.5))
+    key = res.meta.get("objective", "dof_mm")  # the search's depth objective
     feas = [r for r in res.records if r["feasible"]]
     bad = [r for r in res.records if r["ok"] and not r["feasible"]]
     if bad:
         ax.scatter(
-            [r["dof_mm"] for r in bad],
+            [r[key] for r in bad],
             [r["efficiency_ratio"] for r in bad],
             s=6,
             c="0.8",
@@ -400,7 +401,7 @@ def plot_pareto(res, title: str = ""):
         )
     if feas:
         ax.scatter(
-            [r["dof_mm"] for r in feas],
+            [r[key] for r in feas],
             [r["efficiency_ratio"] for r in feas],
             s=10,
             c="C0",
@@ -411,9 +412,9 @@ def plot_pareto(res, title: str = ""):
         # the front as the surrogate ranked it; where it was re-verified, each point's exact
         # figures too, joined to it (the exact ones are the figures of record)
         sur = [r.get("surrogate") or r for r in res.pareto]
-        order = sorted(range(len(sur)), key=lambda i: sur[i]["dof_mm"])
+        order = sorted(range(len(sur)), key=lambda i: sur[i][key])
         ax.plot(
-            [sur[i]["dof_mm"] for i in order],
+            [sur[i][key] for i in order],
             [sur[i]["efficiency_ratio"] for i in order],
             "o-",
             c="C3",
@@ -423,10 +424,10 @@ def plot_pareto(res, title: str = ""):
         ex = [(s, r) for s, r in zip(sur, res.pareto, strict=True) if r.get("exact")]
         if ex:
             for s, r in ex:
-                ax.plot([s["dof_mm"], r["dof_mm"]], [s["efficiency_ratio"], r["efficiency_ratio"]],
+                ax.plot([s[key], r[key]], [s["efficiency_ratio"], r["efficiency_ratio"]],
                         c="C3", lw=0.6, ls=":")  # fmt: skip
             ax.plot(
-                [r["dof_mm"] for _, r in ex],
+                [r[key] for _, r in ex],
                 [r["efficiency_ratio"] for _, r in ex],
                 "D",
                 mfc="none",
@@ -437,14 +438,15 @@ def plot_pareto(res, title: str = ""):
             )
     if res.reference:
         ax.plot(
-            res.reference["dof_mm"],
+            res.reference[key],
             res.reference["efficiency_ratio"],
             "*",
             c="k",
             ms=14,
             label=f"base design ({res.base})",
         )
-    ax.set_xlabel(f"depth of field at {res.meta['dof_dpi']:g} dpi (mm)")
+    what = "restored depth of field" if key == "restored_dof_mm" else "depth of field"
+    ax.set_xlabel(f"{what} at {res.meta['dof_dpi']:g} dpi (mm)")
     ax.set_ylabel("light efficiency, own path (ratio to F10 lens)")
     ax.set_yscale("log")
     ax.legend(fontsize=7)
