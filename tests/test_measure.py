@@ -122,3 +122,27 @@ def test_sfr_along_x_and_y_of_a_slanted_square():
         np.testing.assert_allclose(
             r["sfr"][m], np.exp(-2 * np.pi**2 * sig**2 * f[m] ** 2), atol=0.02
         )
+
+
+@pytest.mark.parametrize("amp, sigma", [(0.3, 0.01), (0.1, 0.02)])
+def test_fundamental_amplitude_cnr_and_overshoot(amp, sigma):
+    """A sinusoidal chart 0.5 + amp cos (period 254 um at 300 dpi) with white noise: the
+    fitted amplitude over the ideal's 2/pi, the contrast to noise 2 amp / sigma, and the
+    overshoot past white or black, as constructed; the RMTF of an overshooting chart
+    clipped to [0, 1] is pinned at 1 while its amplitude is not."""
+    dpi = 300.0
+    px = 25400.0 / dpi
+    x = (np.arange(600) + 0.5) * px
+    rows = 200
+    rng = np.random.default_rng(1)
+    prof = 0.5 + amp * np.cos(2 * np.pi * x / 254.0)
+    prof[(x < 3000) | (x > 47000)] = 0.5
+    img = prof[None, :] + sigma * rng.standard_normal((rows, x.size))
+    (b,) = [b for b in measure_rmtf(img, dpi) if abs(b["period_um"] - 254) < 5]
+    assert b["amplitude_rel"] == pytest.approx(amp / (2 / np.pi), rel=0.02)
+    assert b["cnr"] == pytest.approx(2 * amp / sigma, rel=0.05)
+    over = np.clip(0.5 + 0.7 * np.cos(2 * np.pi * x / 254.0), -1, 2)[None, :].repeat(20, 0)
+    (o,) = [b for b in measure_rmtf(over, dpi) if abs(b["period_um"] - 254) < 5]
+    assert o["overshoot"] == pytest.approx(0.2, abs=0.02)
+    (c,) = [b for b in measure_rmtf(np.clip(over, 0, 1), dpi) if abs(b["period_um"] - 254) < 5]
+    assert c["rmtf"] == pytest.approx(1.0) and c["amplitude_rel"] < 1.0

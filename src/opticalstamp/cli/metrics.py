@@ -335,11 +335,16 @@ def measure_rmtf(
     if not blocks:
         fail(f"{image}: no bar blocks found (need >= 3 periods of equal bars along {axis})")
     data = {"image": str(image), "dpi": use, "blocks": blocks}
-    lines = [f"{image} at {use:g} dpi:", "period (um)   dpi    periods  Imax    Imin    RMTF"]
+    lines = [
+        f"{image} at {use:g} dpi (amplitude: the fitted fundamental over the ideal's; CNR: "
+        "contrast to noise; overshoot past white or black):",
+        "period (um)   dpi    periods  Imax    Imin    RMTF  amplitude      CNR  overshoot",
+    ]
     for b in blocks:
         lines.append(
             f"{b['period_um']:10.1f} {b['dpi']:6.1f} {b['n_periods']:8.1f} "
-            f"{b['imax']:7.4f} {b['imin']:7.4f} {b['rmtf']:7.4f}"
+            f"{b['imax']:7.4f} {b['imin']:7.4f} {b['rmtf']:7.4f} {b['amplitude_rel']:9.3f} "
+            f"{b['cnr']:8.1f} {b['overshoot']:10.3f}"
         )
     emit(data, as_json, lines)
 
