@@ -15,6 +15,7 @@ ORDER = (
     "validate",
     "units",
     "defaults",
+    "device",
     "design",
     "io",
     "raytrace",

@@ -38,6 +38,23 @@ def _version(value: bool) -> None:
 
 
 @app.callback()
+def _device(value: str | None) -> str | None:
+    """--device: checked now (exit 2 naming it), then handed to every ray launch of this
+    process and of its worker processes through OPTICALSTAMP_DEVICE."""
+    if value is None:
+        return None
+    import os
+
+    from ..device import ENV, resolve_device
+
+    try:
+        resolve_device(value)
+    except ValueError as err:
+        raise typer.BadParameter(str(err).replace("device: ", "")) from None
+    os.environ[ENV] = value.strip().lower()
+    return value
+
+
 def _options(
     version: Annotated[
         bool,
@@ -45,6 +62,15 @@ def _options(
             "--version", help="print the version and exit", callback=_version, is_eager=True
         ),
     ] = False,
+    device: Annotated[
+        str | None,
+        typer.Option(
+            "--device",
+            help="where rays are traced: auto (a CUDA GPU where opticalstamp[cuda] is "
+            "installed, else the CPU), cpu or cuda; default: OPTICALSTAMP_DEVICE, else auto",
+            callback=_device,
+        ),
+    ] = None,
 ) -> None:
     """Design and analyse lensless contact image scanners (optical stamps)."""
 

@@ -43,11 +43,14 @@ def to_json(data: dict) -> str:
 
 
 def provenance(design, seed: int | None) -> dict:
+    from ..device import resolve_device
+
     return {
         "design": design.name,
         "design_fingerprint": design.fingerprint(),
         "seed": seed,
         "opticalstamp_version": __version__,
+        "device": resolve_device(),  # where the rays were traced (cpu or cuda)
     }
 
 

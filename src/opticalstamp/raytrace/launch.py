@@ -16,6 +16,7 @@ import numba as nb
 import numpy as np
 from tqdm.auto import tqdm
 
+from ..device import resolve_device
 from .kernel import run_importance, run_plain, seed_key, trace_bundle
 from .sampling import Source, hole_targets
 from .stack import Path
@@ -116,6 +117,7 @@ def launch(
     first_id: int = 0,
     progress: bool = False,
     hole_weights: np.ndarray | None = None,
+    device: str | None = None,
 ) -> Iterator[RayBatch]:
     """Launch ``n_rays`` Lambertian rays from ``source`` and trace them, chunk by chunk.
 
@@ -124,6 +126,8 @@ def launch(
     Memory is bounded by ``chunk``; a tqdm bar is shown when ``progress``.
     ``hole_weights`` (one per lattice site) steers importance sampling towards the holes
     of the first mask that matter (see :func:`~opticalstamp.sources.hole_targets`).
+    ``device``: cpu, cuda or auto (:func:`~opticalstamp.device.resolve_device`;
+    None: the environment's OPTICALSTAMP_DEVICE, else auto); the same rays either way.
 
     Yields
     ------
@@ -133,6 +137,9 @@ def launch(
     if n_rays < 0:
         raise ValueError("n_rays must be >= 0")
     chunk = max(BLOCK, int(chunk))
+    gpu = None
+    if resolve_device(device) == "cuda":
+        from . import cuda as gpu
     n0 = float(path.slabs[0, 1])
     key = seed_key(seed, stream)
     if importance:
@@ -168,6 +175,17 @@ def launch(
             nb_ = (m + BLOCK - 1) // BLOCK
             counts = np.zeros(nb_, np.int64)
             ledger = np.zeros((nb_, npl, 4), np.int64)
+            if gpu is not None:
+                r = gpu.run(
+                    first_id + done, m, key, src, args, fresnel, n_pre, tg if importance else None
+                )
+                yield RayBatch(
+                    r["ids"], r["x"], r["y"], r["sx"], r["sy"], r["w"], r["hole_row"],
+                    r["hole_k"], r["ledger"], r["n_launched"], m,
+                )  # fmt: skip
+                done += m
+                bar.update(m)
+                continue
             if importance:
                 run_importance(
                     first_id + done,
