@@ -37,7 +37,6 @@ def _version(value: bool) -> None:
         raise typer.Exit()
 
 
-@app.callback()
 def _device(value: str | None) -> str | None:
     """--device: checked now (exit 2 naming it), then handed to every ray launch of this
     process and of its worker processes through OPTICALSTAMP_DEVICE."""
@@ -55,6 +54,7 @@ def _device(value: str | None) -> str | None:
     return value
 
 
+@app.callback()
 def _options(
     version: Annotated[
         bool,
