@@ -322,3 +322,26 @@ def test_cli_search_variants(tmp_path):
     assert len(d["variants"]) == 2 and (tmp_path / "v.v1.nc").exists()
     bad = runner.invoke(app, ["search", "--stagger", "maybe"])
     assert bad.exit_code == 2 and "--stagger" in bad.output
+
+
+def test_exact_search_and_tolerance(paper, dask_cluster):
+    """--estimator trace: every candidate's figures are the exact tracer's
+    (evaluate_exact of the same design, bit for bit), the same on one worker and on Dask;
+    a tolerance study traces its samples exactly too."""
+    from opticalstamp.design import with_stack
+    from opticalstamp.studies.tolerance import tolerance
+    from opticalstamp.studies.verify import EXACT, evaluate_exact
+
+    kw = dict(population=4, generations=1, seed=2, estimator="trace")
+    one = search(paper, workers=1, **kw)
+    dsk = search(paper, dask_address=dask_cluster, **kw)
+    assert one.meta["estimator"] == EXACT
+    assert [r["dof_mm"] for r in one.records] == [r["dof_mm"] for r in dsk.records]
+    r = next(r for r in one.records if r["ok"])
+    d = with_stack(paper, holes_um=r["holes_um"], thicknesses_um=r["thicknesses_um"])
+    ex = evaluate_exact(d, dpi=200.0, near_mm=one.meta["near_mm"], seed=2)
+    for k in ("dof_mm", "efficiency_ratio", "ghost_fraction", "diffraction_spill"):
+        assert r[k] == ex[k], k
+    t = tolerance(paper, samples=2, seed=1, workers=1, estimator="trace")
+    assert t.meta["estimator"] == EXACT and "nominal_exact" not in t.meta
+    assert t.nominal["estimator"] == EXACT

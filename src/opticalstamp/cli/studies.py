@@ -159,6 +159,14 @@ def search(
             "accuracy are flagged)",
         ),
     ] = True,
+    estimator: Annotated[
+        str,
+        typer.Option(
+            help="surrogate (closed form with a uniform ghost background, fast) or trace "
+            "(every design traced exactly: ghosts, light, RMTF, depth of field; on the GPU "
+            "with --device cuda)"
+        ),
+    ] = "surrogate",
     objective: Annotated[
         str,
         typer.Option(
@@ -191,6 +199,8 @@ def search(
 
     if objective not in OBJECTIVES:
         fail(f"--objective: must be one of {', '.join(OBJECTIVES)} (got {objective!r})")
+    if estimator not in ("surrogate", "trace"):
+        fail(f"--estimator: must be surrogate or trace (got {estimator!r})")
     _check_dask(dask)
     d = open_design(design)
     base = search_base(d, dpi)
@@ -213,6 +223,7 @@ def search(
             dask_address=dask,
             progress=not as_json,
             objective=objective,
+            estimator=estimator,
         )
         if verify:
             results = {
@@ -357,6 +368,14 @@ def tolerance(
     spec: Annotated[str | None, typer.Option(help="e.g. dof>=2.2,ghost<=0.2,rmtf@2>=0.35")] = (
         None
     ),
+    estimator: Annotated[
+        str,
+        typer.Option(
+            help="surrogate (closed form with a uniform ghost background, fast) or trace "
+            "(every design traced exactly: ghosts, light, RMTF, depth of field; on the GPU "
+            "with --device cuda)"
+        ),
+    ] = "surrogate",
     workers: WorkersOpt = None,
     dask: DaskOpt = None,
     output: OutputOpt = None,
@@ -369,6 +388,8 @@ def tolerance(
     from ..studies.tolerance import parse_spec, tolerance_dataset
     from ..studies.tolerance import tolerance as run
 
+    if estimator not in ("surrogate", "trace"):
+        fail(f"--estimator: must be surrogate or trace (got {estimator!r})")
     _check_dask(dask)
     d = open_design(design)
     try:
@@ -395,6 +416,7 @@ def tolerance(
             dask_address=dask,
             journal=journal_of(output),
             progress=not as_json,
+            estimator=estimator,
         )
     except (ValueError, OSError) as err:
         fail(str(err))
@@ -412,7 +434,8 @@ def tolerance(
     dp = data["dof_mm"]
     lines.append(
         f"  DOF median {dp['p50']:.2f} mm (5-95 %: {dp['p5']:.2f}-{dp['p95']:.2f}), "
-        f"nominal {r.nominal['dof_mm']:.2f} (surrogate)"
+        f"nominal {r.nominal['dof_mm']:.2f} "
+        + ("(exact tracer)" if estimator == "trace" else "(surrogate)")
     )
     ex = r.meta.get("nominal_exact")
     if ex:

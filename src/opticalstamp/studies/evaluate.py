@@ -63,6 +63,15 @@ def rmtf_with_background(
     return rmtf_curves(lsf, design, window_um=window_um, shift_step_um=shift_step_um)["max"][0]
 
 
+def diffraction_spill(design: Design, wavelength_um: float | None = None) -> float:
+    """The largest share of a layer's diffracted light outside its geometric shadow, at
+    ``wavelength_um`` (default: the design's), closed form."""
+    if wavelength_um is None:
+        wavelength_um = design.wavelength_um
+    diff = diffraction_budget(design, wavelengths_um=(wavelength_um,))
+    return max(row["outside_shadow"][f"{wavelength_um:g}"] for row in diff["layers"])
+
+
 def evaluate_design(
     design: Design,
     *,
@@ -100,8 +109,7 @@ def evaluate_design(
         zs = extended_z(zs)
         curve = rmtf_with_background(design, dpi, zs, ghost)
     at = {f"{z:g}": float(np.interp(z, zs, curve)) for z in rmtf_z_mm}
-    diff = diffraction_budget(design, wavelengths_um=(wavelength_um,))
-    spill = max(row["outside_shadow"][f"{wavelength_um:g}"] for row in diff["layers"])
+    spill = diffraction_spill(design, wavelength_um)
     tot = own + ghost
     restored_dof = None
     if restored:

@@ -29,7 +29,7 @@ from ..raytrace.stack import lattice_of
 from ..validate import check_seed
 from .evaluate import SURROGATE, evaluate_design
 from .runner import run_tasks, task_key
-from .verify import disagreements, exact_figures
+from .verify import EXACT, disagreements, evaluate_exact, exact_figures
 
 DEFAULT_SIGMAS = TOLERANCE_SIGMAS
 SPEC_RE = re.compile(r"^(dof|ghost_radius|ghost|efficiency|rmtf@[0-9.]+)(>=|<=)(-?[0-9.]+)$")
@@ -81,7 +81,12 @@ def apply_errors(design: Design, errors: dict) -> Design:
 
 def _evaluate_payload(payload: dict) -> dict:
     base = design_from_dict(payload["base"], "tolerance base")
-    return evaluate_design(apply_errors(base, payload["errors"]), **payload["options"])
+    d = apply_errors(base, payload["errors"])
+    opts = dict(payload["options"])
+    if opts.pop("estimator", "surrogate") == "trace":
+        opts.pop("ghost_rays", None)  # the exact tracer's own ray counts
+        return evaluate_exact(d, **opts)
+    return evaluate_design(d, **opts)
 
 
 def parse_spec(text: str | None) -> list[tuple[str, str, float]]:
@@ -296,6 +301,7 @@ def tolerance(
     journal=None,
     progress: bool = False,
     verify: bool = True,
+    estimator: str = "surrogate",
 ) -> ToleranceResult:
     """Monte Carlo of assembly errors, sensitivity table and yield (see module doc).
 
@@ -303,7 +309,12 @@ def tolerance(
     (:func:`~opticalstamp.studies.verify.exact_figures`); its figures are in
     ``meta["nominal_exact"]`` and the figures where the surrogate is off beyond its stated
     accuracy in ``meta["nominal_disagrees"]`` (the samples are the surrogate's).
+    ``estimator``: "surrogate" or "trace" (every sample traced exactly,
+    :func:`~opticalstamp.studies.verify.evaluate_exact`; the nominal then needs no
+    re-verification).
     """
+    if estimator not in ("surrogate", "trace"):
+        raise ValueError(f"estimator: must be surrogate or trace (got {estimator!r})")
     check_seed(seed)
     sg = DEFAULT_SIGMAS | (sigmas or {})
     if any(v < 0 for v in sg.values()):
@@ -318,6 +329,8 @@ def tolerance(
         "ghost_rays": ghost_rays,
         "seed": seed,
     }
+    if estimator == "trace":
+        options["estimator"] = "trace"
 
     def task(errors: dict) -> tuple[str, dict]:
         p = {"base": base, "errors": errors, "options": options}
@@ -394,8 +407,11 @@ def tolerance(
         sensitivity=table,
         spec=spec or "",
         yield_fraction=yld,
-        meta={"ghost_rays": ghost_rays, "estimator": SURROGATE}
-        | _nominal_exact(design, nominal, dpi, z_mm, seed, verify),
+        meta={
+            "ghost_rays": ghost_rays,
+            "estimator": SURROGATE if estimator == "surrogate" else EXACT,
+        }
+        | _nominal_exact(design, nominal, dpi, z_mm, seed, verify and estimator == "surrogate"),
     )
 
 

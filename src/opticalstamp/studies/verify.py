@@ -113,6 +113,45 @@ def exact_figures(
     }
 
 
+def evaluate_exact(
+    design: Design,
+    *,
+    dpi: float = 200.0,
+    rmtf_z_mm=(1.0, 2.0, 3.0),
+    near_mm: float = 1.0,
+    seed: int = 0,
+    restored: bool = False,
+    ghost_rays: int = EXACT_GHOST_RAYS,
+    lsf_rays: int = EXACT_LSF_RAYS,
+    wavelength_um: float | None = None,
+) -> dict:
+    """Every figure of :func:`~opticalstamp.studies.evaluate.evaluate_design` with the
+    exact tracer in place of the surrogate (the estimator of ``search --estimator trace``
+    and ``tolerance --estimator trace``): ghosts, light, RMTF and depth of field traced
+    (:func:`exact_figures`), the diffraction spill in closed form, and with ``restored``
+    the restored depth of field in closed form at the traced ghost fraction."""
+    from .evaluate import diffraction_spill
+
+    out = exact_figures(
+        design,
+        dpi=dpi,
+        rmtf_z_mm=rmtf_z_mm,
+        near_mm=near_mm,
+        ghost_rays=ghost_rays,
+        lsf_rays=lsf_rays,
+        seed=seed,
+    )
+    out["diffraction_spill"] = diffraction_spill(design, wavelength_um)
+    out["restored_dof_mm"] = None
+    if restored:
+        from .restoration import restored_dof_closed_form
+
+        out["restored_dof_mm"] = restored_dof_closed_form(
+            design, dpi=dpi, ghost_fraction=out["ghost_fraction"]
+        )["dof_mm"]
+    return out
+
+
 def disagreements(surrogate: dict, exact: dict, accuracy=SURROGATE_ACCURACY) -> list[str]:
     """The figures where the surrogate is further from the exact tracer than its stated
     accuracy (``SURROGATE_ACCURACY``, in the regime of the exact ghost fraction): "dof_mm",
