@@ -74,6 +74,14 @@ def test_cuda_refused_without_a_gpu(tmp_path):
     res = run(["--device", "cuda", "ghosts", "--rays", "100000"])
     assert_clean_refusal(res, ("--device",))
     assert_clean_refusal(run(["--device", "tpu", "ghosts"]), ("--device",))
+    for value in ("cuda", "tpu"):  # from the environment: named as such, no traceback
+        res = subprocess.run(
+            [sys.executable, "-c", "from opticalstamp.cli import main; main()", "ghosts"],
+            capture_output=True, text=True, cwd=ROOT, timeout=120,
+            env=os.environ | {"OPTICALSTAMP_DEVICE": value, "PYTHONPATH": str(ROOT / "src")},
+        )  # fmt: skip
+        assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+        assert "OPTICALSTAMP_DEVICE" in res.stderr
 
 
 def test_the_cpu_path_imports_nothing_of_numba_cuda():

@@ -189,6 +189,33 @@ def test_restore_bad_inputs(tmp_path):
         assert_clean_refusal(run(args), names, out)
 
 
+def test_restore_refuses_to_overwrite_or_guess(tmp_path):
+    """The output may not replace the scan or its sidecar; a restoration's own sidecar
+    states no scan height; a rod-lens design is refused before `scan --restore` writes
+    anything; a height-map scan is not given one estimated height."""
+    assert run(["chart", "bars", "-o", tmp_path / "bars.png"]).exit_code == 0
+    res = run(
+        ["scan", tmp_path / "bars.png", "-o", tmp_path / "s.tif", "--z", "3", "--restore", "rl"]
+    )
+    assert res.exit_code == 0, res.output
+    before = sorted(p.name for p in tmp_path.iterdir())
+    s, rod = tmp_path / "s.tif", ["--design", "sla-1row-12deg"]
+    for args, names in (
+        (["restore", s, "-o", s], ("-o",)),
+        (["restore", s, "-o", tmp_path / "s.png"], ("-o",)),
+        (["restore", tmp_path / "s-restored.tif", "-o", tmp_path / "r2.tif"], ("--z",)),
+        (["restore", s, "-o", tmp_path / "r3.tif", *rod], ("--design",)),
+        (["scan", tmp_path / "bars.png", "-o", tmp_path / "t.png", "--z", "1", "--restore", "tv",
+          *rod], ("--restore",)),
+    ):  # fmt: skip
+        assert_clean_refusal(run(args), names)
+        assert sorted(p.name for p in tmp_path.iterdir()) == before, args
+    hm = ["scan", tmp_path / "bars.png", "-o", tmp_path / "h.tif", "--height-map", "tilt:2:3"]
+    assert run(hm).exit_code == 0
+    res = run(["restore", tmp_path / "h.tif", "-o", tmp_path / "hr.tif", "--estimate-height"])
+    assert_clean_refusal(res, ("--estimate-height",))
+
+
 @pytest.mark.parametrize("z", [1.0, 3.1])
 def test_height_estimated_from_text_or_refused(paper, z):
     """Black-and-white text: the height whose restoration is most black-and-white is the

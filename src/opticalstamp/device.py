@@ -13,11 +13,13 @@ from __future__ import annotations
 import importlib.util
 import os
 
+from .validate import InputError
+
 DEVICES = ("auto", "cpu", "cuda")
 ENV = "OPTICALSTAMP_DEVICE"
 
 
-class DeviceUnavailable(ValueError):
+class DeviceUnavailable(InputError):
     """CUDA asked for where it cannot run."""
 
 
@@ -38,10 +40,14 @@ def resolve_device(name: str | None = None) -> str:
     """``cpu`` or ``cuda`` for ``name`` (None: the environment's ``OPTICALSTAMP_DEVICE``,
     else ``auto``). ``auto`` is ``cuda`` only with the numba-cuda package and a real GPU
     (never the simulator). Raises :class:`DeviceUnavailable` for ``cuda`` where it cannot
-    run and ValueError for a name not in :data:`DEVICES`."""
+    run and :class:`~opticalstamp.validate.InputError` for a name not in :data:`DEVICES`
+    (naming OPTICALSTAMP_DEVICE where the name came from it)."""
+    where = "device"
+    if name is None and os.environ.get(ENV):
+        where = ENV  # named where it came from: the environment
     name = (name or os.environ.get(ENV) or "auto").strip().lower()
     if name not in DEVICES:
-        raise ValueError(f"device: must be one of {', '.join(DEVICES)} (got {name!r})")
+        raise InputError(f"{where}: must be one of {', '.join(DEVICES)} (got {name!r})")
     if name == "cpu":
         return "cpu"
     if name == "auto":
@@ -51,5 +57,5 @@ def resolve_device(name: str | None = None) -> str:
         return "cuda" if _cuda_ready()[0] else "cpu"
     ok, why = _cuda_ready()
     if not ok:
-        raise DeviceUnavailable(f"device cuda: {why}")
+        raise DeviceUnavailable(f"{where} cuda: {why}")
     return "cuda"

@@ -73,6 +73,15 @@ def _options(
     ] = None,
 ) -> None:
     """Design and analyse lensless contact image scanners (optical stamps)."""
+    import os
+
+    from ..device import ENV, resolve_device
+
+    if device is None and os.environ.get(ENV):  # the environment's choice, checked first
+        try:
+            resolve_device()
+        except InputError as err:
+            fail(str(err))
 
 
 def command(*args, **kwargs):

@@ -46,6 +46,18 @@ def _outputs(output: Path) -> tuple[Path, Path, Path]:
     return png, tif, sidecar
 
 
+def check_stamp(d, option: str) -> None:
+    """Restoration kernels exist for stamps only: refuse a rod-lens array up front."""
+    from ..design import RodLensDesign
+
+    if isinstance(d, RodLensDesign):
+        fail(
+            f"{option}: {d.name} is a rod-lens array; restoration kernels are built for "
+            "aperture-array stamps (a rod-lens array's pixels sit at varying phases of its "
+            "rod lattice)"
+        )
+
+
 def restore_and_write(
     img: np.ndarray,
     dpi: float,
@@ -67,7 +79,8 @@ def restore_and_write(
     try:
         r = restore_scan(img, d, z_mm=z, height_map=hm, method=method, settings=settings, seed=seed)
     except ValueError as err:
-        fail(str(err).replace("z_mm:", "--z:").replace("height_map:", "--height-map:"))
+        msg = str(err).replace("z_mm:", "--z:").replace("height_map:", "--height-map:")
+        fail(msg.replace("design:", "--design:"))
     meta = provenance(d, seed) | {"restoration": r.meta, "output_dpi": dpi} | extra
     # overshoot past black or white by more than 5 % of white, clipped in the files
     meta["clipped_fraction"] = float(np.mean((r.image < -0.05) | (r.image > 1.05)))
@@ -137,12 +150,23 @@ def restore(
 
     if method not in METHODS:
         fail(f"--method: must be one of {', '.join(METHODS)} (got {method!r})")
+    inputs = {scan.resolve(), scan.with_suffix(".json").resolve()}
+    if any(p.resolve() in inputs for p in _outputs(output)):
+        fail(f"-o: {output} would overwrite the scan {scan} or its sidecar; choose another name")
     side = _sidecar(scan) or {}
+    if "restoration" in side:
+        side = {}  # a restoration's sidecar: it states no scan to restore (see below)
+        restored_before = True
+    else:
+        restored_before = False
+    if side.get("color"):
+        fail(f"{scan}: a colour scan (its sidecar says so); restoration takes a grey scan")
     img, dpi = read_scan_image(scan, None, linear, min_px=4)
     if img.ndim != 2:
         fail(f"{scan}: restoration takes a grey scan (got {img.shape[2]} channels)")
     spec = design or side.get("design_source") or side.get("design") or "paper2016"
     d = open_design(spec, kinds=BOTH_KINDS)
+    check_stamp(d, "--design")
     if design is None and side.get("design_fingerprint") not in (None, d.fingerprint()):
         fail(
             f"--design: {spec} is not the design the scan was made with (fingerprint "
@@ -162,6 +186,11 @@ def restore(
 
         if z is not None or height_map is not None:
             fail("--estimate-height: not with --z or --height-map")
+        if side.get("height_map"):
+            fail(
+                "--estimate-height: the scan was made over a height map (one height cannot "
+                "stand for it); give --height-map, or none to use the sidecar's"
+            )
         try:
             est = find_height(img, d, settings=st, seed=seed)
         except ValueError as err:
@@ -178,9 +207,14 @@ def restore(
         else:
             z = side.get("z_mm")
             if z is None:
-                fail("--z: the float height is needed (the scan has no sidecar stating it)")
+                why = (
+                    "its sidecar is a restoration's, which states no scan height"
+                    if restored_before
+                    else "the scan has no sidecar stating it"
+                )
+                fail(f"--z: the float height is needed ({why}; or --estimate-height)")
     elif height_map is not None and z is not None:
-        fail("give one of --z MM and --height-map FILE|SHAPE")
+        fail("--height-map: not with --z (give one of them)")
     if height_map is not None:
         p = pitch_of_dpi(dpi)
         try:
@@ -206,8 +240,9 @@ def restore(
             if hm is None
             else f"heights {r['levels_mm'][0]:g}-{r['levels_mm'][-1]:g} mm"
         )
-        + f" with design {d.name}: noise {r['sigma']:.4f} per pixel (sensor and model error "
-        f"{r['model_error']:g}); {meta['clipped_fraction']:.1%} of the pixels overshoot by "
+        + f" with design {d.name}, regularised for the scan's noise of {r['sigma']:.4f} per "
+        f"pixel (sensor at mid-grey and model error {r['model_error']:g}); "
+        f"{meta['clipped_fraction']:.1%} of the restored pixels overshoot white or black by "
         "more than 5 % (clipped in the files)"
     ]
     emit(meta, as_json, lines)

@@ -212,6 +212,10 @@ def scan(
         restored_out = output.with_name(output.stem + "-restored" + output.suffix)
         _scan_outputs(restored_out)
     d = open_design(design, kinds=BOTH_KINDS)
+    if restore is not None:
+        from .restore import check_stamp
+
+        check_stamp(d, "--restore")
     st = _settings(
         illumination,
         kernel,

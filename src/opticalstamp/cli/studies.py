@@ -252,7 +252,9 @@ def search(
         f"{base.name}: {sum(len(v.records) for v in results.values())} designs in "
         f"{len(results)} variant(s); Pareto front (holes and slabs in um, object side first)"
         + (
-            "; figures from the exact tracer, the surrogate's in brackets:"
+            "; every design traced exactly (--estimator trace):"
+            if estimator == "trace"
+            else "; figures from the exact tracer, the surrogate's in brackets:"
             if verify
             else "; figures from the surrogate (--no-verify):"
         )

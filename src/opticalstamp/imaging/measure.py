@@ -52,7 +52,8 @@ def _fundamental(
         coef = np.linalg.lstsq(m, p[i], rcond=None)[0]
         best = max(best, float(np.hypot(coef[0], coef[1])))
     sigma = float(rows[:, i].std(axis=0, ddof=1).mean()) if rows.shape[0] > 1 else 0.0
-    return best, (2 * best / sigma if sigma > 0 else float("inf"))
+    # no noise to speak of (a noiseless chart: rounding only): contrast to noise unbounded
+    return best, (2 * best / sigma if sigma > 1e-9 * max(best, 1e-12) else float("inf"))
 
 
 def _crossings(p: np.ndarray, mid: np.ndarray) -> np.ndarray:

@@ -299,7 +299,9 @@ def build_report(
             )
         clock.lap("scans")
         with background.cores():
-            restoration = _restoration(design, work, seed=seed, fresnel=fresnel, tracer=tracer)
+            restoration = _restoration(
+                design, work, seed=seed, fresnel=fresnel, tracer=tracer, dof_dpi=dpi
+            )
         clock.lap("restoration")
         figures = {
             "stack.png": plot_stack(design),
@@ -681,7 +683,13 @@ def _scans(
 
 
 def _restoration(
-    design: Design, work: Work, *, seed: int, fresnel: bool, tracer: PixelTracer
+    design: Design,
+    work: Work,
+    *,
+    seed: int,
+    fresnel: bool,
+    tracer: PixelTracer,
+    dof_dpi: float = DOF_DPI,
 ) -> dict:
     """Restoration with the known blur (issue 13): the study against height, text crops
     raw and restored, OCR of small text before and after."""
@@ -707,6 +715,7 @@ def _restoration(
         settings=page,
         seed=seed,
         tracer=tracer,
+        dpi=dof_dpi,
     )
     dpi = work.scan_dpi
     panel_z = (2.5, 3.5, 4.5)

@@ -742,7 +742,8 @@ def _summary_html(s: dict | None) -> str:
             else f"{c['spec']}: "
             + ("PASS" if c["pass"] else ("FAIL" if c["pass"] is False else "not computed"))
         )
-        what = f["what"] + (f" at {s['dof_dpi']:g} dpi" if f["figure"] == "dof" else "")
+        dof_like = f["figure"] in ("dof", "restored_dof")
+        what = f["what"] + (f" at {s['dof_dpi']:g} dpi" if dof_like else "")
         row = [what, shown, verdict]
         if paper:
             p = f["paper"]

@@ -22,6 +22,10 @@ FIGURES = MappingProxyType(
     {
         "ghost_radius": ("ghost-free radius on the object plane", "mm"),
         "dof": ("depth of field", "mm"),
+        "restored_dof": (
+            "depth of field restored with the known blur (Wiener, height known)",
+            "mm",
+        ),
         "light": ("light vs the F/10 lens (own path)", ""),
         "f_number": ("working F-number", ""),
         "vs_rod_lens": ("light vs a 1-row 12-degree rod-lens array", ""),
@@ -87,7 +91,11 @@ def headline_figures(data: dict) -> dict:
         "thickness": data["stack"][0]["z_top_um"] / 1000 if data.get("stack") else None,
         "vs_rod_lens": None,
         "yield": None,
+        "restored_dof": None,
     }
+    rest = data.get("restoration")
+    if rest and "wiener" in rest["study"]["dof"]:
+        values["restored_dof"] = rest["study"]["dof"]["wiener"]["dof_mm"]
     rod = data.get("rodlens")
     if rod and len(rod["rows"]) > 1:
         values["vs_rod_lens"] = rod["rows"][0]["light_vs_f10"] / rod["rows"][1]["light_vs_f10"]
@@ -119,7 +127,12 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
                 "what": what,
                 "value": values[name],
                 "unit": unit,
-                "bound": name == "dof" and bool(r.get("dof_open_ended", {}).get(key)),
+                "bound": (name == "dof" and bool(r.get("dof_open_ended", {}).get(key)))
+                or (
+                    name == "restored_dof"
+                    and bool(data.get("restoration"))
+                    and bool(data["restoration"]["study"]["dof"]["wiener"]["open_ended"])
+                ),
                 "check": checks.get(name),
                 "paper": PAPER.get(name) if paper else None,
             }
