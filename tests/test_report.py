@@ -34,8 +34,20 @@ def test_report_writes_every_section(tmp_path):
         "rodlens",
         "stack",
         "summary",
+        "restoration",
     ):
         assert key in d, key
+    # restoration with the known blur: every method carries the depth of field beyond the
+    # raw scan's and below the ceiling, the transfer function's zero; in the verdict too
+    st = d["restoration"]["study"]
+    raw = st["dof"]["raw"]["dof_mm"]
+    assert all(
+        raw < st["dof"][m]["dof_mm"] < st["transfer_zero_mm"] for m in ("wiener", "rl", "tv")
+    )
+    verdict = {f["figure"]: f["value"] for f in d["summary"]["figures"]}
+    assert verdict["restored_dof"] == st["dof"]["wiener"]["dof_mm"]
+    if d["scans"]["ocr"]:  # tesseract present
+        assert {o["version"] for o in d["restoration"]["ocr"]} >= {"raw", "wiener"}
     assert d["provenance"]["design"] == "paper2016" and d["provenance"]["seed"] == 0
     assert "opticalstamp_version" in d["provenance"]
     page = (out / "index.html").read_text()
@@ -53,6 +65,7 @@ def test_report_writes_every_section(tmp_path):
         "The stamp against a rod-lens array",
         "The design as built",
         "Verdict",
+        "Restoration with the known blur",
     ):
         assert heading in page, heading
     figures = [
@@ -70,6 +83,8 @@ def test_report_writes_every_section(tmp_path):
         "scan_profiles",
         "scan_lines",
         "scan_tilt",
+        "restore_curves",
+        "restore_text",
         "pareto",
         "tolerance",
         "rodlens_contrast",

@@ -172,6 +172,7 @@ def _work(quick: bool, n_rays: int) -> Work:
             "Fig. 1 concepts: 2^18 rays each",
             "RMTF: 2^19 rays per pixel row, Z every 0.5 mm",
             "simulated scans: 600-dpi charts, kernels from 2^18 rays",
+            "restoration: Wiener only, at Z = 1.5, 3, 4.5 mm, no OCR",
         ),
     )
 
