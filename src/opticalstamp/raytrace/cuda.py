@@ -195,7 +195,7 @@ def _zero(led, launched, npl):
     cuda.syncthreads()
 
 
-@cuda.jit
+@cuda.jit(cache=True)  # compiled once, kept between processes where numba-cuda can
 def plain_kernel(
     first_id, n_rays, key, src, slabs, n_out, masks, lat, lim, fresnel,
     hrow, hk, out, o_id, o_hrow, o_hk, count, ledger, n_launched,
@@ -227,7 +227,7 @@ def plain_kernel(
     _flush(led, launched, ledger, n_launched, npl)
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def importance_kernel(
     first_id, n_rays, key, src, slabs, n_out, masks, lat, lim, fresnel, n_pre,
     tgt_x, tgt_y, tgt_prob, tgt_alias, tgt_q,
