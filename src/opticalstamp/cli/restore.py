@@ -12,6 +12,7 @@ import typer
 from ..units import pitch_of_dpi, um_to_mm
 from .common import BOTH_KINDS, JsonOpt, command, emit, fail, number, open_design, writable
 from .metrics import ImageArg, LinearOpt, read_scan_image
+from .scan import image_set_paths
 
 MethodOpt = Annotated[
     str,
@@ -33,17 +34,6 @@ def _sidecar(scan: Path) -> dict | None:
     if not isinstance(data, dict):
         fail(f"{path}: the scan's sidecar is not a JSON object")
     return data
-
-
-def _outputs(output: Path) -> tuple[Path, Path, Path]:
-    from ..validate import check_output_path
-
-    png = output if output.suffix.lower() == ".png" else output.with_suffix(".png")
-    tif = output if output.suffix.lower() != ".png" else output.with_suffix(".tif")
-    sidecar = output.with_suffix(".json")
-    for p in (png, tif, sidecar):
-        check_output_path(p, "-o")
-    return png, tif, sidecar
 
 
 def check_stamp(d, option: str) -> None:
@@ -75,7 +65,7 @@ def restore_and_write(
     from ..imaging.restore import restore_scan
     from ..io.files import encode_png, encode_tiff16, provenance, to_json, write_set
 
-    png, tif, sidecar = _outputs(output)
+    png, tif, sidecar = image_set_paths(output)
     try:
         r = restore_scan(img, d, z_mm=z, height_map=hm, method=method, settings=settings, seed=seed)
     except ValueError as err:
@@ -151,7 +141,7 @@ def restore(
     if method not in METHODS:
         fail(f"--method: must be one of {', '.join(METHODS)} (got {method!r})")
     inputs = {scan.resolve(), scan.with_suffix(".json").resolve()}
-    if any(p.resolve() in inputs for p in _outputs(output)):
+    if any(p.resolve() in inputs for p in image_set_paths(output)):
         fail(f"-o: {output} would overwrite the scan {scan} or its sidecar; choose another name")
     side = _sidecar(scan) or {}
     if "restoration" in side:

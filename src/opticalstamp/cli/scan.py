@@ -115,8 +115,9 @@ def _settings(
         fail(f"--{name}: {e['msg']} (got {e.get('input')!r})")
 
 
-def _scan_outputs(output: Path) -> tuple[Path, Path, Path]:
-    """The PNG, TIFF and JSON of a scan set; the name given with -o keeps its spelling."""
+def image_set_paths(output: Path) -> tuple[Path, Path, Path]:
+    """The PNG, TIFF and JSON of an image set (a scan, a restoration); the name given with
+    -o keeps its spelling; each checked as a writable -o."""
     png = output if output.suffix.lower() == ".png" else output.with_suffix(".png")
     tif = output if output.suffix.lower() != ".png" else output.with_suffix(".tif")
     sidecar = output.with_suffix(".json")
@@ -201,7 +202,7 @@ def scan(
     from ..imaging.scan import simulate_scan
     from ..io.files import encode_png, encode_tiff16, provenance, to_json, write_set
 
-    png, tif, sidecar = _scan_outputs(output)
+    png, tif, sidecar = image_set_paths(output)
     if restore is not None:
         from ..imaging.restore import METHODS
 
@@ -210,7 +211,7 @@ def scan(
         if color:
             fail("--restore: restoration takes a grey scan (not with --color)")
         restored_out = output.with_name(output.stem + "-restored" + output.suffix)
-        _scan_outputs(restored_out)
+        image_set_paths(restored_out)
     d = open_design(design, kinds=BOTH_KINDS)
     if restore is not None:
         from .restore import check_stamp

@@ -93,6 +93,25 @@ def _pins(text: str | None) -> dict:
     return out
 
 
+EstimatorOpt = Annotated[
+    str,
+    typer.Option(
+        help="surrogate (closed form with a uniform ghost background, fast) or trace "
+        "(every design traced exactly: ghosts, light, RMTF, depth of field; on the GPU "
+        "with --device cuda)"
+    ),
+]
+
+
+def _check_estimator(name: str) -> None:
+    from ..studies.verify import check_estimator
+
+    try:
+        check_estimator(name)
+    except ValueError as err:
+        fail(f"--{err}")
+
+
 @command()
 def search(
     dpi: Annotated[
@@ -159,14 +178,7 @@ def search(
             "accuracy are flagged)",
         ),
     ] = True,
-    estimator: Annotated[
-        str,
-        typer.Option(
-            help="surrogate (closed form with a uniform ghost background, fast) or trace "
-            "(every design traced exactly: ghosts, light, RMTF, depth of field; on the GPU "
-            "with --device cuda)"
-        ),
-    ] = "surrogate",
+    estimator: EstimatorOpt = "surrogate",
     objective: Annotated[
         str,
         typer.Option(
@@ -199,8 +211,7 @@ def search(
 
     if objective not in OBJECTIVES:
         fail(f"--objective: must be one of {', '.join(OBJECTIVES)} (got {objective!r})")
-    if estimator not in ("surrogate", "trace"):
-        fail(f"--estimator: must be surrogate or trace (got {estimator!r})")
+    _check_estimator(estimator)
     _check_dask(dask)
     d = open_design(design)
     base = search_base(d, dpi)
@@ -370,14 +381,7 @@ def tolerance(
     spec: Annotated[str | None, typer.Option(help="e.g. dof>=2.2,ghost<=0.2,rmtf@2>=0.35")] = (
         None
     ),
-    estimator: Annotated[
-        str,
-        typer.Option(
-            help="surrogate (closed form with a uniform ghost background, fast) or trace "
-            "(every design traced exactly: ghosts, light, RMTF, depth of field; on the GPU "
-            "with --device cuda)"
-        ),
-    ] = "surrogate",
+    estimator: EstimatorOpt = "surrogate",
     workers: WorkersOpt = None,
     dask: DaskOpt = None,
     output: OutputOpt = None,
@@ -390,8 +394,7 @@ def tolerance(
     from ..studies.tolerance import parse_spec, tolerance_dataset
     from ..studies.tolerance import tolerance as run
 
-    if estimator not in ("surrogate", "trace"):
-        fail(f"--estimator: must be surrogate or trace (got {estimator!r})")
+    _check_estimator(estimator)
     _check_dask(dask)
     d = open_design(design)
     try:

@@ -36,8 +36,8 @@ from scipy import ndimage, signal
 
 from ..design import AnyDesign, RodLensDesign
 from ..raytrace.stack import lattice_of
-from .kernels import KernelCache, ScanKernel, scan_kernels
-from .scan import ScanSettings, pixel_groups, scan_pitch
+from .kernels import KernelCache, ScanKernel
+from .scan import ScanSettings, kernels_for, pixel_groups, scan_pitch
 
 #: output pixels kept beyond a kernel's support for the band-limited kernel's tails
 KERNEL_MARGIN = 24
@@ -167,17 +167,8 @@ def output_kernel(
             "array's pixels sit at varying phases of its rod lattice (not built)"
         )
     st = settings or ScanSettings()
-    how = {
-        "source": st.kernel,
-        "ghosts": ghosts,
-        "n_rays": st.kernel_rays,
-        "seed": seed,
-        "fresnel": st.fresnel,
-    }
-    if kernels is None:
-        kern = scan_kernels(design, [z_mm], **how)
-    elif isinstance(kernels, KernelCache):
-        kern = kernels.lookup(design, [z_mm], **how)
+    if kernels is None or isinstance(kernels, KernelCache):
+        kern = kernels_for(design, [z_mm], st, seed=seed, ghosts=ghosts, kernels=kernels)
     else:
         kern = kernels
     p = scan_pitch(design)

@@ -40,7 +40,7 @@ from ..design import Design
 from .heightmap import Z_RANGE_MM
 from .heightmap import sample as sample_height
 from .outputkernel import OutputKernel, ghost_background, output_kernel
-from .scan import ScanSettings, prepare_kernels, scan_levels, scan_pitch
+from .scan import ScanSettings, kernels_for, prepare_kernels, scan_levels, scan_pitch
 from .sensor import SensorModel
 
 METHODS = ("wiener", "rl", "tv")
@@ -442,23 +442,7 @@ def restore_scan(
         if not np.all(np.isfinite(hm)) or hm.min() < Z_RANGE_MM[0] or hm.max() > Z_RANGE_MM[1]:
             raise ValueError(f"height_map: heights must be finite and lie in {list(Z_RANGE_MM)} mm")
     levels = scan_levels(z_mm, height_map, st.z_step_mm)
-    cache = prepare_kernels(
-        design,
-        z_mm=[z_mm] if z_mm is not None else [],
-        height_maps=[height_map] if height_map is not None else [],
-        settings=st,
-        seed=seed,
-        ghosts=ghosts,
-    )
-    kern = cache.lookup(
-        design,
-        levels,
-        source=st.kernel,
-        ghosts=ghosts,
-        n_rays=st.kernel_rays,
-        seed=seed,
-        fresnel=st.fresnel,
-    )
+    kern = kernels_for(design, levels, st, seed=seed, ghosts=ghosts)
     out = np.zeros_like(g)
     metas = []
     if height_map is not None:

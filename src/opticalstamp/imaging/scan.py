@@ -271,6 +271,31 @@ def prepare_kernels(
     )
 
 
+def kernels_for(
+    design: AnyDesign,
+    levels,
+    settings: ScanSettings,
+    *,
+    seed: int,
+    ghosts: bool = True,
+    kernels: KernelCache | None = None,
+    progress: bool = False,
+) -> list[list[ScanKernel]]:
+    """The scan kernels [row][level] at ``levels`` for ``settings`` (kernel source, rays,
+    Fresnel) and ``seed``: looked up in ``kernels`` (built beforehand by
+    :func:`prepare_kernels`; ValueError where they do not fit) or built here."""
+    how = {
+        "source": settings.kernel,
+        "ghosts": ghosts,
+        "n_rays": settings.kernel_rays,
+        "seed": seed,
+        "fresnel": settings.fresnel,
+    }
+    if kernels is None:
+        return scan_kernels(design, levels, progress=progress, **how)
+    return kernels.lookup(design, levels, **how)
+
+
 def simulate_scan(
     doc: np.ndarray,
     doc_dpi: float,
@@ -332,17 +357,9 @@ def simulate_scan(
     )
     y_line = np.cumsum(step) - step / 2
     levels = scan_levels(z_mm, height_map, st.z_step_mm)
-    how = {
-        "source": st.kernel,
-        "ghosts": ghosts,
-        "n_rays": st.kernel_rays,
-        "seed": seed,
-        "fresnel": st.fresnel,
-    }
-    if kernels is None:
-        kern = scan_kernels(design, levels, progress=progress, **how)
-    else:
-        kern = kernels.lookup(design, levels, **how)
+    kern = kernels_for(
+        design, levels, st, seed=seed, ghosts=ghosts, kernels=kernels, progress=progress
+    )
     kern = [kern[g.kernel] for g in groups]
     n_rows = len(groups)
     n_ch = doc.shape[2]

@@ -481,30 +481,25 @@ def _quality(
     dpis = list(PAPER_DPI) + ([] if float(dof_dpi) in PAPER_DPI else [float(dof_dpi)])
     periods = [period_of_dpi(d) for d in dpis]
     zs = np.asarray(DEFAULT_Z_MM if work.lsf_z_mm is None else work.lsf_z_mm)
-    # all light and the own path alone from one trace per row
-    lsf, lsf_own = traced_folded_lsf_pair(
-        design,
-        z_mm=zs,
-        periods_um=periods,
-        n_rays=work.lsf_rays,
-        seed=seed,
-        fresnel=fresnel,
-        progress=progress,
-        tracer=tracer,
-    )
-    res = rmtf_from_lsf(lsf, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
-    own = rmtf_from_lsf(lsf_own, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
-    fine = crossing_brackets([res, own])  # the crossings again on a finer Z step
-    if fine.size:
-        fine_lsf, fine_own = traced_folded_lsf_pair(
+
+    def pair(z, show: bool):  # all light and the own path alone from one trace per row
+        return traced_folded_lsf_pair(
             design,
-            z_mm=fine,
+            z_mm=z,
             periods_um=periods,
             n_rays=work.lsf_rays,
             seed=seed,
             fresnel=fresnel,
+            progress=show,
             tracer=tracer,
         )
+
+    lsf, lsf_own = pair(zs, progress)
+    res = rmtf_from_lsf(lsf, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
+    own = rmtf_from_lsf(lsf_own, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
+    fine = crossing_brackets([res, own])  # the crossings again on a finer Z step
+    if fine.size:
+        fine_lsf, fine_own = pair(fine, False)
         res = refine_crossings(res, fine_lsf, design)
         own = refine_crossings(own, fine_own, design)
     rect = all(m.shape != "circle" for m in design.masks)

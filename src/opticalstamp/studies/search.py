@@ -40,15 +40,17 @@ from ..io.journal import journal_lock
 from ..raytrace.stack import output_pitch
 from ..units import pitch_of_dpi
 from ..validate import InputError, check_number, check_seed
-from .evaluate import SURROGATE, evaluate_design
+from .evaluate import SURROGATE
 from .runner import run_tasks, task_key
 from .verify import (
+    ESTIMATORS,
     EXACT,
     EXACT_GHOST_RAYS,
     EXACT_LSF_RAYS,
     SURROGATE_ACCURACY,
+    check_estimator,
     disagreements,
-    evaluate_exact,
+    evaluate_with,
     exact_figures,
 )
 
@@ -88,14 +90,10 @@ def default_space(
 
 def _evaluate_payload(payload: dict) -> dict:
     """Worker entry: build the candidate from plain data and evaluate it with the
-    payload's estimator (the surrogate, or the exact tracer for ``"trace"``)."""
+    payload's estimator (:func:`~opticalstamp.studies.verify.evaluate_with`)."""
     base = design_from_dict(payload["base"], "search base")
     d = with_stack(base, holes_um=payload["holes_um"], thicknesses_um=payload["thicknesses_um"])
-    opts = dict(payload["options"])
-    if opts.pop("estimator", "surrogate") == "trace":
-        opts.pop("ghost_rays", None)  # the exact tracer's own ray counts
-        return evaluate_exact(d, **opts)
-    return evaluate_design(d, **opts)
+    return evaluate_with(d, payload["options"])
 
 
 @dataclass(frozen=True)
@@ -240,8 +238,7 @@ def search(
     if objective not in OBJECTIVES:
         raise InputError(f"objective: must be one of {', '.join(OBJECTIVES)} (got {objective!r})")
     depth = OBJECTIVES[objective]
-    if estimator not in ESTIMATORS:
-        raise InputError(f"estimator: must be one of {', '.join(ESTIMATORS)} (got {estimator!r})")
+    check_estimator(estimator)
     options = {"dpi": dof_dpi, "near_mm": near_mm, "ghost_rays": ghost_rays}
     if estimator == "trace":
         options["estimator"] = "trace"
@@ -354,7 +351,7 @@ def search(
         pareto=front,
         reference=reference,
         meta={
-            "estimator": SURROGATE if estimator == "surrogate" else EXACT,
+            "estimator": ESTIMATORS[estimator],
             "objective": depth,
             "dof_dpi": dof_dpi,
             "budget_mm": budget_mm,
@@ -381,8 +378,6 @@ FIGURES = (
     "diffraction_spill",
     "stack_um",
 )
-#: how a search or a tolerance study evaluates each design
-ESTIMATORS = ("surrogate", "trace")
 #: the depth objective of a search: the depth of field, or the depth of field after
 #: Wiener restoration with the known blur (co-design of optics and computation)
 OBJECTIVES = MappingProxyType({"dof": "dof_mm", "restored-dof": "restored_dof_mm"})

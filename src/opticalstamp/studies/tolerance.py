@@ -27,9 +27,8 @@ from ..defaults import DOF_DPI, TOLERANCE_SAMPLES, TOLERANCE_SIGMAS
 from ..design import Design, design_from_dict, stack_params, with_stack
 from ..raytrace.stack import lattice_of
 from ..validate import check_seed
-from .evaluate import SURROGATE, evaluate_design
 from .runner import run_tasks, task_key
-from .verify import EXACT, disagreements, evaluate_exact, exact_figures
+from .verify import ESTIMATORS, check_estimator, disagreements, evaluate_with, exact_figures
 
 DEFAULT_SIGMAS = TOLERANCE_SIGMAS
 SPEC_RE = re.compile(r"^(dof|ghost_radius|ghost|efficiency|rmtf@[0-9.]+)(>=|<=)(-?[0-9.]+)$")
@@ -81,12 +80,7 @@ def apply_errors(design: Design, errors: dict) -> Design:
 
 def _evaluate_payload(payload: dict) -> dict:
     base = design_from_dict(payload["base"], "tolerance base")
-    d = apply_errors(base, payload["errors"])
-    opts = dict(payload["options"])
-    if opts.pop("estimator", "surrogate") == "trace":
-        opts.pop("ghost_rays", None)  # the exact tracer's own ray counts
-        return evaluate_exact(d, **opts)
-    return evaluate_design(d, **opts)
+    return evaluate_with(apply_errors(base, payload["errors"]), payload["options"])
 
 
 def parse_spec(text: str | None) -> list[tuple[str, str, float]]:
@@ -313,8 +307,7 @@ def tolerance(
     :func:`~opticalstamp.studies.verify.evaluate_exact`; the nominal then needs no
     re-verification).
     """
-    if estimator not in ("surrogate", "trace"):
-        raise ValueError(f"estimator: must be surrogate or trace (got {estimator!r})")
+    check_estimator(estimator)
     check_seed(seed)
     sg = DEFAULT_SIGMAS | (sigmas or {})
     if any(v < 0 for v in sg.values()):
@@ -409,7 +402,7 @@ def tolerance(
         yield_fraction=yld,
         meta={
             "ghost_rays": ghost_rays,
-            "estimator": SURROGATE if estimator == "surrogate" else EXACT,
+            "estimator": ESTIMATORS[estimator],
         }
         | _nominal_exact(design, nominal, dpi, z_mm, seed, verify and estimator == "surrogate"),
     )

@@ -24,7 +24,8 @@ from ..analysis.rmtf import DEFAULT_Z_MM, rmtf
 from ..design import Design
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import output_pitch
-from .evaluate import GHOST_Z_MM, Z_LIMIT_MM, extended_z
+from ..validate import InputError
+from .evaluate import GHOST_Z_MM, SURROGATE, Z_LIMIT_MM, evaluate_design, extended_z
 
 #: how :func:`exact_figures` estimates, recorded with every figure it makes
 EXACT = (
@@ -150,6 +151,29 @@ def evaluate_exact(
             design, dpi=dpi, ghost_fraction=out["ghost_fraction"]
         )["dof_mm"]
     return out
+
+
+#: how a search or a tolerance study evaluates each design: name -> what it is
+ESTIMATORS = MappingProxyType({"surrogate": SURROGATE, "trace": EXACT})
+
+
+def check_estimator(name: str) -> str:
+    """``name`` if it is one of :data:`ESTIMATORS`; else InputError naming the field."""
+    if name not in ESTIMATORS:
+        raise InputError(f"estimator: must be one of {', '.join(ESTIMATORS)} (got {name!r})")
+    return name
+
+
+def evaluate_with(design: Design, options: dict) -> dict:
+    """A design's figures by the estimator ``options["estimator"]`` (default surrogate):
+    :func:`~opticalstamp.studies.evaluate.evaluate_design`, or :func:`evaluate_exact`
+    for "trace" (with its own ray counts: the surrogate's ``ghost_rays`` is dropped); the
+    other options go to the evaluation."""
+    opts = dict(options)
+    if check_estimator(opts.pop("estimator", "surrogate")) == "trace":
+        opts.pop("ghost_rays", None)
+        return evaluate_exact(design, **opts)
+    return evaluate_design(design, **opts)
 
 
 def disagreements(surrogate: dict, exact: dict, accuracy=SURROGATE_ACCURACY) -> list[str]:
