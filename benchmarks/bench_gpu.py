@@ -2,7 +2,8 @@
 python benchmarks/bench_gpu.py [--device cpu|cuda|auto] [--search-designs N] [--no-report]).
 
 1. Plain reverse trace of the prototype's pixel: launched rays per second (2^26 samples
-   on the CPU, 2^30 on a GPU), after a warm-up (compilation).
+   on the CPU, 2^30 on a GPU), after a warm-up (compilation); on a GPU also each plain
+   kernel alone (queued per block, one thread per ray), median of 5 chunks of 2^26.
 2. The ghost analysis to 0.01 % standard error on the own path and 0.1 % on the ghost
    light (the precision-driven run, capped at 2^31 rays).
 3. ``search --estimator trace``: every candidate traced exactly (480 designs by default).
@@ -23,6 +24,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 
 def device_name(device: str) -> str:
@@ -63,6 +66,28 @@ def main() -> None:
     dt = time.perf_counter() - t
     out["plain_trace"] = {"samples": n, "launched": launched, "s": dt, "rays_per_s": launched / dt}
     print(f"{out['device_name']}: plain trace {launched / dt:.3g} launched rays/s")
+    if device == "cuda":  # the two plain kernels: queued per block (default), and not
+        from opticalstamp.raytrace import cuda
+        from opticalstamp.raytrace.kernel import seed_key
+
+        n0 = float(path.slabs[0, 1])
+        srcv = np.array([src.x, src.y, src.width, src.height, 4 * n0 * n0 * src.area, n0, n0, 0])
+        kargs = (
+            np.ascontiguousarray(path.slabs), float(path.index_out),
+            np.ascontiguousarray(path.masks), path.lattice.as_array(), path.limits,
+        )  # fmt: skip
+        n_pre, step = path.first_mask_slab + 1, 1 << 26
+        for queue in (True, False):
+            cuda.run(0, step, seed_key(2), srcv, kargs, False, n_pre, None, queue)  # warm-up
+            times = []
+            for rep in range(5):
+                t = time.perf_counter()
+                r = cuda.run(rep * step, step, seed_key(2), srcv, kargs, False, n_pre, None, queue)
+                cuda.cuda.synchronize()
+                times.append(time.perf_counter() - t)
+            rate = r.n_launched / float(np.median(times))
+            out[f"plain_kernel_{'queued' if queue else 'per_thread'}_rays_per_s"] = rate
+            print(f"  plain kernel, {'queued' if queue else 'one thread per ray'}: {rate:.3g}/s")
     t = time.perf_counter()
     g = analyse_ghosts(d, rse_own=1e-4, rse_ghost=1e-3, max_rays=1 << 31)
     dt = time.perf_counter() - t

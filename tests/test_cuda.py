@@ -39,7 +39,92 @@ for importance, fresnel, n in cases:
         assert np.array_equal(a.ledger, b.ledger)
         assert (a.n_launched, a.n_samples) == (b.n_launched, b.n_samples)
     print(importance, fresnel, sum(b.ids.size for b in cpu), int(cpu[0].ledger.sum()))
+# plain sampling, one thread per ray throughout (no queue): the same rays again
+import math
+from opticalstamp.raytrace import cuda
+from opticalstamp.raytrace.kernel import seed_key
+from opticalstamp.raytrace.launch import _kernel_args
+
+n0 = float(path.slabs[0, 1])
+w0 = 4.0 * n0 * n0 * src.area
+args = np.array([src.x, src.y, src.width, src.height, w0, n0, n0, 0.0])
+n_pre = path.first_mask_slab + 1
+runs = [
+    cuda.run(123, 1 << 12, seed_key(7), args, _kernel_args(path), True, n_pre, None, queue=q)
+    for q in (True, False)
+]
+a, b = (r.host() for r in runs)
+kw = dict(importance=False, fresnel=True, chunk=1 << 12, first_id=123, device="cpu")
+(cpu,) = launch(path, src, 1 << 12, 7, **kw)
+for f in a:  # the two device kernels exactly; the CPU's as above
+    assert np.array_equal(a[f], b[f]), f
+    np.testing.assert_allclose(a[f], getattr(cpu, f), rtol=1e-12, atol=1e-9)
+assert np.array_equal(runs[0].ledger, runs[1].ledger) and runs[0].n_launched == runs[1].n_launched
 print("same")
+"""
+
+TALLIES = """
+import os
+import numpy as np
+from opticalstamp.analysis.cuda_tallies import ghost_tallies
+from opticalstamp.analysis.ghosts import analyse_ghosts
+from opticalstamp.analysis.lsf import traced_folded_lsf_pair, traced_map_sets
+from opticalstamp.design import load_design
+from opticalstamp.raytrace import cuda
+from opticalstamp.raytrace.pixel import PixelTracer, Sampling
+
+np.seterr(over="ignore")  # the simulator's uint64 hashing wraps, as on the device
+d = load_design("paper2016")
+s = Sampling(n_rays=1 << 13, seed=5, chunk=1 << 12)  # two chunks
+res = {}
+for dev in ("cpu", "cuda"):
+    tr = PixelTracer(d, s, replay=True)  # each chunk traced once, tallied by all three
+    os.environ["OPTICALSTAMP_DEVICE"] = "cpu"  # the pilots (2^18 rays) on the CPU
+    for px in [(0, 0), (1, 0)]:
+        tr.hole_weights(px)
+    os.environ["OPTICALSTAMP_DEVICE"] = dev
+    g = analyse_ghosts(d, z_mm=(0.0, 2.0), sampling=s, tracer=tr)
+    f = traced_folded_lsf_pair(
+        d, z_mm=[0.5, 3.0], periods_um=[169.3, 254.0], sampling=s, tracer=tr, n_batches=4
+    )
+    m = traced_map_sets(d, z_sets=[[0.5], [1.0, 2.5]], sampling=s, tracer=tr)
+    res[dev] = (g, f, m)
+    if dev == "cuda":  # every tally was taken on the device: no survivor was copied back
+        assert tr._replays and all("_host" not in vars(pb.rays) for pb in tr._replays.values())
+
+
+def same(x, y, where=""):
+    if isinstance(x, dict):
+        assert x.keys() == y.keys(), where
+        for k in x:
+            same(x[k], y[k], f"{where}/{k}")
+    elif isinstance(x, list | tuple):
+        assert len(x) == len(y), where
+        for i, (p, q) in enumerate(zip(x, y)):
+            same(p, q, f"{where}[{i}]")
+    elif isinstance(x, float):
+        assert np.isclose(x, y, rtol=1e-12, atol=0), (where, x, y)
+    else:
+        assert x == y, (where, x, y)
+
+
+(gc, fc, mc), (gg, fg, mg) = res["cpu"], res["cuda"]
+a, b = gc.to_dict(), gg.to_dict()
+assert len(gc.paths) > 10
+same(a, b)
+for u, v in zip(fc, fg, strict=True):
+    for hu, hv in zip(u.h, v.h, strict=True):
+        np.testing.assert_allclose(hv, hu, rtol=1e-12, atol=1e-12 * hu.max())
+for u, v in zip(mc, mg, strict=True):
+    assert u.own.sum() > 0 and u.ghost.sum() > 0
+    np.testing.assert_allclose(v.own, u.own, rtol=1e-12, atol=1e-12 * u.own.max())
+    np.testing.assert_allclose(v.ghost, u.ghost, rtol=1e-12, atol=1e-12 * u.ghost.max())
+print("same")
+pb = next(tr.trace((0, 0)))
+lat = tr.path.lattice
+assert ghost_tallies(pb, lat.k_lo, lat.k_hi, tr.n0, [0.0], 84.6, 400, 500.0) is not None
+assert ghost_tallies(pb, lat.k_lo, lat.k_hi, tr.n0, [0.0], 84.6, 400, 500.0, capacity=2) is None
+print("full")
 """
 
 
@@ -53,10 +138,22 @@ def _python(code: str, **env) -> subprocess.CompletedProcess:
 def test_cuda_kernels_under_the_simulator_trace_the_cpu_rays():
     """Plain sampling (4,096 samples) and importance sampling with Fresnel losses (2,048
     rays): the same survivors (ids), positions, directions and weights (to 1e-12), holes,
-    ledger and launched counts as the CPU kernel, for the same seed."""
+    ledger and launched counts as the CPU kernel, for the same seed; the queued plain
+    kernel (the default) and the one-thread-per-ray one give identical rays."""
     res = _python(SIMULATED, NUMBA_ENABLE_CUDASIM="1")
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.strip().endswith("same")
+
+
+def test_device_tallies_under_the_simulator_equal_the_cpu_tallies():
+    """With the rays kept on the (simulated) device and tallied there: the ghost analysis
+    (every etendue, path, angle range, landing histogram and nearest landing, over two
+    chunks), the folded LSFs (all light and own path) and the responsivity maps equal the
+    CPU's to rounding for the same seed; a full hash table of hole sequences hands the
+    batch back to the host (None)."""
+    res = _python(TALLIES, NUMBA_ENABLE_CUDASIM="1")
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.split()[-2:] == ["same", "full"], res.stdout
 
 
 def test_device_choice():

@@ -296,8 +296,28 @@ def analyse_ghosts(
     done = 0
     for end in _schedule(sampling.n_rays, sampling.max_rays):
         for pb in tr.trace(pixel, end - done, first_id=done, progress=progress):
-            b, w = pb.rays, pb.w
+            b = pb.rays
             ledger += b.ledger
+            t = None
+            if b.device is not None:  # tallied where the GPU keeps the rays
+                from .cuda_tallies import ghost_tallies
+
+                lat = tr.path.lattice
+                t = ghost_tallies(
+                    pb, lat.k_lo, lat.k_hi, n0, [z * 1000.0 for z in zs], bin_um, nbins,
+                    detector_half_um,
+                )  # fmt: skip
+            if t is not None:
+                codes = np.array([registry.id_of(q) for q in t.sequences], np.int64)
+                slot = sums.merge(codes, t.s1, t.s2, t.count, t.lo, t.hi)
+                nearest = _grown(nearest, len(sums.keys))
+                for iz in range(len(zs)):
+                    np.minimum.at(nearest[iz], slot, t.nearest[:, iz])
+                hist += t.hist
+                inside += t.inside
+                inside2 += t.inside2
+                continue
+            w = pb.w
             codes = registry.ids(b)
             theta = np.degrees(np.arcsin(np.sqrt(b.sx**2 + b.sy**2) / n0))
             slot = sums.add(codes, w, theta)
@@ -312,9 +332,7 @@ def analyse_ghosts(
                 wb = w[g][box]
                 np.add.at(inside, np.full(wb.size, iz), wb)
                 np.add.at(inside2, np.full(wb.size, iz), wb * wb)
-                if nearest.shape[1] < len(sums.keys):
-                    grow = len(sums.keys) - nearest.shape[1]
-                    nearest = np.hstack([nearest, np.full((len(zs), grow), np.inf)])
+                nearest = _grown(nearest, len(sums.keys))
                 np.minimum.at(nearest[iz], slot[g], dist)
         done = end
         n = done
@@ -387,6 +405,12 @@ def analyse_ghosts(
         landing=landing,
         ledger=led,
     )
+
+
+def _grown(nearest: np.ndarray, n_slots: int) -> np.ndarray:
+    """``nearest`` (nz, slots) with a column of inf for each slot it lacks."""
+    grow = n_slots - nearest.shape[1]
+    return np.hstack([nearest, np.full((nearest.shape[0], grow), np.inf)]) if grow > 0 else nearest
 
 
 def _finite(v: float) -> float | None:

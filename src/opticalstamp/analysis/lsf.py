@@ -206,12 +206,23 @@ def _traced_folds(
         src = tr.source((row, k))
         rows.append((src.x, src.y))
         outs = [np.zeros((per.size, n_batches, zs.size, int(nb.max()))) for _ in kinds]
+        on_gpu = None  # the same tallies on the device, where a GPU keeps the rays
         for pb in tr.trace((row, k), progress=progress):
             b = pb.rays
+            if b.device is not None:
+                from . import cuda_tallies as gpu
+
+                on_gpu = on_gpu or [gpu.zeros(out.shape) for out in outs]
+                for ghosts, res in zip(kinds, on_gpu, strict=True):
+                    gpu.fold(pb, not ghosts, zs * 1000.0, tr.n_obj, per, nb, n_batches, res)
+                continue
             batch = (b.ids % n_batches).astype(np.int64)
             for ghosts, out in zip(kinds, outs, strict=True):
                 w = pb.w if ghosts else pb.w * pb.own
                 _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, tr.n_obj, per, nb, out)
+        for out, res in zip(outs, on_gpu or [None] * len(outs), strict=True):
+            if res is not None:
+                out += res.copy_to_host()
         for h, out in zip(hs, outs, strict=True):
             for p in range(per.size):
                 # each batch holds n_rays / n_batches samples: scale so batches sum to the mean
@@ -557,8 +568,19 @@ def traced_map_sets(
         nf = int(np.ceil(2 * half / fine_bin_um))
         fine_lo = -nf * fine_bin_um / 2
         sets.append((zs, fine_lo, np.zeros((zs.size, nf, nf)), np.zeros((zs.size, ncy, ncx))))
+    on_gpu = None  # the same maps on the device, where a GPU keeps the rays
     for pb in tr.trace((row, 0), progress=progress):
         b = pb.rays
+        if b.device is not None:
+            from . import cuda_tallies as gpu
+
+            on_gpu = on_gpu or [(gpu.zeros(f.shape), gpu.zeros(c.shape)) for _, _, f, c in sets]
+            for (zs, fine_lo, _, _), (fine, coarse) in zip(sets, on_gpu, strict=True):
+                gpu.maps(
+                    pb, zs * 1000.0, tr.n_obj, fine_lo, fine_bin_um, coarse_lo,
+                    coarse_bin_um, fine, coarse,
+                )  # fmt: skip
+            continue
         for zs, fine_lo, fine, coarse in sets:
             _maps(
                 b.x,
@@ -578,6 +600,10 @@ def traced_map_sets(
                 fine,
                 coarse,
             )
+    for (_, _, fine, coarse), dev in zip(sets, on_gpu or [None] * len(sets), strict=True):
+        if dev is not None:
+            fine += dev[0].copy_to_host()
+            coarse += dev[1].copy_to_host()
     return [
         TracedMaps(
             zs,

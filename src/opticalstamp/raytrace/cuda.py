@@ -25,8 +25,11 @@ if not hasattr(np, "row_stack"):  # numba-cuda <= 0.30 calls np.row_stack, gone 
 from numba import cuda  # noqa: E402
 
 TRANSMITTED, ABSORBED, TIR, ESCAPED = 0, 1, 2, 3
+ALIVE = -1  # a ray that goes on (between the stages of the queued kernel)
 THREADS = 128
 MAX_PLANES = 32  # the ledger's planes per block in shared memory
+MAX_MASKS = 16  # a ray's holes, per thread in local memory
+QUEUE_BLOCKS = 4096  # blocks of the queued kernel (each loops over tiles of THREADS rays)
 
 _U32 = 2.0**-32
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -83,32 +86,32 @@ def _hole(x, y, masks, m, lat):
 
 
 @cuda.jit(device=True)
-def _trace_one(x, y, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, hrow, hk, slot):
-    """As :func:`opticalstamp.raytrace.kernel._trace_one` (status, plane, x, y, weight)."""
+def _advance(x, y, sx, sy, ps, pp, i0, i1, slabs, n_out, masks, lat, lim, fresnel, hrow, hk, slot):
+    """Slabs i0 ... i1 - 1 of :func:`opticalstamp.raytrace.kernel._trace_one`: (status,
+    plane, x, y, ps, pp), status ALIVE where the ray goes on past slab i1 - 1; ps, pp:
+    the products of the s and p Fresnel transmissions so far."""
     s2 = sx * sx + sy * sy
-    ps = 1.0
-    pp = 1.0
     n_sl = slabs.shape[0]
-    for i in range(n_sl):
+    for i in range(i0, i1):
         d = slabs[i, 0]
         n = slabs[i, 1]
         c = math.sqrt(n * n - s2)
         x += d * sx / c
         y += d * sy / c
         if abs(x) > lim[0] or abs(y) > lim[1]:
-            return ESCAPED, i, x, y, w * 0.5 * (ps + pp)
+            return ESCAPED, i, x, y, ps, pp
         m = int(slabs[i, 2])
         if m >= 0:
             r, k = _hole(x, y, masks, m, lat)
             if r < 0:
-                return ABSORBED, i, x, y, w * 0.5 * (ps + pp)
+                return ABSORBED, i, x, y, ps, pp
             hrow[slot, m] = r
             hk[slot, m] = k
         n2 = slabs[i + 1, 1] if i + 1 < n_sl else n_out
         if n2 != n:
             c2sq = n2 * n2 - s2
             if c2sq <= 0.0:
-                return TIR, i, x, y, w * 0.5 * (ps + pp)
+                return TIR, i, x, y, ps, pp
             if fresnel:
                 c1 = c / n
                 cc2 = math.sqrt(c2sq) / n2
@@ -120,7 +123,17 @@ def _trace_one(x, y, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, hrow, hk
                 rp = (a2 - b2) / (a2 + b2)
                 ps *= 1.0 - rs * rs
                 pp *= 1.0 - rp * rp
-    return TRANSMITTED, n_sl - 1, x, y, w * 0.5 * (ps + pp)
+    return ALIVE, i1 - 1, x, y, ps, pp
+
+
+@cuda.jit(device=True)
+def _trace_one(x, y, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, hrow, hk, slot):
+    """As :func:`opticalstamp.raytrace.kernel._trace_one` (status, plane, x, y, weight)."""
+    n_sl = slabs.shape[0]
+    st, pl, x, y, ps, pp = _advance(
+        x, y, sx, sy, 1.0, 1.0, 0, n_sl, slabs, n_out, masks, lat, lim, fresnel, hrow, hk, slot
+    )
+    return (TRANSMITTED if st == ALIVE else st), pl, x, y, w * 0.5 * (ps + pp)
 
 
 @cuda.jit(device=True)
@@ -195,13 +208,29 @@ def _zero(led, launched, npl):
     cuda.syncthreads()
 
 
+@cuda.jit(device=True)
+def _plain_sample(key, gid, src):
+    """Sample ``gid`` of plain Lambertian sampling: (is a ray, x, y, sx, sy)."""
+    g = np.uint64(gid) * _GOLDEN
+    z0 = _mix(key ^ g)
+    z1 = _mix(key ^ (g + _M2))
+    n0 = src[5]
+    xa = src[0] + _centred(z0 >> _S33) * src[2]
+    ya = src[1] + _centred(z0 & _MASK31) * src[3]
+    a = 2.0 * n0 * _centred(z1 >> _S33)
+    c2 = 2.0 * n0 * _centred(z1 & _MASK31)
+    return a * a + c2 * c2 < n0 * n0, xa, ya, a, c2
+
+
 @cuda.jit(cache=True)  # compiled once, kept between processes where numba-cuda can
 def plain_kernel(
     first_id, n_rays, key, src, slabs, n_out, masks, lat, lim, fresnel,
-    hrow, hk, out, o_id, o_hrow, o_hk, count, ledger, n_launched,
+    out, o_id, o_hrow, o_hk, count, ledger, n_launched,
 ):  # fmt: skip
     """Plain Lambertian samples first_id ... first_id + n_rays - 1 (see run_plain):
     samples outside |s| < n0 are not rays and not launched."""
+    hrow = cuda.local.array((1, MAX_MASKS), np.int8)
+    hk = cuda.local.array((1, MAX_MASKS), np.int32)
     led = cuda.shared.array((MAX_PLANES, 4), np.int64)
     launched = cuda.shared.array(1, np.int64)
     npl = slabs.shape[0]
@@ -209,31 +238,117 @@ def plain_kernel(
     i = cuda.grid(1)
     if i < n_rays:
         gid = first_id + i
-        g = np.uint64(gid) * _GOLDEN
-        z0 = _mix(key ^ g)
-        z1 = _mix(key ^ (g + _M2))
-        n0 = src[5]
-        xa = src[0] + _centred(z0 >> _S33) * src[2]
-        ya = src[1] + _centred(z0 & _MASK31) * src[3]
-        a = 2.0 * n0 * _centred(z1 >> _S33)
-        c2 = 2.0 * n0 * _centred(z1 & _MASK31)
-        if a * a + c2 * c2 < n0 * n0:
+        ok, xa, ya, a, c2 = _plain_sample(key, gid, src)
+        if ok:
             cuda.atomic.add(launched, 0, 1)
             st, pl, xe, ye, we = _trace_one(
-                xa, ya, a, c2, src[4], slabs, n_out, masks, lat, lim, fresnel, hrow, hk, i
+                xa, ya, a, c2, src[4], slabs, n_out, masks, lat, lim, fresnel, hrow, hk, 0
             )
-            _finish(st, pl, xe, ye, we, a, c2, gid, hrow, hk, i, masks.shape[0], led, out,
+            _finish(st, pl, xe, ye, we, a, c2, gid, hrow, hk, 0, masks.shape[0], led, out,
                     o_id, o_hrow, o_hk, count)  # fmt: skip
     _flush(led, launched, ledger, n_launched, npl)
+
+
+@cuda.jit(cache=True)
+def plain_queue_kernel(
+    first_id, n_rays, key, src, slabs, n_out, masks, lat, lim, fresnel, n_pre,
+    out, o_id, o_hrow, o_hk, count, ledger, n_launched,
+):  # fmt: skip
+    """:func:`plain_kernel`'s rays, traced in two stages with a queue per block.
+
+    Each block takes tiles of THREADS samples (grid-stride). Every thread traces its
+    sample through the slabs up to the first mask (stage 1); the few rays that pass it
+    (about 2 % for the prototype) are put in the block's queue in shared memory. Whenever
+    the queue holds THREADS rays, every thread takes one and traces the rest of the stack
+    (stage 2), so the long traces run in full warps instead of one thread of a warp
+    tracing while the others wait. Only shared-memory atomics and ``syncthreads``: it
+    runs under numba's CUDA simulator, where it is checked ray for ray against the CPU.
+    """
+    hrow = cuda.local.array((1, MAX_MASKS), np.int8)
+    hk = cuda.local.array((1, MAX_MASKS), np.int32)
+    led = cuda.shared.array((MAX_PLANES, 4), np.int64)
+    launched = cuda.shared.array(1, np.int64)
+    qf = cuda.shared.array((2 * THREADS, 6), np.float64)  # x, y, sx, sy, ps, pp
+    qid = cuda.shared.array(2 * THREADS, np.int64)
+    qr = cuda.shared.array(2 * THREADS, np.int8)
+    qk = cuda.shared.array(2 * THREADS, np.int32)
+    qn = cuda.shared.array(1, np.int32)
+    npl = slabs.shape[0]
+    nm = masks.shape[0]
+    m0 = int(slabs[n_pre - 1, 2])
+    t = cuda.threadIdx.x
+    if t == 0:
+        qn[0] = 0
+    _zero(led, launched, npl)
+    n_tiles = (n_rays + THREADS - 1) // THREADS
+    for tile in range(cuda.blockIdx.x, n_tiles, cuda.gridDim.x):
+        i = tile * THREADS + t
+        if i < n_rays:
+            gid = first_id + i
+            ok, xa, ya, a, c2 = _plain_sample(key, gid, src)
+            if ok:
+                cuda.atomic.add(launched, 0, 1)
+                st, pl, xe, ye, ps, pp = _advance(
+                    xa, ya, a, c2, 1.0, 1.0, 0, n_pre, slabs, n_out, masks, lat, lim,
+                    fresnel, hrow, hk, 0,
+                )  # fmt: skip
+                if st == ALIVE and n_pre < npl:
+                    q = cuda.atomic.add(qn, 0, 1)
+                    qf[q, 0] = xe
+                    qf[q, 1] = ye
+                    qf[q, 2] = a
+                    qf[q, 3] = c2
+                    qf[q, 4] = ps
+                    qf[q, 5] = pp
+                    qid[q] = gid
+                    qr[q] = hrow[0, m0]
+                    qk[q] = hk[0, m0]
+                else:
+                    st = TRANSMITTED if st == ALIVE else st
+                    _finish(st, pl, xe, ye, src[4] * 0.5 * (ps + pp), a, c2, gid, hrow, hk, 0,
+                            nm, led, out, o_id, o_hrow, o_hk, count)  # fmt: skip
+        cuda.syncthreads()
+        full = qn[0]
+        if full >= THREADS:  # the same for every thread of the block
+            _stage2(full - THREADS + t, qf, qid, qr, qk, m0, n_pre, src[4], slabs, n_out,
+                    masks, lat, lim, fresnel, hrow, hk, led, out, o_id, o_hrow, o_hk,
+                    count)  # fmt: skip
+            cuda.syncthreads()
+            if t == 0:
+                qn[0] = full - THREADS
+        cuda.syncthreads()
+    if t < qn[0]:  # what is left in the queue
+        _stage2(t, qf, qid, qr, qk, m0, n_pre, src[4], slabs, n_out, masks, lat, lim,
+                fresnel, hrow, hk, led, out, o_id, o_hrow, o_hk, count)  # fmt: skip
+    _flush(led, launched, ledger, n_launched, npl)
+
+
+@cuda.jit(device=True)
+def _stage2(q, qf, qid, qr, qk, m0, n_pre, w0, slabs, n_out, masks, lat, lim, fresnel,
+            hrow, hk, led, out, o_id, o_hrow, o_hk, count):  # fmt: skip
+    """Trace queued ray ``q`` from slab n_pre to the end of the stack and finish it."""
+    hrow[0, m0] = qr[q]
+    hk[0, m0] = qk[q]
+    sx = qf[q, 2]
+    sy = qf[q, 3]
+    st, pl, xe, ye, ps, pp = _advance(
+        qf[q, 0], qf[q, 1], sx, sy, qf[q, 4], qf[q, 5], n_pre, slabs.shape[0], slabs, n_out,
+        masks, lat, lim, fresnel, hrow, hk, 0,
+    )  # fmt: skip
+    st = TRANSMITTED if st == ALIVE else st
+    _finish(st, pl, xe, ye, w0 * 0.5 * (ps + pp), sx, sy, qid[q], hrow, hk, 0,
+            masks.shape[0], led, out, o_id, o_hrow, o_hk, count)  # fmt: skip
 
 
 @cuda.jit(cache=True)
 def importance_kernel(
     first_id, n_rays, key, src, slabs, n_out, masks, lat, lim, fresnel, n_pre,
     tgt_x, tgt_y, tgt_prob, tgt_alias, tgt_q,
-    hrow, hk, out, o_id, o_hrow, o_hk, count, ledger, n_launched,
+    out, o_id, o_hrow, o_hk, count, ledger, n_launched,
 ):  # fmt: skip
     """Importance-sampled rays first_id ... first_id + n_rays - 1 (see run_importance)."""
+    hrow = cuda.local.array((1, MAX_MASKS), np.int8)
+    hk = cuda.local.array((1, MAX_MASKS), np.int32)
     led = cuda.shared.array((MAX_PLANES, 4), np.int64)
     launched = cuda.shared.array(1, np.int64)
     npl = slabs.shape[0]
@@ -272,25 +387,114 @@ def importance_kernel(
         sy = rho * dy / r if r > 0.0 else 0.0
         w = src[4] / (tgt_q[t] * fp * q * math.pi * src[5] * src[5])
         st, pl, xe, ye, we = _trace_one(
-            x0, y0, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, hrow, hk, i
+            x0, y0, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, hrow, hk, 0
         )
-        _finish(st, pl, xe, ye, we, sx, sy, gid, hrow, hk, i, masks.shape[0], led, out,
+        _finish(st, pl, xe, ye, we, sx, sy, gid, hrow, hk, 0, masks.shape[0], led, out,
                 o_id, o_hrow, o_hk, count)  # fmt: skip
     _flush(led, launched, ledger, n_launched, npl)
 
 
-def run(first_id, n_rays, key, src, args, fresnel, n_pre, targets=None) -> dict:
-    """Trace one chunk on the device; the survivors in ray order (as the CPU's):
-    ``ids, x, y, sx, sy, w, hole_row, hole_k``, the ``ledger`` and ``n_launched``.
-    ``targets``: the alias table (importance sampling) or None (plain sampling)."""
+@cuda.jit(cache=True)
+def accept_kernel(out, o_hrow, o_hk, n, s2_max, row, k, w_acc, own):
+    """The pixel's angular response and own-path test of survivor i (device order):
+    w_acc = w where |s|^2 <= s2_max else 0; own = 1 where every hole is (row, k)."""
+    i = cuda.grid(1)
+    if i < n:
+        sx = out[i, 2]
+        sy = out[i, 3]
+        w_acc[i] = out[i, 4] if sx * sx + sy * sy <= s2_max else 0.0
+        o = 1
+        for m in range(o_hrow.shape[1]):
+            if o_hrow[i, m] != row or o_hk[i, m] != k:
+                o = 0
+        own[i] = o
+
+
+def blocks(n: int) -> int:
+    """Blocks of :data:`THREADS` threads that cover ``n`` items (at least one)."""
+    return max(1, (n + THREADS - 1) // THREADS)
+
+
+class DeviceRays:
+    """The survivors of one chunk, kept in device memory in the order threads appended
+    them (``out`` columns x, y, sx, sy, w; ``ids``; ``hole_row``, ``hole_k``), with the
+    chunk's ``ledger`` and ``n_launched`` on the host. :meth:`host` copies them back in
+    ray order; device tallies read them where they are."""
+
+    def __init__(self, n, out, ids, hole_row, hole_k, ledger, n_launched):
+        self.n = int(n)
+        self.out = out
+        self.ids = ids
+        self.hole_row = hole_row
+        self.hole_k = hole_k
+        self.ledger = ledger
+        self.n_launched = int(n_launched)
+
+    def order(self) -> np.ndarray:
+        """The permutation that puts device order into ray order (by id)."""
+        ids = self.ids[: self.n].copy_to_host() if self.n else np.zeros(0, np.int64)
+        return np.argsort(ids, kind="stable")
+
+    def to_host(self, a, order: np.ndarray) -> np.ndarray:
+        """Device array ``a`` (survivors first) on the host, in ray order."""
+        if self.n == 0:
+            return np.zeros((0, *a.shape[1:]), a.dtype)
+        return a[: self.n].copy_to_host()[order]
+
+    def host(self) -> dict:
+        """``ids, x, y, sx, sy, w, hole_row, hole_k`` in ray order, as the CPU's."""
+        order = self.order()
+        o = self.to_host(self.out, order)
+        return {
+            "ids": self.to_host(self.ids, order),
+            "x": o[:, 0].copy(),
+            "y": o[:, 1].copy(),
+            "sx": o[:, 2].copy(),
+            "sy": o[:, 3].copy(),
+            "w": o[:, 4].copy(),
+            "hole_row": self.to_host(self.hole_row, order),
+            "hole_k": self.to_host(self.hole_k, order),
+        }
+
+    def accept(self, s2_max: float, row: int, k: int):
+        """(w_acc, own) on the device: weights inside the acceptance cone and the
+        own-path flags (int8) of pixel (row, k), in device order."""
+        w_acc = cuda.device_array(max(self.n, 1), np.float64)
+        own = cuda.device_array(max(self.n, 1), np.int8)
+        if self.n:
+            accept_kernel[blocks(self.n), THREADS](
+                self.out, self.hole_row, self.hole_k, self.n, float(s2_max), int(row),
+                int(k), w_acc, own,
+            )  # fmt: skip
+        return w_acc, own
+
+
+def _compact(a, n: int):
+    """The first ``n`` rows of device array ``a`` in an array of their own (the chunk's
+    buffers, sized for every ray, are freed; a kept batch holds its survivors only)."""
+    c = cuda.device_array((max(n, 1), *a.shape[1:]), a.dtype)
+    if n:
+        c[:n].copy_to_device(a[:n])
+    return c
+
+
+def run(
+    first_id, n_rays, key, src, args, fresnel, n_pre, targets=None, queue: bool = True
+) -> DeviceRays:
+    """Trace one chunk on the device; its survivors stay there (:class:`DeviceRays`).
+    ``targets``: the alias table (importance sampling) or None (plain sampling);
+    ``queue``: plain sampling in two stages with a queue per block
+    (:func:`plain_queue_kernel`) or one thread per ray throughout (:func:`plain_kernel`);
+    the same rays either way."""
     slabs, n_out, masks, lat, lim = args
     nm, npl = masks.shape[0], slabs.shape[0]
-    if npl > MAX_PLANES:
-        raise ValueError(f"the CUDA kernel handles at most {MAX_PLANES} planes (got {npl})")
+    if npl > MAX_PLANES or nm > MAX_MASKS:
+        raise ValueError(
+            f"the CUDA kernel handles at most {MAX_PLANES} planes and {MAX_MASKS} masks "
+            f"(got {npl} and {nm})"
+        )
     d = cuda.to_device
     dargs = (d(slabs), float(n_out), d(masks), d(lat), d(lim), bool(fresnel))
-    hrow = cuda.device_array((n_rays, nm), np.int8)
-    hk = cuda.device_array((n_rays, nm), np.int32)
     cap = n_rays  # survivors: at most one per ray
     out = cuda.device_array((cap, 5), np.float64)
     o_id = cuda.device_array(cap, np.int64)
@@ -299,30 +503,23 @@ def run(first_id, n_rays, key, src, args, fresnel, n_pre, targets=None) -> dict:
     count = d(np.zeros(1, np.int64))
     ledger = d(np.zeros((npl, 4), np.int64))
     launched = d(np.zeros(1, np.int64))
-    blocks = (n_rays + THREADS - 1) // THREADS
-    common = (hrow, hk, out, o_id, o_hrow, o_hk, count, ledger, launched)
+    common = (out, o_id, o_hrow, o_hk, count, ledger, launched)
     with np.errstate(over="ignore"):  # the simulator's uint64 hashing wraps, as on the device
-        if targets is None:
-            plain_kernel[blocks, THREADS](first_id, n_rays, key, d(src), *dargs, *common)
+        if targets is None and queue:
+            grid = min(blocks(n_rays), QUEUE_BLOCKS)
+            plain_queue_kernel[grid, THREADS](
+                first_id, n_rays, key, d(src), *dargs, int(n_pre), *common
+            )
+        elif targets is None:
+            plain_kernel[blocks(n_rays), THREADS](first_id, n_rays, key, d(src), *dargs, *common)
         else:
             tg = targets
-            importance_kernel[blocks, THREADS](
+            importance_kernel[blocks(n_rays), THREADS](
                 first_id, n_rays, key, d(src), *dargs, int(n_pre),
                 d(tg.x), d(tg.y), d(tg.prob), d(tg.alias), d(tg.q_per_area), *common,
             )  # fmt: skip
     n = int(count.copy_to_host()[0])
-    o = out[:n].copy_to_host() if n else np.zeros((0, 5))
-    ids = o_id[:n].copy_to_host() if n else np.zeros(0, np.int64)
-    order = np.argsort(ids, kind="stable")
-    return {
-        "ids": ids[order],
-        "x": o[order, 0],
-        "y": o[order, 1],
-        "sx": o[order, 2],
-        "sy": o[order, 3],
-        "w": o[order, 4],
-        "hole_row": (o_hrow[:n].copy_to_host() if n else np.zeros((0, nm), np.int8))[order],
-        "hole_k": (o_hk[:n].copy_to_host() if n else np.zeros((0, nm), np.int32))[order],
-        "ledger": ledger.copy_to_host(),
-        "n_launched": int(launched.copy_to_host()[0]),
-    }
+    out, o_id, o_hrow, o_hk = (_compact(a, n) for a in (out, o_id, o_hrow, o_hk))
+    return DeviceRays(
+        n, out, o_id, o_hrow, o_hk, ledger.copy_to_host(), int(launched.copy_to_host()[0])
+    )

@@ -9,8 +9,11 @@ identical for any chunk size or thread count (see :mod:`.kernel` for the generat
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import cached_property
+from typing import Any, ClassVar
 
 import numba as nb
 import numpy as np
@@ -22,6 +25,18 @@ from .sampling import Source, hole_targets
 from .stack import Path
 
 BLOCK = 4096
+#: Least rays per chunk on a GPU: a chunk costs a few kernel launches and transfers, which
+#: at ~1e11 rays/s outweigh a CPU-sized chunk's trace. It never changes an estimate beyond
+#: rounding (the device's sums are order-free atomics anyway).
+DEVICE_CHUNK = 1 << 24
+
+
+def chunk_for(chunk: int, device: str) -> int:
+    """Rays per chunk that :func:`launch` uses for ``chunk`` on ``device`` (cpu, cuda).
+    Under numba's CUDA simulator (no launch costs to amortise) the chunk is the caller's,
+    so that the tests see several chunks."""
+    gpu = device == "cuda" and os.environ.get("NUMBA_ENABLE_CUDASIM") != "1"
+    return max(BLOCK, int(chunk), DEVICE_CHUNK if gpu else 0)
 
 
 @dataclass(frozen=True)
@@ -51,6 +66,37 @@ class RayBatch:
     ledger: np.ndarray
     n_launched: int
     n_samples: int
+    #: The survivors in device memory (:class:`~opticalstamp.raytrace.cuda.DeviceRays`)
+    #: where a GPU traced them, for tallies on the device; None on the CPU.
+    device: ClassVar[Any] = None
+
+
+class DeviceRayBatch:
+    """A :class:`RayBatch` whose survivors a GPU traced and keeps: ``device`` holds them
+    for tallies on the device; the host arrays (in ray order, read-only) are copied back
+    on first use, so code that reads a RayBatch reads this one unchanged."""
+
+    def __init__(self, device: Any, n_samples: int) -> None:
+        self.device = device
+        self.ledger = device.ledger
+        self.n_launched = device.n_launched
+        self.n_samples = int(n_samples)
+
+    @cached_property
+    def _host(self) -> dict:
+        h = self.device.host()
+        for v in h.values():
+            v.flags.writeable = False
+        return h
+
+    ids = property(lambda self: self._host["ids"])
+    x = property(lambda self: self._host["x"])
+    y = property(lambda self: self._host["y"])
+    sx = property(lambda self: self._host["sx"])
+    sy = property(lambda self: self._host["sy"])
+    w = property(lambda self: self._host["w"])
+    hole_row = property(lambda self: self._host["hole_row"])
+    hole_k = property(lambda self: self._host["hole_k"])
 
 
 @dataclass(frozen=True)
@@ -128,17 +174,20 @@ def launch(
     of the first mask that matter (see :func:`~opticalstamp.sources.hole_targets`).
     ``device``: cpu, cuda or auto (:func:`~opticalstamp.device.resolve_device`;
     None: the environment's OPTICALSTAMP_DEVICE, else auto); the same rays either way.
+    On a GPU a chunk holds at least :data:`DEVICE_CHUNK` rays (:func:`chunk_for`).
 
     Yields
     ------
-    RayBatch
-        The rays of each chunk that reached the end of the path.
+    RayBatch or DeviceRayBatch
+        The rays of each chunk that reached the end of the path (on a GPU they stay in
+        device memory and are copied back on first use).
     """
     if n_rays < 0:
         raise ValueError("n_rays must be >= 0")
-    chunk = max(BLOCK, int(chunk))
+    where = resolve_device(device)
+    chunk = chunk_for(chunk, where)
     gpu = None
-    if resolve_device(device) == "cuda":
+    if where == "cuda":
         from . import cuda as gpu
     n0 = float(path.slabs[0, 1])
     key = seed_key(seed, stream)
@@ -156,7 +205,7 @@ def launch(
     src = np.array([source.x, source.y, source.width, source.height, w0, n0, n_min, d_eq])
     args = _kernel_args(path)
     nm, npl = path.n_masks, path.slabs.shape[0]
-    size = min(chunk, max(n_rays, 1))
+    size = min(chunk, max(n_rays, 1)) if gpu is None else 0  # the CPU kernel's buffers
     bufs = (
         np.empty(size),
         np.empty(size),
@@ -179,10 +228,7 @@ def launch(
                 r = gpu.run(
                     first_id + done, m, key, src, args, fresnel, n_pre, tg if importance else None
                 )
-                yield RayBatch(
-                    r["ids"], r["x"], r["y"], r["sx"], r["sy"], r["w"], r["hole_row"],
-                    r["hole_k"], r["ledger"], r["n_launched"], m,
-                )  # fmt: skip
+                yield DeviceRayBatch(r, m)
                 done += m
                 bar.update(m)
                 continue

@@ -21,13 +21,15 @@ from __future__ import annotations
 import copy
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
 from ..defaults import RSE_GHOST, RSE_OWN
 from ..design import Design
+from ..device import resolve_device
 from ..validate import InputError, check_number, check_seed
-from .launch import BLOCK, RayBatch, launch
+from .launch import RayBatch, chunk_for, launch
 from .sampling import DEFENSIVE_SHARE, Source, geometric_q_per_area, site_index
 from .stack import Path, lattice_of, pixel_center, reverse_path
 from .tally import is_own_path, object_plane
@@ -54,6 +56,18 @@ def pixel_source(design: Design, row: int, k: int) -> Source:
     return Source(cx, cy, s.sensitive_width_um, s.sensitive_height_um)
 
 
+def acceptance_s2(design: Design, n0: float) -> float:
+    """The largest |s|^2 of the pixel's acceptance cone in the medium n0 (inf: all rays).
+
+    Parameters
+    ----------
+    design : Design, whose sensor gives the acceptance half-angle (deg, in the medium n0)
+    n0 : refractive index of the medium next to the pixel
+    """
+    cut = design.sensor.acceptance_half_angle_deg
+    return float("inf") if cut >= 90.0 else float((n0 * np.sin(np.radians(cut))) ** 2)
+
+
 def acceptance(design: Design, n0: float, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
     """Pixel angular response (0 or 1) for invariant directions s in the medium n0.
 
@@ -68,10 +82,7 @@ def acceptance(design: Design, n0: float, sx: np.ndarray, sy: np.ndarray) -> np.
     np.ndarray
         1.0 where the ray is inside the acceptance cone, else 0.0 (float64, shape of sx).
     """
-    cut = design.sensor.acceptance_half_angle_deg
-    if cut >= 90.0:
-        return np.ones(sx.shape)
-    return (sx * sx + sy * sy <= (n0 * np.sin(np.radians(cut))) ** 2).astype(np.float64)
+    return (sx * sx + sy * sy <= acceptance_s2(design, n0)).astype(np.float64)
 
 
 def allocate_holes(
@@ -205,19 +216,45 @@ class PixelBatch:
 
     Attributes
     ----------
-    rays : the traced rays that left the stack, in launch order
-    w : (n,) weights (etendue, um^2 sr) with the pixel's angular response applied
-    own : (n,) bool, whether each ray passed the pixel's own hole in every mask
+    rays : the traced rays that left the stack, in launch order (a
+        :class:`~opticalstamp.raytrace.launch.DeviceRayBatch` where a GPU traced them)
+    row, k : the pixel
+    s2_max : the pixel's acceptance, |s|^2 <= s2_max (:func:`acceptance_s2`)
     x0, y0 : the pixel's axis (um)
     n_obj : refractive index of the object medium
+    w : (n,) weights (etendue, um^2 sr) with the pixel's angular response applied
+    own : (n,) bool, whether each ray passed the pixel's own hole in every mask
+    on_device : (w, own) as device arrays, in the device's order of ``rays.device``,
+        for tallies on the GPU (only where ``rays.device`` is not None)
     """
 
     rays: RayBatch
-    w: np.ndarray
-    own: np.ndarray
+    row: int
+    k: int
+    s2_max: float
     x0: float
     y0: float
     n_obj: float
+
+    @cached_property
+    def w(self) -> np.ndarray:
+        b = self.rays
+        if b.device is not None:
+            w = b.device.to_host(self.on_device[0], b.device.order())
+        else:
+            w = b.w * (b.sx * b.sx + b.sy * b.sy <= self.s2_max).astype(np.float64)
+        w.flags.writeable = False
+        return w
+
+    @cached_property
+    def own(self) -> np.ndarray:
+        own = is_own_path(self.rays, self.row, self.k)
+        own.flags.writeable = False
+        return own
+
+    @cached_property
+    def on_device(self) -> tuple:
+        return self.rays.device.accept(self.s2_max, self.row, self.k)
 
     def offsets(self, z_um: float) -> tuple[np.ndarray, np.ndarray]:
         """(dx, dy) from the pixel's axis where the rays meet the object plane z_um (um).
@@ -259,6 +296,7 @@ class PixelTracer:
         self.sampling = Sampling() if sampling is None else sampling
         self.path = reverse_path(design)
         self.n0 = float(self.path.slabs[0, 1])
+        self.s2_max = acceptance_s2(design, self.n0)
         self.n_obj = float(design.index(design.object_medium))
         self._pilots: dict[tuple, np.ndarray | None] = {}
         self._replays: dict[tuple, PixelBatch] | None = {} if replay else None
@@ -334,7 +372,7 @@ class PixelTracer:
         # the chunks launch() deals the rays into; each is kept, and handed out again to a
         # later trace with the same chunk (rays, stream, seed, Fresnel option and pilot)
         self.source(pixel)  # InputError for a pixel that is not used, as _trace
-        chunk = max(BLOCK, int(s.chunk))
+        chunk = chunk_for(s.chunk, resolve_device())  # as launch() deals them
         base = (int(pixel[0]), int(pixel[1]), int(stream), *s.pilot_key)
         spans = [(int(first_id) + d, min(chunk, n - d)) for d in range(0, n, chunk)]
         i = 0
@@ -372,8 +410,7 @@ class PixelTracer:
             progress=progress,
             hole_weights=weights,
         ):
-            w = b.w * acceptance(self.design, self.n0, b.sx, b.sy)
-            yield PixelBatch(b, w, is_own_path(b, row, k), src.x, src.y, self.n_obj)
+            yield PixelBatch(b, row, k, self.s2_max, src.x, src.y, self.n_obj)
 
 
 def _read_only(pb: PixelBatch) -> PixelBatch:

@@ -106,12 +106,14 @@ class PathRegistry:
         self.k = int(k)
         self.sequences: list[tuple[tuple[int, int], ...]] = []
         self._ids: dict[tuple[tuple[int, int], ...], int] = {}
-        self._id(((0, 0),) * self.n_masks)
+        self.id_of(((0, 0),) * self.n_masks)
 
     def __len__(self) -> int:
         return len(self.sequences)
 
-    def _id(self, seq: tuple[tuple[int, int], ...]) -> int:
+    def id_of(self, seq: tuple[tuple[int, int], ...]) -> int:
+        """The id of hole sequence ``seq`` (((other_row, dk), ...) per mask), registered
+        where new."""
         i = self._ids.get(seq)
         if i is None:
             i = self._ids[seq] = len(self.sequences)
@@ -141,7 +143,7 @@ class PathRegistry:
         _, first, inv = np.unique(key, return_index=True, return_inverse=True)
         lut = np.array(
             [
-                self._id(tuple(zip(o, d, strict=True)))
+                self.id_of(tuple(zip(o, d, strict=True)))
                 for o, d in zip(other[first].tolist(), dk[first].tolist(), strict=True)
             ],
             dtype=np.int64,
@@ -164,9 +166,8 @@ class KeyedSums:
         self.lo = np.zeros(0)
         self.hi = np.zeros(0)
 
-    def add(self, keys: np.ndarray, w: np.ndarray, attr: np.ndarray) -> np.ndarray:
-        """Add rays; returns each ray's slot index."""
-        uniq, inv = np.unique(keys, return_inverse=True)
+    def _slots(self, uniq: np.ndarray) -> np.ndarray:
+        """The slot of each key (new keys get new slots, the arrays grow)."""
         slots = np.empty(uniq.size, np.int64)
         for i, key in enumerate(uniq.tolist()):
             if key not in self.keys:
@@ -179,13 +180,29 @@ class KeyedSums:
             self.count = np.concatenate([self.count, np.zeros(grow, np.int64)])
             self.lo = np.concatenate([self.lo, np.full(grow, np.inf)])
             self.hi = np.concatenate([self.hi, np.full(grow, -np.inf)])
-        idx = slots[inv]
+        return slots
+
+    def add(self, keys: np.ndarray, w: np.ndarray, attr: np.ndarray) -> np.ndarray:
+        """Add rays; returns each ray's slot index."""
+        uniq, inv = np.unique(keys, return_inverse=True)
+        idx = self._slots(uniq)[inv]
         np.add.at(self.s1, idx, w)
         np.add.at(self.s2, idx, w * w)
         np.add.at(self.count, idx, 1)
         np.minimum.at(self.lo, idx, attr)
         np.maximum.at(self.hi, idx, attr)
         return idx
+
+    def merge(self, keys, s1, s2, count, lo, hi) -> np.ndarray:
+        """Add sums taken elsewhere (a GPU's), one row per distinct key; returns the
+        keys' slots."""
+        slots = self._slots(np.asarray(keys, np.int64))
+        self.s1[slots] += s1
+        self.s2[slots] += s2
+        self.count[slots] += count
+        self.lo[slots] = np.minimum(self.lo[slots], lo)
+        self.hi[slots] = np.maximum(self.hi[slots], hi)
+        return slots
 
     def get(self, key: int) -> int | None:
         return self.keys.get(key)
