@@ -3,6 +3,7 @@ ray for ray; the device switch; the CPU path imports nothing of numba.cuda."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import subprocess
@@ -127,6 +128,84 @@ assert ghost_tallies(pb, lat.k_lo, lat.k_hi, tr.n0, [0.0], 84.6, 400, 500.0, cap
 print("full")
 """
 
+RECORD = """
+import os
+import pickle
+import sys
+
+import numpy as np
+from opticalstamp.analysis import cuda_tallies as ct
+from opticalstamp.analysis.ghosts import analyse_ghosts
+from opticalstamp.analysis.lsf import traced_folded_lsf_pair, traced_map_sets
+from opticalstamp.design import load_design
+from opticalstamp.raytrace import cuda as rc
+from opticalstamp.raytrace.kernel import seed_key
+from opticalstamp.raytrace.launch import _kernel_args
+from opticalstamp.raytrace.pixel import PixelTracer, Sampling, pixel_source
+
+np.seterr(over="ignore")
+seen = {}
+
+
+class Recorder:  # each kernel's arguments as launched (host copies), then the launch
+    def __init__(self, name, kernel):
+        self.name, self.kernel = name, kernel
+
+    def __getitem__(self, config):
+        def call(*args):
+            host = [a.copy_to_host() if hasattr(a, "copy_to_host") else a for a in args]
+            seen.setdefault(self.name, host)
+            return self.kernel[config](*args)
+
+        return call
+
+
+for mod in (rc, ct):
+    for name in [n for n in dir(mod) if n.endswith("_kernel")]:
+        setattr(mod, name, Recorder(name, getattr(mod, name)))
+d = load_design("paper2016")
+tr = PixelTracer(d, Sampling(n_rays=1 << 12, seed=1, chunk=1 << 12), replay=True)
+os.environ["OPTICALSTAMP_DEVICE"] = "cpu"
+tr.hole_weights((0, 0))  # the pilot (2^18 rays) on the CPU
+os.environ["OPTICALSTAMP_DEVICE"] = "cuda"
+analyse_ghosts(d, z_mm=(0.0,), sampling=tr.sampling, tracer=tr)
+traced_map_sets(d, z_sets=[[1.0]], sampling=tr.sampling, tracer=tr)
+path, src = tr.path, pixel_source(d, 0, 0)
+n0 = float(path.slabs[0, 1])
+v = np.array([src.x, src.y, src.width, src.height, 4 * n0 * n0 * src.area, n0, n0, 0.0])
+for queue in (True, False):
+    rc.run(0, 256, seed_key(1), v, _kernel_args(path), True, path.first_mask_slab + 1, queue=queue)
+pb = next(tr.trace((0, 0)))
+res = ct.zeros((1, 1, 1, 338))
+ct.fold(pb, False, [1000.0], 1.0, [169.3], [338], 1, res)
+pickle.dump(seen, open(sys.argv[1], "wb"))
+print(sorted(seen))
+"""
+
+COMPILE = """
+import pickle
+import sys
+
+import numba
+from numba import cuda
+from numba.cuda import dispatcher
+
+
+class Hopper:  # device functions compile for "the current device": an H100 here
+    compute_capability = (9, 0)
+
+
+dispatcher.get_current_device = lambda: Hopper()
+from opticalstamp.analysis import cuda_tallies as ct
+from opticalstamp.raytrace import cuda as rc
+
+for name, args in sorted(pickle.load(open(sys.argv[1], "rb")).items()):
+    kernel = getattr(rc, name, None) or getattr(ct, name)
+    sig = tuple(numba.typeof(a) for a in args)
+    ptx, _ = cuda.compile_ptx(kernel.py_func, sig, cc=(9, 0))
+    print(name, ptx.count("fma.rn.f64"))
+"""
+
 
 def _python(code: str, **env) -> subprocess.CompletedProcess:
     e = os.environ | {"PYTHONPATH": str(ROOT / "src")} | env
@@ -154,6 +233,51 @@ def test_device_tallies_under_the_simulator_equal_the_cpu_tallies():
     res = _python(TALLIES, NUMBA_ENABLE_CUDASIM="1")
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.split()[-2:] == ["same", "full"], res.stdout
+
+
+def _compiler_missing() -> str:
+    """Why numba-cuda cannot compile for a GPU here ("" where it can)."""
+    if importlib.util.find_spec("numba_cuda") is None:
+        return "numba-cuda (the opticalstamp[cuda] extra) is not installed"
+    code = (
+        "from numba import cuda, float64\n"
+        "def k(a):\n    a[0] = 1.0\n"
+        "cuda.compile_ptx(k, (float64[:],), cc=(9, 0))\n"
+    )
+    res = _python(code)
+    return "" if res.returncode == 0 else (res.stderr.strip().splitlines() or ["?"])[-1]
+
+
+def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path):
+    """What the simulator cannot check: each kernel, with the argument types it is
+    launched with, compiles to PTX for an H100 (sm_90) with numba-cuda; and the kernels
+    free of transcendental functions contain no fused multiply-add, so that their
+    products are rounded as on the CPU (the libdevice cos, sin, asin and hypot that the
+    importance and ghost kernels call use FMAs of their own)."""
+    why = _compiler_missing()
+    if why:
+        pytest.skip(f"numba-cuda cannot compile for a GPU here: {why}")
+    rec = tmp_path / "args.pkl"
+    script = tmp_path / "record.py"
+    script.write_text(RECORD)
+    res = subprocess.run(
+        [sys.executable, str(script), str(rec)], capture_output=True, text=True, cwd=ROOT,
+        env=os.environ | {"PYTHONPATH": str(ROOT / "src"), "NUMBA_ENABLE_CUDASIM": "1"},
+        timeout=600,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    script = tmp_path / "compile.py"
+    script.write_text(COMPILE)
+    res = subprocess.run(
+        [sys.executable, str(script), str(rec)], capture_output=True, text=True, cwd=ROOT,
+        env=os.environ | {"PYTHONPATH": str(ROOT / "src")}, timeout=600,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    fma = dict(line.split() for line in res.stdout.strip().splitlines())
+    kernels = {"accept", "fold", "ghost", "importance", "maps", "plain", "plain_queue"}
+    assert set(fma) == {f"{k}_kernel" for k in kernels}, fma
+    for k in ("accept", "fold", "maps", "plain", "plain_queue"):
+        assert fma[f"{k}_kernel"] == "0", fma
 
 
 def test_device_choice():

@@ -7,8 +7,10 @@ to the host: the folding of rays onto chart periods (the RMTF's folded LSFs,
 analysis's sums per hole sequence, landing histograms and nearest landings
 (:func:`ghost_tallies`). Each kernel computes, per ray, what the CPU's tally computes
 (:mod:`.lsf`'s ``_fold`` and ``_maps``, :func:`~.ghosts.analyse_ghosts`), in float64, and
-adds it with atomics: the sums equal the CPU's to rounding (the order of the additions
-differs), counts, minima and maxima are the same. Imported only where a GPU (or numba's
+adds it with atomics (products that the CPU rounds on their own are kept from fusing
+into FMAs, :func:`~opticalstamp.raytrace.cuda.mul`): the sums equal the CPU's to rounding
+(the order of the additions differs), counts, minima and maxima are the same. Imported
+only where a GPU (or numba's
 CUDA simulator) traced the rays.
 """
 
@@ -19,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..raytrace.cuda import THREADS, blocks, cuda
+from ..raytrace.cuda import THREADS, blocks, cuda, mul
 
 EMPTY = -1  # a free slot of the hash table of hole sequences
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -43,12 +45,12 @@ def fold_kernel(out, ids, w, own, own_only, n, x0, z_um, n_obj, periods, n_bins,
         return
     sx = out[i, 2]
     sy = out[i, 3]
-    c = math.sqrt(n_obj * n_obj - sx * sx - sy * sy)
+    c = math.sqrt(mul(n_obj, n_obj) - mul(sx, sx) - mul(sy, sy))
     xo = out[i, 0] + z_um[iz] * sx / c - x0
     b = ids[i] % n_batch
     for p in range(periods.size):
         per = periods[p]
-        phi = xo - math.floor(xo / per) * per
+        phi = xo - mul(math.floor(xo / per), per)
         j = int(phi / per * n_bins[p])
         if j >= n_bins[p]:
             j = n_bins[p] - 1
@@ -86,7 +88,7 @@ def maps_kernel(
         return
     sx = out[i, 2]
     sy = out[i, 3]
-    c = math.sqrt(n_obj * n_obj - sx * sx - sy * sy)
+    c = math.sqrt(mul(n_obj, n_obj) - mul(sx, sx) - mul(sy, sy))
     z = z_um[iz]
     xo = out[i, 0] + z * sx / c - x0
     yo = out[i, 1] + z * sy / c - y0
@@ -158,12 +160,12 @@ def ghost_kernel(
     cuda.atomic.add(s1, s, wi)
     cuda.atomic.add(s2, s, wi * wi)
     cuda.atomic.add(count, s, 1)
-    theta = math.degrees(math.asin(math.sqrt(sx * sx + sy * sy) / n0))
+    theta = math.degrees(math.asin(math.sqrt(mul(sx, sx) + mul(sy, sy)) / n0))
     cuda.atomic.min(lo, s, theta)
     cuda.atomic.max(hi, s, theta)
     if own[i] or not wi > 0.0:
         return
-    c = math.sqrt(n_obj * n_obj - sx * sx - sy * sy)
+    c = math.sqrt(mul(n_obj, n_obj) - mul(sx, sx) - mul(sy, sy))
     for iz in range(z_um.size):
         z = z_um[iz]
         dx = out[i, 0] + z * sx / c - x0

@@ -22,13 +22,15 @@ import numpy as np
 if not hasattr(np, "row_stack"):  # numba-cuda <= 0.30 calls np.row_stack, gone in numpy 2.5
     setattr(np, "row_stack", np.vstack)  # noqa: B010
 
-from numba import cuda  # noqa: E402
+from numba import config, cuda  # noqa: E402
+from numba.cuda import libdevice  # noqa: E402
 
 TRANSMITTED, ABSORBED, TIR, ESCAPED = 0, 1, 2, 3
 ALIVE = -1  # a ray that goes on (between the stages of the queued kernel)
 THREADS = 128
 MAX_PLANES = 32  # the ledger's planes per block in shared memory
 MAX_MASKS = 16  # a ray's holes, per thread in local memory
+QUEUE = 2 * THREADS  # rays a block's queue holds (shared memory)
 QUEUE_BLOCKS = 4096  # blocks of the queued kernel (each loops over tiles of THREADS rays)
 
 _U32 = 2.0**-32
@@ -39,6 +41,22 @@ _S30, _S27, _S31, _S32 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(
 _S33 = np.uint64(33)
 _MASK32 = np.uint64(0xFFFFFFFF)
 _MASK31 = np.uint64(0x7FFFFFFF)
+
+
+if config.ENABLE_CUDASIM:  # the simulator computes in Python: products are rounded
+
+    @cuda.jit(device=True, inline=True)
+    def mul(a, b):
+        """a * b, rounded on its own (as on the CPU)."""
+        return a * b
+
+else:
+
+    @cuda.jit(device=True, inline=True)
+    def mul(a, b):
+        """a * b, rounded on its own (as on the CPU): the device compiler fuses a product
+        and a sum into one FMA, rounded once, unless the product is ``dmul_rn``."""
+        return libdevice.dmul_rn(a, b)
 
 
 @cuda.jit(device=True, inline=True)
@@ -58,7 +76,7 @@ def _uniform_pair(key, gid, draw):
 
 @cuda.jit(device=True, inline=True)
 def _centred(bits31):
-    return (np.float64(bits31) + 0.5) * 2.0**-31 - 0.5
+    return mul(np.float64(bits31) + 0.5, 2.0**-31) - 0.5
 
 
 @cuda.jit(device=True)
@@ -72,13 +90,13 @@ def _hole(x, y, masks, m, lat):
     circ = masks[m, 0] == 1.0
     for r in range(int(lat[3])):
         x0 = lat[4 + 2 * r] + ox
-        k = math.floor((x - x0) * ip + 0.5)
+        k = math.floor(mul(x - x0, ip) + 0.5)
         if k < lat[1] or k > lat[2]:
             continue
-        dx = x - (x0 + k * p)
+        dx = x - (x0 + mul(k, p))
         dy = y - (lat[5 + 2 * r] + oy)
         if circ:
-            if dx * dx + dy * dy <= hw * hw:
+            if mul(dx, dx) + mul(dy, dy) <= hw * hw:
                 return r, int(k)
         elif abs(dx) <= hw and abs(dy) <= hh:
             return r, int(k)
@@ -90,12 +108,12 @@ def _advance(x, y, sx, sy, ps, pp, i0, i1, slabs, n_out, masks, lat, lim, fresne
     """Slabs i0 ... i1 - 1 of :func:`opticalstamp.raytrace.kernel._trace_one`: (status,
     plane, x, y, ps, pp), status ALIVE where the ray goes on past slab i1 - 1; ps, pp:
     the products of the s and p Fresnel transmissions so far."""
-    s2 = sx * sx + sy * sy
+    s2 = mul(sx, sx) + mul(sy, sy)
     n_sl = slabs.shape[0]
     for i in range(i0, i1):
         d = slabs[i, 0]
         n = slabs[i, 1]
-        c = math.sqrt(n * n - s2)
+        c = math.sqrt(mul(n, n) - s2)
         x += d * sx / c
         y += d * sy / c
         if abs(x) > lim[0] or abs(y) > lim[1]:
@@ -109,7 +127,7 @@ def _advance(x, y, sx, sy, ps, pp, i0, i1, slabs, n_out, masks, lat, lim, fresne
             hk[slot, m] = k
         n2 = slabs[i + 1, 1] if i + 1 < n_sl else n_out
         if n2 != n:
-            c2sq = n2 * n2 - s2
+            c2sq = mul(n2, n2) - s2
             if c2sq <= 0.0:
                 return TIR, i, x, y, ps, pp
             if fresnel:
@@ -121,8 +139,8 @@ def _advance(x, y, sx, sy, ps, pp, i0, i1, slabs, n_out, masks, lat, lim, fresne
                 a2 = n2 * c1
                 b2 = n * cc2
                 rp = (a2 - b2) / (a2 + b2)
-                ps *= 1.0 - rs * rs
-                pp *= 1.0 - rp * rp
+                ps *= 1.0 - mul(rs, rs)
+                pp *= 1.0 - mul(rp, rp)
     return ALIVE, i1 - 1, x, y, ps, pp
 
 
@@ -141,19 +159,19 @@ def _reach(rho, slabs, n_pre):
     dr = 0.0
     dd = 0.0
     for i in range(n_pre):
-        n2 = slabs[i, 1] * slabs[i, 1]
-        c2 = n2 - rho * rho
+        n2 = mul(slabs[i, 1], slabs[i, 1])
+        c2 = n2 - mul(rho, rho)
         c = math.sqrt(c2)
         dr += slabs[i, 0] / c
         dd += slabs[i, 0] * n2 / (c2 * c)
-    return rho * dr, dd, dr
+    return mul(rho, dr), dd, dr
 
 
 @cuda.jit(device=True)
 def _solve_rho(r, slabs, n_pre, n_min, d_eq):
     if r <= 0.0:
         return 0.0
-    rho = n_min * r / math.sqrt(d_eq * d_eq + r * r)
+    rho = n_min * r / math.sqrt(mul(d_eq, d_eq) + mul(r, r))
     for _ in range(60):
         f, fp, _q = _reach(rho, slabs, n_pre)
         step = (f - r) / fp
@@ -215,11 +233,11 @@ def _plain_sample(key, gid, src):
     z0 = _mix(key ^ g)
     z1 = _mix(key ^ (g + _M2))
     n0 = src[5]
-    xa = src[0] + _centred(z0 >> _S33) * src[2]
-    ya = src[1] + _centred(z0 & _MASK31) * src[3]
+    xa = src[0] + mul(_centred(z0 >> _S33), src[2])
+    ya = src[1] + mul(_centred(z0 & _MASK31), src[3])
     a = 2.0 * n0 * _centred(z1 >> _S33)
     c2 = 2.0 * n0 * _centred(z1 & _MASK31)
-    return a * a + c2 * c2 < n0 * n0, xa, ya, a, c2
+    return mul(a, a) + mul(c2, c2) < n0 * n0, xa, ya, a, c2
 
 
 @cuda.jit(cache=True)  # compiled once, kept between processes where numba-cuda can
@@ -268,10 +286,10 @@ def plain_queue_kernel(
     hk = cuda.local.array((1, MAX_MASKS), np.int32)
     led = cuda.shared.array((MAX_PLANES, 4), np.int64)
     launched = cuda.shared.array(1, np.int64)
-    qf = cuda.shared.array((2 * THREADS, 6), np.float64)  # x, y, sx, sy, ps, pp
-    qid = cuda.shared.array(2 * THREADS, np.int64)
-    qr = cuda.shared.array(2 * THREADS, np.int8)
-    qk = cuda.shared.array(2 * THREADS, np.int32)
+    qf = cuda.shared.array((QUEUE, 6), np.float64)  # x, y, sx, sy, ps, pp
+    qid = cuda.shared.array(QUEUE, np.int64)
+    qr = cuda.shared.array(QUEUE, np.int8)
+    qk = cuda.shared.array(QUEUE, np.int32)
     qn = cuda.shared.array(1, np.int32)
     npl = slabs.shape[0]
     nm = masks.shape[0]
@@ -363,8 +381,8 @@ def importance_kernel(
         circ = masks[m0, 0] == 1.0
         nt = tgt_prob.size
         u1, u2 = _uniform_pair(key, gid, 0)
-        x0 = src[0] + (u1 - 0.5) * src[2]
-        y0 = src[1] + (u2 - 0.5) * src[3]
+        x0 = src[0] + mul(u1 - 0.5, src[2])
+        y0 = src[1] + mul(u2 - 0.5, src[3])
         u3, u4 = _uniform_pair(key, gid, 1)
         t = min(int(u3 * nt), nt - 1)
         if u4 >= tgt_prob[t]:
@@ -373,14 +391,14 @@ def importance_kernel(
         if circ:
             rr = hw * math.sqrt(u5)
             ph = 2.0 * math.pi * u6
-            xt = tgt_x[t] + rr * math.cos(ph)
-            yt = tgt_y[t] + rr * math.sin(ph)
+            xt = tgt_x[t] + mul(rr, math.cos(ph))
+            yt = tgt_y[t] + mul(rr, math.sin(ph))
         else:
-            xt = tgt_x[t] + (2.0 * u5 - 1.0) * hw
-            yt = tgt_y[t] + (2.0 * u6 - 1.0) * hh
+            xt = tgt_x[t] + mul(mul(2.0, u5) - 1.0, hw)
+            yt = tgt_y[t] + mul(mul(2.0, u6) - 1.0, hh)
         dx = xt - x0
         dy = yt - y0
-        r = math.sqrt(dx * dx + dy * dy)
+        r = math.sqrt(mul(dx, dx) + mul(dy, dy))
         rho = _solve_rho(r, slabs, n_pre, src[6], src[7])
         f, fp, q = _reach(rho, slabs, n_pre)
         sx = rho * dx / r if r > 0.0 else 0.0
@@ -402,7 +420,7 @@ def accept_kernel(out, o_hrow, o_hk, n, s2_max, row, k, w_acc, own):
     if i < n:
         sx = out[i, 2]
         sy = out[i, 3]
-        w_acc[i] = out[i, 4] if sx * sx + sy * sy <= s2_max else 0.0
+        w_acc[i] = out[i, 4] if mul(sx, sx) + mul(sy, sy) <= s2_max else 0.0
         o = 1
         for m in range(o_hrow.shape[1]):
             if o_hrow[i, m] != row or o_hk[i, m] != k:
