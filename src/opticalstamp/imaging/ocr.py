@@ -67,6 +67,22 @@ def recognise(image: np.ndarray, dpi: float, psm: int = 6) -> str:
             return f.read().decode("utf-8")
 
 
+def recognise_all(
+    items: list[tuple[np.ndarray, float]], psm: int = 6, workers: int | None = None
+) -> list[str]:
+    """:func:`recognise` of each (image, dpi), in that order, with up to ``workers``
+    Tesseract processes at once (default: one per core): each is a program of its own, so
+    the threads here only wait for them. Raises as :func:`recognise` (the first error)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    if not items:
+        return []
+    require_tesseract()
+    n = max(1, min(len(items), workers or os.cpu_count() or 1))
+    with ThreadPoolExecutor(n) as pool:
+        return list(pool.map(lambda item: recognise(item[0], item[1], psm), items))
+
+
 def normalise(text: str) -> str:
     return re.sub(r"\s+", " ", text).strip()
 

@@ -561,7 +561,12 @@ def _scans(
     from ..imaging.charts import bar_chart, edge_chart, line_chart, text_chart
     from ..imaging.heightmap import shape_map
     from ..imaging.measure import measure_rmtf, sfr_xy
-    from ..imaging.ocr import OCRUnavailable, character_error_rate, recognise, tesseract_available
+    from ..imaging.ocr import (
+        OCRUnavailable,
+        character_error_rate,
+        recognise_all,
+        tesseract_available,
+    )
     from ..imaging.scan import ScanSettings, prepare_kernels, simulate_scan
     from ..units import period_of_dpi
 
@@ -590,16 +595,12 @@ def _scans(
         return simulate_scan(doc, dpi, design, seed=seed, settings=page, kernels=kernels, **kw)
 
     res: dict = {"text_panels": [], "ocr": [], "profiles": [], "bar_panels": []}
+    reads = []  # the scans to read, read at once below (one Tesseract process per core)
 
     def read(r, z: float, truth: str, face: str, points: float) -> None:
         from ..io.files import linear_to_srgb
 
-        try:
-            got = recognise(linear_to_srgb(r.image), r.dpi)
-        except OCRUnavailable:
-            return
-        cer = character_error_rate(truth, got)
-        res["ocr"].append({"face": face, "points": points, "z_mm": z, "cer": cer})
+        reads.append(((linear_to_srgb(r.image), r.dpi), (truth, face, points, z)))
 
     for z in (0.5, 1.5, 2.5):
         r = scan(text, z_mm=z)
@@ -610,6 +611,13 @@ def _scans(
         small, small_truth = text_chart(dpi, small_points, face=small_face)
         for z in small_z:
             read(scan(small, z_mm=z), z, small_truth, small_face, small_points)
+        try:
+            texts = recognise_all([image for image, _ in reads])
+        except OCRUnavailable:
+            texts = []
+        for got, (_, (truth_, face, points, z)) in zip(texts, reads, strict=False):
+            cer = character_error_rate(truth_, got)
+            res["ocr"].append({"face": face, "points": points, "z_mm": z, "cer": cer})
     bars = bar_chart(dpi, chart_dpi=(200.0,), block_mm=10.0, height_mm=4.0)
     # RMTF compared on the own path: the chart is a finite patch on a white page, so its
     # ghost background differs from the infinite chart of the computed RMTF
@@ -692,7 +700,12 @@ def _restoration(
     import numpy as np
 
     from ..imaging.charts import text_chart
-    from ..imaging.ocr import OCRUnavailable, character_error_rate, recognise, tesseract_available
+    from ..imaging.ocr import (
+        OCRUnavailable,
+        character_error_rate,
+        recognise_all,
+        tesseract_available,
+    )
     from ..imaging.outputkernel import output_kernel
     from ..imaging.restore import METHODS, MODEL_ERROR, noise_sigma, restore
     from ..imaging.scan import ScanSettings, prepare_kernels, simulate_scan
@@ -744,16 +757,19 @@ def _restoration(
         )
         for name, img in restored(r.image, z, methods, region).items():
             panels.append((f"{name}, Z = {z:g} mm", np.clip(img[inner], 0, 1)))
+    pending = []  # read at once below (one Tesseract process per core)
     for points, z in reads:
         doc, truth = charts[points]
         r = simulate_scan(doc, dpi, design, z_mm=z, seed=seed, settings=page, kernels=kernels)
         for name, img in restored(r.image, z, ocr_methods).items():
-            try:
-                got = recognise(linear_to_srgb(np.clip(img, 0, 1)), r.dpi)
-            except OCRUnavailable:
-                continue
-            cer = character_error_rate(truth, got)
-            ocr.append({"points": points, "z_mm": z, "version": name, "cer": cer})
+            image = (linear_to_srgb(np.clip(img, 0, 1)), r.dpi)
+            pending.append((image, {"points": points, "z_mm": z, "version": name}, truth))
+    try:
+        texts = recognise_all([image for image, _, _ in pending])
+    except OCRUnavailable:
+        texts = []
+    for got, (_, entry, truth) in zip(texts, pending, strict=False):
+        ocr.append({**entry, "cer": character_error_rate(truth, got)})
     return {
         "study": study,
         "panels": panels,
