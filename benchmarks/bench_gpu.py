@@ -8,6 +8,8 @@ python benchmarks/bench_gpu.py [--device cpu|cuda|auto] [--search-designs N] [--
    light (the precision-driven run, capped at 2^31 rays).
 3. ``search --estimator trace``: every candidate traced exactly (480 designs by default).
 4. ``opticalstamp report``, the whole process, on the device.
+5. Start-up: a whole process tracing a few rays, with an empty and with a filled
+   compiled-code cache (the kernels are declared ``cache=True``).
 Targets on an H100-class GPU: >= 1e11 rays/s (float64); ghosts < 1 s; search < 60 s;
 report < 10 s. On the 2-core CPU: the exact search within 15 minutes.
 Writes benchmarks/bench_gpu.json with the device's name.
@@ -36,6 +38,31 @@ def device_name(device: str) -> str:
     return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores"
 
 
+STARTUP = """
+from opticalstamp.design import load_design
+from opticalstamp.raytrace.launch import launch
+from opticalstamp.raytrace.pixel import pixel_source
+from opticalstamp.raytrace.stack import reverse_path
+d = load_design("paper2016")
+for importance in (False, True):
+    list(launch(reverse_path(d), pixel_source(d, 0, 0), 1 << 16, 1, importance=importance))
+"""
+
+
+def startup(device: str) -> dict:
+    """Seconds for a whole process that traces a few rays (both kernels): with an empty
+    compiled-code cache (numba compiles and stores the kernels), then with that cache (the
+    kernels loaded from it): what compile-once saves."""
+    out = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = os.environ | {"NUMBA_CACHE_DIR": cache, "OPTICALSTAMP_DEVICE": device}
+        for name in ("cold_cache_s", "warm_cache_s"):
+            t = time.perf_counter()
+            subprocess.run([sys.executable, "-c", STARTUP], check=True, env=env)
+            out[name] = round(time.perf_counter() - t, 2)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--device", default="auto")
@@ -53,6 +80,8 @@ def main() -> None:
 
     device = resolve_device(args.device)
     out = {"device": device, "device_name": device_name(device), "python": sys.version.split()[0]}
+    out["startup"] = startup(args.device)
+    print(f"start-up, whole process: {out['startup']}")
     d = load_design("paper2016")
     path, src = reverse_path(d), pixel_source(d, 0, 0)
     n = 1 << (30 if device == "cuda" else 26)

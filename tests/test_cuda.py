@@ -18,49 +18,59 @@ from opticalstamp.device import DeviceUnavailable, resolve_device
 ROOT = Path(__file__).resolve().parents[1]
 
 SIMULATED = """
+import os
+
 import numpy as np
 from opticalstamp.design import load_design
-from opticalstamp.raytrace.launch import launch
+from opticalstamp.raytrace import cuda
+from opticalstamp.raytrace.kernel import seed_key
+from opticalstamp.raytrace.launch import _kernel_args, launch
 from opticalstamp.raytrace.pixel import pixel_source
 from opticalstamp.raytrace.stack import reverse_path
 
+N = int(os.environ.get("RAYS_LOG2", "12"))  # 2^N samples (the simulator is slow)
+np.seterr(over="ignore")  # the simulator's uint64 hashing wraps, as on the device
 d = load_design("paper2016")
 path, src = reverse_path(d), pixel_source(d, 0, 0)
-cases = [(False, False, 1 << 12), (True, True, 1 << 11)]  # (importance, fresnel, rays)
+FIELDS = ("ids", "x", "y", "sx", "sy", "w", "hole_row", "hole_k")
+
+
+def joined(batches):  # the chunks as one (a GPU deals rays into larger chunks)
+    out = {f: np.concatenate([getattr(b, f) for b in batches]) for f in FIELDS}
+    out["ledger"] = sum(b.ledger for b in batches)
+    out["n_launched"] = sum(b.n_launched for b in batches)
+    return out
+
+
+def same(a, b, exact=False):
+    assert np.array_equal(a["ids"], b["ids"]), (a["ids"].size, b["ids"].size)
+    for f in ("x", "y", "sx", "sy", "w"):
+        if exact:
+            assert np.array_equal(a[f], b[f]), f
+        np.testing.assert_allclose(a[f], b[f], rtol=1e-12, atol=1e-9)
+    for f in ("hole_row", "hole_k", "ledger"):
+        assert np.array_equal(a[f], b[f]), f
+    assert a["n_launched"] == b["n_launched"]
+
+
+cases = [(False, False, 1 << N), (True, True, 1 << (N - 1))]  # (importance, fresnel, rays)
 for importance, fresnel, n in cases:
     kw = dict(importance=importance, fresnel=fresnel, chunk=1 << 12, first_id=123)
-    cpu = list(launch(path, src, n, 7, device="cpu", **kw))
-    gpu = list(launch(path, src, n, 7, device="cuda", **kw))
-    assert len(cpu) == len(gpu)
-    for a, b in zip(cpu, gpu):
-        assert np.array_equal(a.ids, b.ids), (a.ids.size, b.ids.size)
-        for f in ("x", "y", "sx", "sy", "w"):
-            np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=1e-12, atol=1e-9)
-        assert np.array_equal(a.hole_row, b.hole_row) and np.array_equal(a.hole_k, b.hole_k)
-        assert np.array_equal(a.ledger, b.ledger)
-        assert (a.n_launched, a.n_samples) == (b.n_launched, b.n_samples)
-    print(importance, fresnel, sum(b.ids.size for b in cpu), int(cpu[0].ledger.sum()))
-# plain sampling, one thread per ray throughout (no queue): the same rays again
-import math
-from opticalstamp.raytrace import cuda
-from opticalstamp.raytrace.kernel import seed_key
-from opticalstamp.raytrace.launch import _kernel_args
-
+    cpu = joined(list(launch(path, src, n, 7, device="cpu", **kw)))
+    same(cpu, joined(list(launch(path, src, n, 7, device="cuda", **kw))))
+    print(importance, fresnel, cpu["ids"].size, int(cpu["ledger"].sum()))
+# plain sampling, one thread per ray throughout (no queue): the same rays again, exactly
 n0 = float(path.slabs[0, 1])
-w0 = 4.0 * n0 * n0 * src.area
-args = np.array([src.x, src.y, src.width, src.height, w0, n0, n0, 0.0])
+args = np.array([src.x, src.y, src.width, src.height, 4 * n0 * n0 * src.area, n0, n0, 0.0])
 n_pre = path.first_mask_slab + 1
 runs = [
-    cuda.run(123, 1 << 12, seed_key(7), args, _kernel_args(path), True, n_pre, None, queue=q)
+    cuda.run(123, 1 << N, seed_key(7), args, _kernel_args(path), True, n_pre, None, queue=q)
     for q in (True, False)
 ]
-a, b = (r.host() for r in runs)
+a, b = ({**r.host(), "ledger": r.ledger, "n_launched": r.n_launched} for r in runs)
+same(a, b, exact=True)
 kw = dict(importance=False, fresnel=True, chunk=1 << 12, first_id=123, device="cpu")
-(cpu,) = launch(path, src, 1 << 12, 7, **kw)
-for f in a:  # the two device kernels exactly; the CPU's as above
-    assert np.array_equal(a[f], b[f]), f
-    np.testing.assert_allclose(a[f], getattr(cpu, f), rtol=1e-12, atol=1e-9)
-assert np.array_equal(runs[0].ledger, runs[1].ledger) and runs[0].n_launched == runs[1].n_launched
+same(a, joined(list(launch(path, src, 1 << N, 7, **kw))))
 print("same")
 """
 
@@ -76,7 +86,8 @@ from opticalstamp.raytrace.pixel import PixelTracer, Sampling
 
 np.seterr(over="ignore")  # the simulator's uint64 hashing wraps, as on the device
 d = load_design("paper2016")
-s = Sampling(n_rays=1 << 13, seed=5, chunk=1 << 12)  # two chunks
+N = int(os.environ.get("RAYS_LOG2", "12"))  # 2^(N+1) rays (the simulator is slow)
+s = Sampling(n_rays=1 << (N + 1), seed=5, chunk=1 << N)  # two chunks (one on a GPU)
 res = {}
 for dev in ("cpu", "cuda"):
     tr = PixelTracer(d, s, replay=True)  # each chunk traced once, tallied by all three
@@ -321,6 +332,16 @@ def test_the_cpu_path_imports_nothing_of_numba_cuda():
     assert res.returncode == 0, res.stderr[-2000:]
     got = json.loads(res.stdout.strip().splitlines()[-1])
     assert got == {"cuda": False, "device": "cpu"}
+
+
+@pytest.mark.skipif(resolve_device("auto") != "cuda", reason="needs a CUDA GPU")
+@pytest.mark.parametrize("script", ["SIMULATED", "TALLIES"])
+def test_on_the_gpu_the_same_rays_and_tallies(script):  # pragma: no cover - GPU machines
+    """The simulator tests above on a real GPU, with 2^20 rays: the CPU's survivors ray for
+    ray, the queued and per-thread kernels identical, the tallies equal to rounding."""
+    res = _python(globals()[script], RAYS_LOG2="20")
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "same" in res.stdout.split(), res.stdout
 
 
 @pytest.mark.skipif(resolve_device("auto") != "cuda", reason="needs a CUDA GPU")
