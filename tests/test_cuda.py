@@ -59,16 +59,18 @@ for importance, fresnel, n in cases:
     cpu = joined(list(launch(path, src, n, 7, device="cpu", **kw)))
     same(cpu, joined(list(launch(path, src, n, 7, device="cuda", **kw))))
     print(importance, fresnel, cpu["ids"].size, int(cpu["ledger"].sum()))
-# plain sampling, one thread per ray throughout (no queue): the same rays again, exactly
+# plain sampling queued per block, per warp (on a GPU) and not at all: the same rays, exactly
 n0 = float(path.slabs[0, 1])
 args = np.array([src.x, src.y, src.width, src.height, 4 * n0 * n0 * src.area, n0, n0, 0.0])
 n_pre = path.first_mask_slab + 1
+queues = ("block", "none") if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1" else cuda.QUEUES
 runs = [
     cuda.run(123, 1 << N, seed_key(7), args, _kernel_args(path), True, n_pre, None, queue=q)
-    for q in (True, False)
+    for q in queues
 ]
-a, b = ({**r.host(), "ledger": r.ledger, "n_launched": r.n_launched} for r in runs)
-same(a, b, exact=True)
+a, *others = ({**r.host(), "ledger": r.ledger, "n_launched": r.n_launched} for r in runs)
+for b in others:
+    same(a, b, exact=True)
 kw = dict(importance=False, fresnel=True, chunk=1 << 12, first_id=123, device="cpu")
 same(a, joined(list(launch(path, src, 1 << N, 7, **kw))))
 print("same")
@@ -184,7 +186,7 @@ traced_map_sets(d, z_sets=[[1.0]], sampling=tr.sampling, tracer=tr)
 path, src = tr.path, pixel_source(d, 0, 0)
 n0 = float(path.slabs[0, 1])
 v = np.array([src.x, src.y, src.width, src.height, 4 * n0 * n0 * src.area, n0, n0, 0.0])
-for queue in (True, False):
+for queue in ("block", "none"):
     rc.run(0, 256, seed_key(1), v, _kernel_args(path), True, path.first_mask_slab + 1, queue=queue)
 pb = next(tr.trace((0, 0)))
 res = ct.zeros((1, 1, 1, 338))
@@ -210,7 +212,9 @@ dispatcher.get_current_device = lambda: Hopper()
 from opticalstamp.analysis import cuda_tallies as ct
 from opticalstamp.raytrace import cuda as rc
 
-for name, args in sorted(pickle.load(open(sys.argv[1], "rb")).items()):
+launched = pickle.load(open(sys.argv[1], "rb"))
+launched["plain_warp_kernel"] = launched["plain_queue_kernel"]  # not under the simulator
+for name, args in sorted(launched.items()):
     kernel = getattr(rc, name, None) or getattr(ct, name)
     sig = tuple(numba.typeof(a) for a in args)
     ptx, _ = cuda.compile_ptx(kernel.py_func, sig, cc=(9, 0))
@@ -228,8 +232,9 @@ def _python(code: str, **env) -> subprocess.CompletedProcess:
 def test_cuda_kernels_under_the_simulator_trace_the_cpu_rays():
     """Plain sampling (4,096 samples) and importance sampling with Fresnel losses (2,048
     rays): the same survivors (ids), positions, directions and weights (to 1e-12), holes,
-    ledger and launched counts as the CPU kernel, for the same seed; the queued plain
-    kernel (the default) and the one-thread-per-ray one give identical rays."""
+    ledger and launched counts as the CPU kernel, for the same seed; the plain kernel
+    queued per block (the default) and the one-thread-per-ray one give identical rays (and
+    the one queued per warp, on a GPU)."""
     res = _python(SIMULATED, NUMBA_ENABLE_CUDASIM="1")
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.strip().endswith("same")
@@ -285,9 +290,10 @@ def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path):
     )  # fmt: skip
     assert res.returncode == 0, res.stderr[-3000:]
     fma = dict(line.split() for line in res.stdout.strip().splitlines())
-    kernels = {"accept", "fold", "ghost", "importance", "maps", "plain", "plain_queue"}
+    plain = ("plain", "plain_queue", "plain_warp")
+    kernels = {"accept", "fold", "ghost", "importance", "maps", *plain}
     assert set(fma) == {f"{k}_kernel" for k in kernels}, fma
-    for k in ("accept", "fold", "maps", "plain", "plain_queue"):
+    for k in ("accept", "fold", "maps", *plain):
         assert fma[f"{k}_kernel"] == "0", fma
 
 

@@ -31,7 +31,12 @@ THREADS = 128
 MAX_PLANES = 32  # the ledger's planes per block in shared memory
 MAX_MASKS = 16  # a ray's holes, per thread in local memory
 QUEUE = 2 * THREADS  # rays a block's queue holds (shared memory)
-QUEUE_BLOCKS = 4096  # blocks of the queued kernel (each loops over tiles of THREADS rays)
+QUEUE_BLOCKS = 4096  # blocks of the queued kernels (each loops over tiles of THREADS rays)
+WARP = 32
+WARPS = THREADS // WARP  # warps per block
+WARP_QUEUE = 2 * WARP  # rays a warp's queue holds
+FULL_MASK = 0xFFFFFFFF
+QUEUES = ("block", "warp", "none")  # the plain kernels: queued per block or warp, or not
 
 _U32 = 2.0**-32
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -341,6 +346,78 @@ def plain_queue_kernel(
     _flush(led, launched, ledger, n_launched, npl)
 
 
+@cuda.jit(cache=True)
+def plain_warp_kernel(
+    first_id, n_rays, key, src, slabs, n_out, masks, lat, lim, fresnel, n_pre,
+    out, o_id, o_hrow, o_hk, count, ledger, n_launched,
+):  # fmt: skip
+    """:func:`plain_queue_kernel` with a queue per warp instead of per block: the rays that
+    pass the first mask are placed with ``ballot_sync`` and ``popc`` (each lane's place
+    is the number of passing lanes below it), and a warp traces the rest of the stack as
+    soon as its own queue holds 32 rays, with no block-wide barrier. The simulator has no
+    warp intrinsics: this kernel is checked on a GPU against the per-block one."""
+    hrow = cuda.local.array((1, MAX_MASKS), np.int8)
+    hk = cuda.local.array((1, MAX_MASKS), np.int32)
+    led = cuda.shared.array((MAX_PLANES, 4), np.int64)
+    launched = cuda.shared.array(1, np.int64)
+    qf = cuda.shared.array((WARPS, WARP_QUEUE, 6), np.float64)  # x, y, sx, sy, ps, pp
+    qid = cuda.shared.array((WARPS, WARP_QUEUE), np.int64)
+    qr = cuda.shared.array((WARPS, WARP_QUEUE), np.int8)
+    qk = cuda.shared.array((WARPS, WARP_QUEUE), np.int32)
+    npl = slabs.shape[0]
+    nm = masks.shape[0]
+    m0 = int(slabs[n_pre - 1, 2])
+    t = cuda.threadIdx.x
+    wq = t // WARP
+    lane = t % WARP
+    qn = 0  # the warp's queue length: the same in every lane
+    _zero(led, launched, npl)
+    n_tiles = (n_rays + THREADS - 1) // THREADS
+    for tile in range(cuda.blockIdx.x, n_tiles, cuda.gridDim.x):
+        i = tile * THREADS + t
+        alive = False
+        xe = ye = a = c2 = ps = pp = 0.0
+        gid = first_id + i
+        if i < n_rays:
+            ok, xa, ya, a, c2 = _plain_sample(key, gid, src)
+            if ok:
+                cuda.atomic.add(launched, 0, 1)
+                st, pl, xe, ye, ps, pp = _advance(
+                    xa, ya, a, c2, 1.0, 1.0, 0, n_pre, slabs, n_out, masks, lat, lim,
+                    fresnel, hrow, hk, 0,
+                )  # fmt: skip
+                alive = st == ALIVE and n_pre < npl
+                if not alive:
+                    st = TRANSMITTED if st == ALIVE else st
+                    _finish(st, pl, xe, ye, src[4] * 0.5 * (ps + pp), a, c2, gid, hrow, hk, 0,
+                            nm, led, out, o_id, o_hrow, o_hk, count)  # fmt: skip
+        ballot = cuda.ballot_sync(FULL_MASK, alive)
+        if alive:
+            q = qn + cuda.popc(ballot & cuda.lanemask_lt())
+            qf[wq, q, 0] = xe
+            qf[wq, q, 1] = ye
+            qf[wq, q, 2] = a
+            qf[wq, q, 3] = c2
+            qf[wq, q, 4] = ps
+            qf[wq, q, 5] = pp
+            qid[wq, q] = gid
+            qr[wq, q] = hrow[0, m0]
+            qk[wq, q] = hk[0, m0]
+        qn += cuda.popc(ballot)
+        cuda.syncwarp(FULL_MASK)
+        if qn >= WARP:
+            _stage2(qn - WARP + lane, qf[wq], qid[wq], qr[wq], qk[wq], m0, n_pre, src[4],
+                    slabs, n_out, masks, lat, lim, fresnel, hrow, hk, led, out, o_id, o_hrow,
+                    o_hk, count)  # fmt: skip
+            qn -= WARP
+            cuda.syncwarp(FULL_MASK)
+    if lane < qn:  # what is left in the warp's queue
+        _stage2(lane, qf[wq], qid[wq], qr[wq], qk[wq], m0, n_pre, src[4], slabs, n_out,
+                masks, lat, lim, fresnel, hrow, hk, led, out, o_id, o_hrow, o_hk,
+                count)  # fmt: skip
+    _flush(led, launched, ledger, n_launched, npl)
+
+
 @cuda.jit(device=True)
 def _stage2(q, qf, qid, qr, qk, m0, n_pre, w0, slabs, n_out, masks, lat, lim, fresnel,
             hrow, hk, led, out, o_id, o_hrow, o_hk, count):  # fmt: skip
@@ -497,13 +574,18 @@ def _compact(a, n: int):
 
 
 def run(
-    first_id, n_rays, key, src, args, fresnel, n_pre, targets=None, queue: bool = True
+    first_id, n_rays, key, src, args, fresnel, n_pre, targets=None, queue: str = "block"
 ) -> DeviceRays:
     """Trace one chunk on the device; its survivors stay there (:class:`DeviceRays`).
     ``targets``: the alias table (importance sampling) or None (plain sampling);
-    ``queue``: plain sampling in two stages with a queue per block
-    (:func:`plain_queue_kernel`) or one thread per ray throughout (:func:`plain_kernel`);
-    the same rays either way."""
+    ``queue`` (plain sampling, one of :data:`QUEUES`): in two stages with a queue per
+    block (:func:`plain_queue_kernel`) or per warp (:func:`plain_warp_kernel`, not under
+    the simulator), or one thread per ray throughout (:func:`plain_kernel`); the same
+    rays every way."""
+    if queue not in QUEUES:
+        raise ValueError(f"queue: must be one of {', '.join(QUEUES)} (got {queue!r})")
+    if queue == "warp" and config.ENABLE_CUDASIM:
+        raise ValueError("queue: warp needs warp intrinsics, which the CUDA simulator lacks")
     slabs, n_out, masks, lat, lim = args
     nm, npl = masks.shape[0], slabs.shape[0]
     if npl > MAX_PLANES or nm > MAX_MASKS:
@@ -523,9 +605,9 @@ def run(
     launched = d(np.zeros(1, np.int64))
     common = (out, o_id, o_hrow, o_hk, count, ledger, launched)
     with np.errstate(over="ignore"):  # the simulator's uint64 hashing wraps, as on the device
-        if targets is None and queue:
-            grid = min(blocks(n_rays), QUEUE_BLOCKS)
-            plain_queue_kernel[grid, THREADS](
+        if targets is None and queue != "none":
+            kernel = plain_queue_kernel if queue == "block" else plain_warp_kernel
+            kernel[min(blocks(n_rays), QUEUE_BLOCKS), THREADS](
                 first_id, n_rays, key, d(src), *dargs, int(n_pre), *common
             )
         elif targets is None:
