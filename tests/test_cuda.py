@@ -63,22 +63,42 @@ for importance, fresnel, n in cases:
 n0 = float(path.slabs[0, 1])
 args = np.array([src.x, src.y, src.width, src.height, 4 * n0 * n0 * src.area, n0, n0, 0.0])
 n_pre = path.first_mask_slab + 1
-queues = ("block", "none") if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1" else cuda.QUEUES
+simulated = os.environ.get("NUMBA_ENABLE_CUDASIM") == "1"
+queues = ("block",) if simulated else ("block", "warp")
+
 runs = [
     cuda.run(123, 1 << N, seed_key(7), args, _kernel_args(path), True, n_pre, None, queue=q)
-    for q in queues
+    for q in ("none", *queues)
 ]
 a, *others = ({**r.host(), "ledger": r.ledger, "n_launched": r.n_launched} for r in runs)
 for b in others:
     same(a, b, exact=True)
 kw = dict(importance=False, fresnel=True, chunk=1 << 12, first_id=123, device="cpu")
 same(a, joined(list(launch(path, src, 1 << N, 7, **kw))))
+# each queue filled and drained many times: one block, and a first mask opened so wide
+# that most rays from the pixel's centre pass it
+cuda.QUEUE_BLOCKS = 1
+kargs = list(_kernel_args(path))
+kargs[2] = kargs[2].copy()
+kargs[2][int(path.slabs[n_pre - 1, 2]), 1:3] = 80.0  # half width and height (um)
+point = np.array([src.x, src.y, 1e-3, 1e-3, args[4], n0, n0, 0.0])
+runs = [
+    cuda.run(5, 1 << 13, seed_key(3), point, tuple(kargs), True, n_pre, None, queue=q)
+    for q in ("none", *queues)
+]
+passed = runs[0].n_launched - int(runs[0].ledger[:n_pre].sum())
+assert passed > 8 * cuda.THREADS, passed
+a, *others = ({**r.host(), "ledger": r.ledger, "n_launched": r.n_launched} for r in runs)
+assert a["ids"].size > 5, a["ids"].size  # survivors through the rest of the stack
+for b in others:
+    same(a, b, exact=True)
 print("same")
 """
 
 TALLIES = """
 import os
 import numpy as np
+from opticalstamp.analysis import cuda_tallies as ct
 from opticalstamp.analysis.cuda_tallies import ghost_tallies
 from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.analysis.lsf import traced_folded_lsf_pair, traced_map_sets
@@ -134,10 +154,26 @@ for u, v in zip(mc, mg, strict=True):
     np.testing.assert_allclose(v.own, u.own, rtol=1e-12, atol=1e-12 * u.own.max())
     np.testing.assert_allclose(v.ghost, u.ghost, rtol=1e-12, atol=1e-12 * u.ghost.max())
 print("same")
-pb = next(tr.trace((0, 0)))
 lat = tr.path.lattice
-assert ghost_tallies(pb, lat.k_lo, lat.k_hi, tr.n0, [0.0], 84.6, 400, 500.0) is not None
-assert ghost_tallies(pb, lat.k_lo, lat.k_hi, tr.n0, [0.0], 84.6, 400, 500.0, capacity=2) is None
+args = (next(tr.trace((0, 0))), lat.k_lo, lat.k_hi, tr.n0, [0.0], 84.6, 400, 500.0)
+whole = ghost_tallies(*args)
+assert len(whole.sequences) > 10
+assert ghost_tallies(*args, capacity=2, max_capacity=2) is None  # full: back to the host
+grown = ghost_tallies(*args, capacity=2)  # the table doubled until the sequences fit
+assert grown.sequences == whole.sequences and np.array_equal(grown.count, whole.count)
+np.testing.assert_allclose(grown.s1, whole.s1, rtol=1e-12)
+# some chunks handed back to the host (every other one): the CPU's analysis again
+calls = []
+
+
+def every_other(*a, **kw):
+    calls.append(1)
+    return None if len(calls) % 2 else ghost_tallies(*a, **kw)
+
+
+ct.ghost_tallies = every_other
+same(a, analyse_ghosts(d, z_mm=(0.0, 2.0), sampling=s, tracer=tr).to_dict())
+assert calls
 print("full")
 """
 
@@ -197,6 +233,7 @@ print(sorted(seen))
 
 COMPILE = """
 import pickle
+import re
 import sys
 
 import numba
@@ -218,7 +255,15 @@ for name, args in sorted(launched.items()):
     kernel = getattr(rc, name, None) or getattr(ct, name)
     sig = tuple(numba.typeof(a) for a in args)
     ptx, _ = cuda.compile_ptx(kernel.py_func, sig, cc=(9, 0))
-    print(name, ptx.count("fma.rn.f64"))
+    # what ptxas may still fuse: a product not rounded on its own (mul.f64, not mul.rn)
+    # whose result (directly or through mov) feeds a sum
+    prod = set(re.findall(r"mul\\.f64\\s+(%fd\\d+)", ptx))
+    for dst, src in re.findall(r"mov\\.f64\\s+(%fd\\d+),\\s*(%fd\\d+);", ptx):
+        if src in prod:
+            prod.add(dst)
+    sums = re.findall(r"(?:add|sub)(?:\\.rn)?\\.f64\\s+%fd\\d+,\\s*([^,]+),\\s*([^;]+);", ptx)
+    fusable = sum(a.strip() in prod or b.strip() in prod for a, b in sums)
+    print(name, ptx.count("fma.rn.f64") + fusable)
 """
 
 
@@ -244,8 +289,8 @@ def test_device_tallies_under_the_simulator_equal_the_cpu_tallies():
     """With the rays kept on the (simulated) device and tallied there: the ghost analysis
     (every etendue, path, angle range, landing histogram and nearest landing, over two
     chunks), the folded LSFs (all light and own path) and the responsivity maps equal the
-    CPU's to rounding for the same seed; a full hash table of hole sequences hands the
-    batch back to the host (None)."""
+    CPU's to rounding for the same seed; the hash table of hole sequences grows while it
+    fills, and a batch it cannot take goes back to the host, with the same analysis."""
     res = _python(TALLIES, NUMBA_ENABLE_CUDASIM="1")
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.split()[-2:] == ["same", "full"], res.stdout
@@ -269,7 +314,9 @@ def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path):
     launched with, compiles to PTX for an H100 (sm_90) with numba-cuda; and the kernels
     free of transcendental functions contain no fused multiply-add, so that their
     products are rounded as on the CPU (the libdevice cos, sin, asin and hypot that the
-    importance and ghost kernels call use FMAs of their own)."""
+    importance and ghost kernels call use FMAs of their own). Checked in the PTX: no
+    fma, and no product left for the assembler to fuse (a ``mul.f64`` that is not
+    ``mul.rn`` feeding an add or a subtraction)."""
     why = _compiler_missing()
     if why:
         pytest.skip(f"numba-cuda cannot compile for a GPU here: {why}")

@@ -9,9 +9,9 @@ analysis's sums per hole sequence, landing histograms and nearest landings
 (:mod:`.lsf`'s ``_fold`` and ``_maps``, :func:`~.ghosts.analyse_ghosts`), in float64, and
 adds it with atomics (products that the CPU rounds on their own are kept from fusing
 into FMAs, :func:`~opticalstamp.raytrace.cuda.mul`): the sums equal the CPU's to rounding
-(the order of the additions differs), counts, minima and maxima are the same. Imported
-only where a GPU (or numba's
-CUDA simulator) traced the rays.
+(the order of the additions differs, and varies from run to run), the counts are exact;
+angles and landing distances use libdevice's asin and hypot, within an ulp of the CPU's.
+Imported only where a GPU (or numba's CUDA simulator) traced the rays.
 """
 
 from __future__ import annotations
@@ -32,6 +32,16 @@ def zeros(shape) -> object:
     return cuda.to_device(np.zeros(shape))
 
 
+@cuda.jit(device=True)
+def _landing(out, i, z, n_obj):
+    """Where survivor i meets the object plane z (um above the reference plane), as
+    :func:`~opticalstamp.raytrace.tally.object_plane`."""
+    sx = out[i, 2]
+    sy = out[i, 3]
+    c = math.sqrt(mul(n_obj, n_obj) - mul(sx, sx) - mul(sy, sy))
+    return out[i, 0] + z * sx / c, out[i, 1] + z * sy / c
+
+
 @cuda.jit(cache=True)
 def fold_kernel(out, ids, w, own, own_only, n, x0, z_um, n_obj, periods, n_bins, n_batch, res):
     """res[p, id % n_batch, iz, bin] += w per ray and Z (the CPU's ``lsf._fold``)."""
@@ -43,10 +53,8 @@ def fold_kernel(out, ids, w, own, own_only, n, x0, z_um, n_obj, periods, n_bins,
     wi = w[i]
     if wi == 0.0 or (own_only and own[i] == 0):
         return
-    sx = out[i, 2]
-    sy = out[i, 3]
-    c = math.sqrt(mul(n_obj, n_obj) - mul(sx, sx) - mul(sy, sy))
-    xo = out[i, 0] + z_um[iz] * sx / c - x0
+    xo, _ = _landing(out, i, z_um[iz], n_obj)
+    xo -= x0
     b = ids[i] % n_batch
     for p in range(periods.size):
         per = periods[p]
@@ -86,12 +94,9 @@ def maps_kernel(
     wi = w[i]
     if wi == 0.0:
         return
-    sx = out[i, 2]
-    sy = out[i, 3]
-    c = math.sqrt(mul(n_obj, n_obj) - mul(sx, sx) - mul(sy, sy))
-    z = z_um[iz]
-    xo = out[i, 0] + z * sx / c - x0
-    yo = out[i, 1] + z * sy / c - y0
+    xo, yo = _landing(out, i, z_um[iz], n_obj)
+    xo -= x0
+    yo -= y0
     if own[i]:
         jx = int(math.floor((xo - fine_lo) / fine_bin))
         jy = int(math.floor((yo - fine_lo) / fine_bin))
@@ -126,7 +131,9 @@ def _slot(keys, key):
     cap = keys.size
     h = np.int64((np.uint64(key) * _GOLDEN) >> np.uint64(40)) % cap
     for _ in range(cap):
-        old = cuda.atomic.cas(keys, h, EMPTY, key)
+        old = keys[h]  # a plain read first: a slot once set never changes
+        if old == EMPTY:
+            old = cuda.atomic.cas(keys, h, EMPTY, key)
         if old == EMPTY or old == key:
             return h
         h = (h + 1) % cap
@@ -165,11 +172,10 @@ def ghost_kernel(
     cuda.atomic.max(hi, s, theta)
     if own[i] or not wi > 0.0:
         return
-    c = math.sqrt(mul(n_obj, n_obj) - mul(sx, sx) - mul(sy, sy))
     for iz in range(z_um.size):
-        z = z_um[iz]
-        dx = out[i, 0] + z * sx / c - x0
-        dy = out[i, 1] + z * sy / c - y0
+        dx, dy = _landing(out, i, z_um[iz], n_obj)
+        dx -= x0
+        dy -= y0
         dist = math.hypot(dx, dy)
         ib = min(int(dist / bin_um), n_bins)
         cuda.atomic.add(hist, (iz, ib), wi)
@@ -205,16 +211,28 @@ class GhostTally:
 
 def ghost_tallies(
     pb, k_lo: int, k_hi: int, n0: float, z_um, bin_um: float, n_bins: int, half_um: float,
-    capacity: int = 1 << 12,
+    capacity: int = 1 << 12, max_capacity: int = 1 << 20,
 ) -> GhostTally | None:  # fmt: skip
     """The ghost analysis's sums of one device batch, or None where the device cannot
-    take them (hole sequences beyond an int64 key, or more than ``capacity`` of them):
-    the caller then tallies the batch on the host."""
-    dev = pb.rays.device
-    nm = dev.hole_k.shape[1]
+    take them (hole sequences beyond an int64 key, or more than ``max_capacity`` of them):
+    the caller then tallies the batch on the host. The hash table of hole sequences starts
+    with ``capacity`` slots and is doubled while it fills up."""
+    nm = pb.rays.device.hole_k.shape[1]
     radix = 2 * (int(k_hi) - int(k_lo) + 1)
     if radix**nm >= 1 << 62:
         return None
+    while capacity <= max_capacity:
+        t = _ghost_tallies(pb, k_lo, radix, n0, z_um, bin_um, n_bins, half_um, capacity)
+        if t is not None:
+            return t
+        capacity *= 2
+    return None
+
+
+def _ghost_tallies(pb, k_lo, radix, n0, z_um, bin_um, n_bins, half_um, capacity):
+    """:func:`ghost_tallies` with a table of ``capacity`` slots; None where it fills."""
+    dev = pb.rays.device
+    nm = dev.hole_k.shape[1]
     zs = np.ascontiguousarray(z_um, np.float64)
     nz = zs.size
     keys = cuda.to_device(np.full(capacity, EMPTY, np.int64))

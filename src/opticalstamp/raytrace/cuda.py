@@ -138,14 +138,14 @@ def _advance(x, y, sx, sy, ps, pp, i0, i1, slabs, n_out, masks, lat, lim, fresne
             if fresnel:
                 c1 = c / n
                 cc2 = math.sqrt(c2sq) / n2
-                a = n * c1
-                b = n2 * cc2
+                a = mul(n, c1)
+                b = mul(n2, cc2)
                 rs = (a - b) / (a + b)
-                a2 = n2 * c1
-                b2 = n * cc2
+                a2 = mul(n2, c1)
+                b2 = mul(n, cc2)
                 rp = (a2 - b2) / (a2 + b2)
-                ps *= 1.0 - mul(rs, rs)
-                pp *= 1.0 - mul(rp, rp)
+                ps = mul(ps, 1.0 - mul(rs, rs))
+                pp = mul(pp, 1.0 - mul(rp, rp))
     return ALIVE, i1 - 1, x, y, ps, pp
 
 
@@ -317,15 +317,7 @@ def plain_queue_kernel(
                 )  # fmt: skip
                 if st == ALIVE and n_pre < npl:
                     q = cuda.atomic.add(qn, 0, 1)
-                    qf[q, 0] = xe
-                    qf[q, 1] = ye
-                    qf[q, 2] = a
-                    qf[q, 3] = c2
-                    qf[q, 4] = ps
-                    qf[q, 5] = pp
-                    qid[q] = gid
-                    qr[q] = hrow[0, m0]
-                    qk[q] = hk[0, m0]
+                    _push(qf, qid, qr, qk, q, xe, ye, a, c2, ps, pp, gid, hrow[0, m0], hk[0, m0])
                 else:
                     st = TRANSMITTED if st == ALIVE else st
                     _finish(st, pl, xe, ye, src[4] * 0.5 * (ps + pp), a, c2, gid, hrow, hk, 0,
@@ -394,15 +386,8 @@ def plain_warp_kernel(
         ballot = cuda.ballot_sync(FULL_MASK, alive)
         if alive:
             q = qn + cuda.popc(ballot & cuda.lanemask_lt())
-            qf[wq, q, 0] = xe
-            qf[wq, q, 1] = ye
-            qf[wq, q, 2] = a
-            qf[wq, q, 3] = c2
-            qf[wq, q, 4] = ps
-            qf[wq, q, 5] = pp
-            qid[wq, q] = gid
-            qr[wq, q] = hrow[0, m0]
-            qk[wq, q] = hk[0, m0]
+            _push(qf[wq], qid[wq], qr[wq], qk[wq], q, xe, ye, a, c2, ps, pp, gid, hrow[0, m0],
+                  hk[0, m0])  # fmt: skip
         qn += cuda.popc(ballot)
         cuda.syncwarp(FULL_MASK)
         if qn >= WARP:
@@ -416,6 +401,20 @@ def plain_warp_kernel(
                 masks, lat, lim, fresnel, hrow, hk, led, out, o_id, o_hrow, o_hk,
                 count)  # fmt: skip
     _flush(led, launched, ledger, n_launched, npl)
+
+
+@cuda.jit(device=True)
+def _push(qf, qid, qr, qk, q, x, y, sx, sy, ps, pp, gid, r, k):
+    """Put a ray that passed the first mask (its hole r, k) in place q of a queue."""
+    qf[q, 0] = x
+    qf[q, 1] = y
+    qf[q, 2] = sx
+    qf[q, 3] = sy
+    qf[q, 4] = ps
+    qf[q, 5] = pp
+    qid[q] = gid
+    qr[q] = r
+    qk[q] = k
 
 
 @cuda.jit(device=True)
@@ -524,11 +523,14 @@ class DeviceRays:
         self.hole_k = hole_k
         self.ledger = ledger
         self.n_launched = int(n_launched)
+        self._order = None
 
     def order(self) -> np.ndarray:
-        """The permutation that puts device order into ray order (by id)."""
-        ids = self.ids[: self.n].copy_to_host() if self.n else np.zeros(0, np.int64)
-        return np.argsort(ids, kind="stable")
+        """The permutation that puts device order into ray order (by id); computed once."""
+        if self._order is None:
+            ids = self.ids[: self.n].copy_to_host() if self.n else np.zeros(0, np.int64)
+            self._order = np.argsort(ids, kind="stable")
+        return self._order
 
     def to_host(self, a, order: np.ndarray) -> np.ndarray:
         """Device array ``a`` (survivors first) on the host, in ray order."""

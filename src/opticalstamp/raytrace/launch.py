@@ -9,7 +9,6 @@ identical for any chunk size or thread count (see :mod:`.kernel` for the generat
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
@@ -35,7 +34,7 @@ def chunk_for(chunk: int, device: str) -> int:
     """Rays per chunk that :func:`launch` uses for ``chunk`` on ``device`` (cpu, cuda).
     Under numba's CUDA simulator (no launch costs to amortise) the chunk is the caller's,
     so that the tests see several chunks."""
-    gpu = device == "cuda" and os.environ.get("NUMBA_ENABLE_CUDASIM") != "1"
+    gpu = device == "cuda" and not nb.config.ENABLE_CUDASIM
     return max(BLOCK, int(chunk), DEVICE_CHUNK if gpu else 0)
 
 

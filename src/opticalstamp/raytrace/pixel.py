@@ -278,7 +278,8 @@ class PixelTracer:
         else, so analyses of one pixel that trace the same rays (a report's ghost
         analysis, folded LSFs and scan kernels; a study's ghost analysis and RMTF of a
         design) trace them once. It holds the rays that leave the stack (about 11 MB per
-        2^20 rays launched for the paper's prototype) as long as the tracer lives.
+        2^20 rays launched for the paper's prototype) as long as the tracer lives; where a
+        GPU traced them, in the GPU's memory (with their weights and own-path flags).
 
     Notes
     -----
