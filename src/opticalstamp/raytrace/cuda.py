@@ -182,9 +182,9 @@ def _solve_rho(r, slabs, n_pre, n_min, d_eq):
         step = (f - r) / fp
         new = rho - step
         if new >= n_min:
-            new = 0.5 * (rho + n_min)
+            new = mul(0.5, rho + n_min)
         elif new <= 0.0:
-            new = 0.5 * rho
+            new = mul(0.5, rho)
         if abs(new - rho) <= 1e-15 * n_min:
             return new
         rho = new
