@@ -31,7 +31,14 @@ from ..analysis.spots import psf, spots
 from ..defaults import DOF_DPI, RAYS_LSF, RAYS_MAP
 from ..design import Design, load_design
 from ..design.describe import stack_rows
-from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
+from ..io.files import (
+    figure_png,
+    provenance,
+    replace_folder,
+    save_figure,
+    to_json,
+    write_atomic,
+)
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import output_pitch
 from ..units import dpi_of_pitch
@@ -304,38 +311,49 @@ def build_report(
                 design, work, seed=seed, fresnel=fresnel, tracer=tracer, dof_dpi=dpi
             )
         clock.lap("restoration")
-        figures = {
-            "stack.png": plot_stack(design),
-            "ghosts.png": plotting.plot_ghosts(g),
-            "spots.png": plotting.plot_spots(sp),
-            "psf_x0.png": plotting.plot_psf(psfs[0]),
-            "psf_x42.png": plotting.plot_psf(psfs[1]),
-            "rmtf.png": plotting.plot_rmtf(quality["rmtf_result"]),
-            "chart_profiles.png": plotting.plot_chart_profiles(quality["profiles"]),
-            "efficiency.png": plotting.plot_efficiency(quality["efficiency_result"]),
-            "diffraction.png": plotting.plot_diffraction(quality["slit_result"]),
-            "scan_text.png": plotting.plot_scan_panels(
-                scans.pop("text_panels"), "8-pt text (paper Fig. 8)"
+        panels = plotting.plot_scan_panels
+        figures = {  # name: (plot, its arguments)
+            "stack.png": (plot_stack, design),
+            "ghosts.png": (plotting.plot_ghosts, g),
+            "spots.png": (plotting.plot_spots, sp),
+            "psf_x0.png": (plotting.plot_psf, psfs[0]),
+            "psf_x42.png": (plotting.plot_psf, psfs[1]),
+            "rmtf.png": (plotting.plot_rmtf, quality["rmtf_result"]),
+            "chart_profiles.png": (plotting.plot_chart_profiles, quality["profiles"]),
+            "efficiency.png": (plotting.plot_efficiency, quality["efficiency_result"]),
+            "diffraction.png": (plotting.plot_diffraction, quality["slit_result"]),
+            "scan_text.png": (panels, scans.pop("text_panels"), "8-pt text (paper Fig. 8)"),
+            "scan_bars.png": (
+                panels,
+                scans.pop("bar_panels"),
+                "200-dpi chart (paper Fig. 12 a, b)",
+                2,
             ),
-            "scan_bars.png": plotting.plot_scan_panels(
-                scans.pop("bar_panels"), "200-dpi chart (paper Fig. 12 a, b)", cols=2
+            "scan_profiles.png": (plotting.plot_scan_profiles, scans["profiles"]),
+            "scan_lines.png": (
+                panels,
+                scans.pop("line_panels"),
+                "fine line work (paper Fig. 9 analogue)",
+                3,
             ),
-            "scan_profiles.png": plotting.plot_scan_profiles(scans["profiles"]),
-            "scan_lines.png": plotting.plot_scan_panels(
-                scans.pop("line_panels"), "fine line work (paper Fig. 9 analogue)", cols=3
+            "scan_tilt.png": (
+                panels,
+                scans.pop("tilt_panels"),
+                "text on a page tilted from 0 to 4 mm",
             ),
-            "scan_tilt.png": plotting.plot_scan_panels(
-                scans.pop("tilt_panels"), "text on a page tilted from 0 to 4 mm"
-            ),
-            "restore_curves.png": plotting.plot_restoration(restoration["study"]),
-            "restore_text.png": plotting.plot_scan_panels(
+            "restore_curves.png": (plotting.plot_restoration, restoration["study"]),
+            "restore_text.png": (
+                panels,
                 restoration.pop("panels"),
                 f"{restoration['panel_points']:g}-pt text, scanned and restored (crops)",
-                cols=restoration["panel_cols"],
+                restoration["panel_cols"],
             ),
         }
-        for name, fig in figures.items():  # while the studies run on
-            save_figure(fig, tmp / name)
+        # each figure drawn by a background process that is idle (while the studies run
+        # on), else here; written in this order either way
+        drawing = {name: background.submit(_png, *task) for name, task in figures.items()}
+        for name, task in drawing.items():
+            write_atomic(tmp / name, _png(*figures[name]) if task is None else task.get())
         names = list(figures)
         clock.lap("figures")
         # each study's figure as soon as that study is done, while the others run on
@@ -781,6 +799,11 @@ def _restoration(
     }
 
 
+def _png(plot, *args) -> bytes:
+    """``plot(*args)`` as PNG bytes (a figure drawn here or in a background process)."""
+    return figure_png(plot(*args))
+
+
 def _one_numba_thread() -> None:  # pragma: no cover - runs in the background processes
     import numba
 
@@ -947,6 +970,7 @@ class _Background:
     def __init__(self, jobs: dict) -> None:
         self._pool = None
         self._jobs: dict[str, list] = {}
+        self._extra: list = []  # tasks given by submit()
         self._n = 0
         tasks = [(name, task) for name, job in jobs.items() for task in job]
         if not tasks:
@@ -978,8 +1002,19 @@ class _Background:
     def running(self) -> int:
         """How many background processes are at work (tasks not finished, at most one per
         process)."""
-        left = sum(not task.ready() for job in self._jobs.values() for task in job)
-        return min(self._n, left)
+        return min(self._n, sum(not task.ready() for task in self._all()))
+
+    def submit(self, fn, *args):
+        """``fn(*args)`` in a background process if one is idle now: its AsyncResult
+        (``get()`` gives the result); else None (nothing started)."""
+        if self._pool is None or self.running() >= self._n:
+            return None
+        task = self._pool.apply_async(fn, args)
+        self._extra.append(task)
+        return task
+
+    def _all(self) -> list:
+        return [task for job in self._jobs.values() for task in job] + self._extra
 
     def as_completed(self, poll_s: float = 0.05):
         """The names of the jobs, each as soon as its tasks have finished (failed ones
