@@ -124,3 +124,22 @@ def test_quick_report_writes_what_it_promises_and_says_so(tmp_path):
         with Image.open(out / name) as im:
             assert im.size[0] > 300 and im.size[1] > 150
     assert {"rmtf", "efficiency", "scans", "ghosts", "spots", "psf"} <= set(d)
+
+
+def test_figures_drawn_by_an_idle_background_process_are_those_drawn_here():
+    """A figure goes to a background process only where one is idle (None while the
+    studies keep every process busy), and its PNG is the one drawn here, byte for byte."""
+    import time
+
+    from opticalstamp.report.build import _Background, _png
+    from opticalstamp.report.plotting.stack import plot_stack
+
+    d = load_design("paper2016")
+    with _Background({"study": [(time.sleep, (3.0,))]}) as bg:  # one process, busy
+        assert bg.submit(_png, plot_stack, d) is None
+        bg.result("study")
+        task = bg.submit(_png, plot_stack, d)
+        assert task is not None
+        png = task.get(timeout=120)
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and png == _png(plot_stack, d)
+    assert _Background({}).submit(_png, plot_stack, d) is None  # no processes
