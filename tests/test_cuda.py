@@ -29,7 +29,6 @@ from opticalstamp.raytrace.pixel import pixel_source
 from opticalstamp.raytrace.stack import reverse_path
 
 N = int(os.environ.get("RAYS_LOG2", "12"))  # 2^N samples (the simulator is slow)
-np.seterr(over="ignore")  # the simulator's uint64 hashing wraps, as on the device
 d = load_design("paper2016")
 path, src = reverse_path(d), pixel_source(d, 0, 0)
 FIELDS = ("ids", "x", "y", "sx", "sy", "w", "hole_row", "hole_k")
@@ -106,7 +105,6 @@ from opticalstamp.design import load_design
 from opticalstamp.raytrace import cuda
 from opticalstamp.raytrace.pixel import PixelTracer, Sampling
 
-np.seterr(over="ignore")  # the simulator's uint64 hashing wraps, as on the device
 d = load_design("paper2016")
 N = int(os.environ.get("RAYS_LOG2", "12"))  # 2^(N+1) rays (the simulator is slow)
 s = Sampling(n_rays=1 << (N + 1), seed=5, chunk=1 << N)  # two chunks (one on a GPU)
@@ -192,7 +190,6 @@ from opticalstamp.raytrace.kernel import seed_key
 from opticalstamp.raytrace.launch import _kernel_args
 from opticalstamp.raytrace.pixel import PixelTracer, Sampling, pixel_source
 
-np.seterr(over="ignore")
 seen = {}
 
 

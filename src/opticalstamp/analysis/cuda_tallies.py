@@ -246,13 +246,12 @@ def _ghost_tallies(pb, k_lo, radix, n0, z_um, bin_um, n_bins, half_um, capacity)
     full = cuda.to_device(np.zeros(1, np.int64))
     if dev.n:
         w, own = pb.on_device
-        with np.errstate(over="ignore"):  # the simulator's uint64 hashing wraps
-            ghost_kernel[blocks(dev.n), THREADS](
-                dev.out, dev.hole_row, dev.hole_k, w, own, dev.n, int(pb.row), int(k_lo),
-                radix, float(n0), float(pb.x0), float(pb.y0), float(pb.n_obj),
-                cuda.to_device(zs), float(bin_um), int(n_bins), float(half_um), keys, *sums,
-                count, lo, hi, nearest, hist, inside, inside2, full,
-            )  # fmt: skip
+        ghost_kernel[blocks(dev.n), THREADS](
+            dev.out, dev.hole_row, dev.hole_k, w, own, dev.n, int(pb.row), int(k_lo),
+            radix, float(n0), float(pb.x0), float(pb.y0), float(pb.n_obj),
+            cuda.to_device(zs), float(bin_um), int(n_bins), float(half_um), keys, *sums,
+            count, lo, hi, nearest, hist, inside, inside2, full,
+        )  # fmt: skip
     if int(full.copy_to_host()[0]):
         return None
     key = keys.copy_to_host()
