@@ -22,6 +22,7 @@ import os
 
 import numpy as np
 from opticalstamp.design import load_design
+from opticalstamp.device import DeviceUnavailable
 from opticalstamp.raytrace import cuda
 from opticalstamp.raytrace.kernel import seed_key
 from opticalstamp.raytrace.launch import _kernel_args, launch
@@ -91,6 +92,14 @@ a, *others = ({**r.host(), "ledger": r.ledger, "n_launched": r.n_launched} for r
 assert a["ids"].size > 5, a["ids"].size  # survivors through the rest of the stack
 for b in others:
     same(a, b, exact=True)
+# a stack beyond the kernels' fixed-size arrays: refused, naming the way out
+big = list(_kernel_args(path))
+big[2] = np.repeat(big[2], 6, axis=0)  # 18 masks
+try:
+    cuda.run(0, 256, seed_key(1), args, tuple(big), False, n_pre)
+    raise SystemExit("18 masks not refused")
+except DeviceUnavailable as err:
+    assert "--device cpu" in str(err), err
 print("same")
 """
 

@@ -26,6 +26,8 @@ if not hasattr(np, "row_stack"):  # numba-cuda <= 0.30 calls np.row_stack, gone 
 from numba import config, cuda  # noqa: E402
 from numba.cuda import libdevice  # noqa: E402
 
+from ..device import DeviceUnavailable  # noqa: E402
+
 TRANSMITTED, ABSORBED, TIR, ESCAPED = 0, 1, 2, 3
 ALIVE = -1  # a ray that goes on (between the stages of the queued kernel)
 THREADS = 128
@@ -600,9 +602,9 @@ def run(
     slabs, n_out, masks, lat, lim = args
     nm, npl = masks.shape[0], slabs.shape[0]
     if npl > MAX_PLANES or nm > MAX_MASKS:
-        raise ValueError(
-            f"the CUDA kernel handles at most {MAX_PLANES} planes and {MAX_MASKS} masks "
-            f"(got {npl} and {nm})"
+        raise DeviceUnavailable(
+            f"device cuda: the CUDA kernels trace at most {MAX_MASKS} masks and {MAX_PLANES} "
+            f"planes (this stack has {nm} and {npl}); trace it with --device cpu"
         )
     d = cuda.to_device
     dargs = (d(slabs), float(n_out), d(masks), d(lat), d(lim), bool(fresnel))
