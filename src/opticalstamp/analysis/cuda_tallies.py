@@ -8,7 +8,7 @@ analysis's sums per hole sequence, landing histograms and nearest landings
 (:func:`ghost_tallies`). Each kernel computes, per ray, what the CPU's tally computes
 (:mod:`.lsf`'s ``_fold`` and ``_maps``, :func:`~.ghosts.analyse_ghosts`), in float64, and
 adds it with atomics (products that the CPU rounds on their own are kept from fusing
-into FMAs, :func:`~opticalstamp.raytrace.cuda.mul`): the sums equal the CPU's to rounding
+into FMAs, :func:`~opticalstamp.raytrace.cuda_ray.mul`): the sums equal the CPU's to rounding
 (the order of the additions differs, and varies from run to run), the counts are exact;
 angles and landing distances use libdevice's asin and hypot, within an ulp of the CPU's.
 Imported only where a GPU (or numba's CUDA simulator) traced the rays.
@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..raytrace.cuda import THREADS, blocks, cuda, mul
+from ..raytrace.cuda import THREADS, blocks
+from ..raytrace.cuda_ray import cuda, mul
 
 EMPTY = -1  # a free slot of the hash table of hole sequences
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
