@@ -355,6 +355,18 @@ def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path):
     assert got["importance_kernel"][1] == 0, got
 
 
+def test_provenance_says_where_the_rays_were_traced(monkeypatch):
+    """With CUDA chosen, a stamp's results say cuda; a rod-lens array's say cpu (its GRIN
+    tracer has no GPU kernel), e.g. side by side in a comparison."""
+    from opticalstamp.design import load_design
+    from opticalstamp.io.files import provenance
+
+    monkeypatch.setenv("NUMBA_ENABLE_CUDASIM", "1")  # cuda can run: numba's simulator
+    monkeypatch.setenv("OPTICALSTAMP_DEVICE", "cuda")
+    assert provenance(load_design("paper2016"), 0)["device"] == "cuda"
+    assert provenance(load_design("sla-1row-12deg"), 0)["device"] == "cpu"
+
+
 def test_device_choice():
     assert resolve_device("cpu") == "cpu"
     with pytest.raises(ValueError, match="device"):

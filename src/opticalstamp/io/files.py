@@ -43,14 +43,18 @@ def to_json(data: dict) -> str:
 
 
 def provenance(design, seed: int | None) -> dict:
+    from ..design.rodlens import RodLensDesign
     from ..device import resolve_device
 
+    # where the rays were traced (cpu or cuda); a rod-lens array's GRIN tracer has no GPU
+    # kernel: its rays are traced on the CPU whatever the device
+    device = "cpu" if isinstance(design, RodLensDesign) else resolve_device()
     return {
         "design": design.name,
         "design_fingerprint": design.fingerprint(),
         "seed": seed,
         "opticalstamp_version": __version__,
-        "device": resolve_device(),  # where the rays were traced (cpu or cuda)
+        "device": device,
     }
 
 
