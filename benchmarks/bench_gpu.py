@@ -13,7 +13,7 @@ python benchmarks/bench_gpu.py [--device cpu|cuda|auto] [--search-designs N] [--
    compiled-code cache (the kernels are declared ``cache=True``).
 Targets on an H100-class GPU: >= 1e11 rays/s (float64); ghosts < 1 s; search < 60 s;
 report < 10 s. On the 2-core CPU: the exact search within 15 minutes.
-Writes benchmarks/bench_gpu.json with the device's name.
+Writes benchmarks/bench_gpu_DEVICE.json (cpu or cuda) with the device's name.
 """
 
 from __future__ import annotations
@@ -65,10 +65,12 @@ def startup(device: str) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--device", default="auto")
-    ap.add_argument("--search-designs", type=int, default=480)
-    ap.add_argument("--no-report", action="store_true")
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument(
+        "--device", default="auto", choices=("auto", "cpu", "cuda"), help="where to trace"
+    )
+    ap.add_argument("--search-designs", type=int, default=480, help="designs of the exact search")
+    ap.add_argument("--no-report", action="store_true", help="skip the report's timing")
     args = ap.parse_args()
     os.environ["OPTICALSTAMP_DEVICE"] = args.device
     from opticalstamp.analysis.ghosts import analyse_ghosts
@@ -140,7 +142,7 @@ def main() -> None:
             )  # fmt: skip
             out["report_s"] = time.perf_counter() - t
         print(f"report: {out['report_s']:.1f} s")
-    path_out = Path(__file__).with_suffix(".json")
+    path_out = Path(__file__).with_name(f"bench_gpu_{device}.json")  # one file per device
     path_out.write_text(json.dumps(out, indent=2) + "\n")
     print(f"wrote {path_out}")
 

@@ -166,6 +166,7 @@ args = (next(tr.trace((0, 0))), lat.k_lo, lat.k_hi, tr.n0, [0.0], 84.6, 400, 500
 whole = ghost_tallies(*args)
 assert len(whole.sequences) > 10
 assert ghost_tallies(*args, capacity=2, max_capacity=2) is None  # full: back to the host
+assert ghost_tallies(args[0], -(2**40), 2**40, *args[3:]) is None  # keys beyond int64
 grown = ghost_tallies(*args, capacity=2)  # the table doubled until the sequences fit
 assert grown.sequences == whole.sequences and np.array_equal(grown.count, whole.count)
 np.testing.assert_allclose(grown.s1, whole.s1, rtol=1e-12)
@@ -376,7 +377,8 @@ def test_device_choice():
 
 
 @pytest.mark.skipif(resolve_device("auto") == "cuda", reason="a CUDA GPU is present")
-def test_cuda_refused_without_a_gpu(tmp_path):
+def test_cuda_refused_without_a_gpu(tmp_path, monkeypatch):
+    monkeypatch.setenv("OPTICALSTAMP_DEVICE", "auto")  # --device sets it: undone after
     with pytest.raises(DeviceUnavailable, match="device cuda"):
         resolve_device("cuda")
     res = run(["--device", "cuda", "ghosts", "--rays", "100000"])
@@ -392,14 +394,41 @@ def test_cuda_refused_without_a_gpu(tmp_path):
         assert "OPTICALSTAMP_DEVICE" in res.stderr
 
 
-def test_the_cpu_path_imports_nothing_of_numba_cuda():
-    """A traced analysis on the CPU (auto without numba-cuda, or cpu) leaves numba.cuda
-    unimported, and its provenance says where the rays were traced."""
+@pytest.mark.skipif(resolve_device("auto") == "cuda", reason="a CUDA GPU is present")
+def test_cuda_checked_where_rays_are_traced(tmp_path, monkeypatch):
+    """``--device cuda`` without a GPU still shows help and runs the commands that trace
+    nothing (their provenance has no device); without numba-cuda, the refusal says how to
+    install it."""
+    import importlib.util
+
+    monkeypatch.setenv("OPTICALSTAMP_DEVICE", "auto")  # --device sets it: undone after
+    assert run(["--device", "cuda", "ghosts", "--help"]).exit_code == 0
+    assert run(["--device", "cuda", "presets"]).exit_code == 0
+    res = run(["--device", "cuda", "show", "paper2016", "--json"])
+    assert res.exit_code == 0 and json.loads(res.stdout)["provenance"]["device"] is None
+    find = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda n, *a: None if n == "numba_cuda" else find(n, *a)
+    )
+    with pytest.raises(DeviceUnavailable, match=r"numba-cuda is not installed.*\[cuda\]"):
+        resolve_device("cuda")
+
+
+@pytest.mark.parametrize("device", ["cpu", "auto"])
+def test_the_cpu_path_imports_nothing_of_numba_cuda(device):
+    """A traced analysis on the CPU (cpu; auto on a machine without an NVIDIA driver, even
+    with numba-cuda installed) leaves numba.cuda unimported, and its provenance says where
+    the rays were traced."""
+    from opticalstamp.device import _driver_found
+
+    if device == "auto" and _driver_found():
+        pytest.skip("an NVIDIA driver is installed: auto asks numba.cuda for a GPU")
     code = (
         "import sys, json\n"
         "from typer.testing import CliRunner\n"
         "from opticalstamp.cli import app\n"
-        "r = CliRunner().invoke(app, ['--device', 'cpu', 'ghosts', '--rays', '100000', '--json'])\n"
+        f"args = ['--device', '{device}', 'ghosts', '--rays', '100000', '--json']\n"
+        "r = CliRunner().invoke(app, args)\n"
         "assert r.exit_code == 0, r.output\n"
         "print(json.dumps({'cuda': 'numba.cuda' in sys.modules,"
         " 'device': json.loads(r.stdout)['provenance']['device']}))\n"

@@ -38,19 +38,20 @@ def _version(value: bool) -> None:
 
 
 def _device(value: str | None) -> str | None:
-    """--device: checked now (exit 2 naming it), then handed to every ray launch of this
-    process and of its worker processes through OPTICALSTAMP_DEVICE."""
+    """--device: its name checked now (exit 2 naming it), then handed to every ray launch
+    of this process and of its worker processes through OPTICALSTAMP_DEVICE; whether CUDA
+    can run is checked when a command that traces rays starts (:func:`command`), so that
+    ``--help`` and the commands that trace nothing work anywhere."""
     if value is None:
         return None
     import os
 
-    from ..device import ENV, resolve_device
+    from ..device import ENV, device_name
 
     try:
-        resolve_device(value)
-    except ValueError as err:
+        os.environ[ENV] = device_name(value)
+    except InputError as err:
         raise typer.BadParameter(str(err).replace("device: ", "")) from None
-    os.environ[ENV] = value.strip().lower()
     return value
 
 
@@ -66,6 +67,7 @@ def _options(
         str | None,
         typer.Option(
             "--device",
+            metavar="[auto|cpu|cuda]",
             help="where rays are traced: auto (a CUDA GPU where opticalstamp[cuda] is "
             "installed, else the CPU), cpu or cuda; default: OPTICALSTAMP_DEVICE, else auto",
             callback=_device,
@@ -75,28 +77,34 @@ def _options(
     """Design and analyse lensless contact image scanners (optical stamps)."""
     import os
 
-    from ..device import ENV, resolve_device
+    from ..device import ENV, device_name
 
     if device is None and os.environ.get(ENV):  # the environment's choice, checked first
         try:
-            resolve_device()
+            device_name()
         except InputError as err:
             fail(str(err))
 
 
-def command(*args, **kwargs):
+def command(*args, traces: bool = True, **kwargs):
     """``app.command`` whose body turns any :class:`InputError` into ``error: ...``, exit 2.
 
     Options are checked by their callbacks while the command line is parsed (click reports
     ``Invalid value for '--option'`` with exit 2); what only the library can check (a
     design file, an image, a height map) raises InputError before any work is done. An
     OSError while writing (disk full) is reported in one line with exit code 1.
+    ``traces``: the command traces rays, so the device chosen must be able to run before
+    it starts (``cuda`` without a GPU: exit 2, before any work).
     """
 
     def deco(fn):
         @functools.wraps(fn)
         def run(*a, **kw):
             try:
+                if traces:
+                    from ..device import resolve_device
+
+                    resolve_device()
                 return fn(*a, **kw)
             except InputError as err:
                 fail(str(err))

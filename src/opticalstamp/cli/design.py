@@ -51,7 +51,7 @@ def presets_show(name: Annotated[str, typer.Argument(help="a preset name")]) -> 
 app.add_typer(presets_app, name="presets")
 
 
-@command()
+@command(traces=False)
 def masks(
     design: Annotated[str, typer.Argument(help="preset name or design TOML file (a stamp)")],
     output: Annotated[
@@ -85,7 +85,7 @@ def masks(
     typer.echo(f"wrote {path} ({path.stat().st_size:,} bytes, fingerprint {d.fingerprint()})")
 
 
-@command()
+@command(traces=False)
 def show(
     design: Annotated[str, typer.Argument(help="preset name or design TOML file")],
     as_json: JsonOpt = False,
@@ -113,7 +113,7 @@ def show(
                 "conjugate_length_mm": a.conjugate_um / 1000,
                 "sensor_to_document_mm": d.reference_plane_um / 1000,
             },
-        } | {"provenance": provenance(d, None)}
+        } | {"provenance": provenance(d, None, traced=False)}
         lines = [f"{d.name}: rod-lens array, {a.rows} row(s) of rods R = {a.rod_radius_um:g} um"]
         lines += [f"  {k.replace('_', ' ')}: {v:.4g}" for k, v in data["derived"].items()]
         emit(data, as_json, lines)
@@ -131,7 +131,7 @@ def show(
         "output_pitch_um": pitch,
         "output_dpi": dpi_of_pitch(pitch),
         "reference_plane_um": d.reference_plane_um,
-        "provenance": provenance(d, None),
+        "provenance": provenance(d, None, traced=False),
     }
     lines = [
         f"{d.name}: {len(d.masks)} aperture layers, {s.rows} row(s) of used pixels every "

@@ -205,7 +205,7 @@ def _rod_efficiency(d, seed: int, fresnel: bool, as_json: bool, plot) -> None:
         save_plot(plot_rod_ripple(r), plot)
 
 
-@command()
+@command(traces=False)
 def diffraction(
     design: DesignOpt = "paper2016",
     slit_um: Annotated[
@@ -317,7 +317,7 @@ LinearOpt = Annotated[
 ]
 
 
-@command("measure-rmtf")
+@command("measure-rmtf", traces=False)
 def measure_rmtf(
     image: ImageArg,
     dpi: DpiOpt = None,
@@ -349,7 +349,7 @@ def measure_rmtf(
     emit(data, as_json, lines)
 
 
-@command()
+@command(traces=False)
 def sfr(
     image: ImageArg,
     dpi: DpiOpt = None,

@@ -297,7 +297,7 @@ def scan(
     emit(json.loads(to_json(meta)), as_json, lines)
 
 
-@command()
+@command(traces=False)
 def chart(
     kind: Annotated[str, typer.Argument(help="bars, edge, text or lines")],
     output: Annotated[

@@ -42,13 +42,17 @@ def to_json(data: dict) -> str:
     )
 
 
-def provenance(design, seed: int | None) -> dict:
+def provenance(design, seed: int | None, traced: bool = True) -> dict:
+    """What a result was made from: the design, the seed, the version and the device that
+    traced its rays (None where ``traced`` is False: nothing was traced)."""
     from ..design.rodlens import RodLensDesign
     from ..device import resolve_device
 
     # where the rays were traced (cpu or cuda); a rod-lens array's GRIN tracer has no GPU
     # kernel: its rays are traced on the CPU whatever the device
-    device = "cpu" if isinstance(design, RodLensDesign) else resolve_device()
+    device = None
+    if traced:
+        device = "cpu" if isinstance(design, RodLensDesign) else resolve_device()
     return {
         "design": design.name,
         "design_fingerprint": design.fingerprint(),
