@@ -220,9 +220,8 @@ def _traced_folds(
             for ghosts, out in zip(kinds, outs, strict=True):
                 w = pb.w if ghosts else pb.w * pb.own
                 _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, tr.n_obj, per, nb, out)
-        for out, res in zip(outs, on_gpu or [None] * len(outs), strict=True):
-            if res is not None:
-                out += res.copy_to_host()
+        for out, res in zip(outs, on_gpu or (), strict=False):  # nothing on the CPU
+            out += res.copy_to_host()
         for h, out in zip(hs, outs, strict=True):
             for p in range(per.size):
                 # each batch holds n_rays / n_batches samples: scale so batches sum to the mean
@@ -600,10 +599,9 @@ def traced_map_sets(
                 fine,
                 coarse,
             )
-    for (_, _, fine, coarse), dev in zip(sets, on_gpu or [None] * len(sets), strict=True):
-        if dev is not None:
-            fine += dev[0].copy_to_host()
-            coarse += dev[1].copy_to_host()
+    for (_, _, fine, coarse), dev in zip(sets, on_gpu or (), strict=False):  # none on a CPU
+        fine += dev[0].copy_to_host()
+        coarse += dev[1].copy_to_host()
     return [
         TracedMaps(
             zs,

@@ -10,9 +10,9 @@ import numpy as np
 import typer
 
 from ..units import pitch_of_dpi, um_to_mm
-from .common import BOTH_KINDS, JsonOpt, command, emit, fail, number, open_design, writable
+from .common import BOTH_KINDS, JsonOpt, command, emit, fail, number, open_design
 from .metrics import ImageArg, LinearOpt, read_scan_image
-from .scan import image_set_paths
+from .scan import ImageSetOpt, image_set_paths
 
 MethodOpt = Annotated[
     str,
@@ -90,15 +90,7 @@ def restore_and_write(
 @command()
 def restore(
     scan: ImageArg,
-    output: Annotated[
-        Path,
-        typer.Option(
-            "-o",
-            "--output",
-            help="output .png or .tif (the .png, .tif and .json beside it are written as a set)",
-            callback=writable(".png", ".tif", ".tiff"),
-        ),
-    ],
+    output: ImageSetOpt,
     method: MethodOpt = "wiener",
     z: Annotated[
         float | None,

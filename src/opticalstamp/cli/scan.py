@@ -126,18 +126,22 @@ def image_set_paths(output: Path) -> tuple[Path, Path, Path]:
     return png, tif, sidecar
 
 
+#: -o/--output of a command that writes an image set (PNG, TIFF and a JSON sidecar)
+ImageSetOpt = Annotated[
+    Path,
+    typer.Option(
+        "-o",
+        "--output",
+        help="output .png or .tif (the .png, .tif and .json beside it are written as a set)",
+        callback=writable(".png", ".tif", ".tiff"),
+    ),
+]
+
+
 @command()
 def scan(
     image: ImageArg,
-    output: Annotated[
-        Path,
-        typer.Option(
-            "-o",
-            "--output",
-            help="output .png or .tif (the .png, .tif and .json beside it are written as a set)",
-            callback=writable(".png", ".tif", ".tiff"),
-        ),
-    ],
+    output: ImageSetOpt,
     z: Annotated[
         float | None, typer.Option(help="float height (mm), 0 to 10", callback=number(0, 10))
     ] = None,

@@ -17,15 +17,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import config
 
 from ..device import DeviceUnavailable
-from .cuda_ray import (
+from .cuda_ray import (  # first: it shims numpy for numba-cuda before importing numba.cuda
     ALIVE,
     MAX_MASKS,
     MAX_PLANES,
     TRANSMITTED,
     advance,
-    config,
     cuda,
     finish,
     flush_block,

@@ -82,7 +82,12 @@ def acceptance(design: Design, n0: float, sx: np.ndarray, sy: np.ndarray) -> np.
     np.ndarray
         1.0 where the ray is inside the acceptance cone, else 0.0 (float64, shape of sx).
     """
-    return (sx * sx + sy * sy <= acceptance_s2(design, n0)).astype(np.float64)
+    return _within(sx, sy, acceptance_s2(design, n0))
+
+
+def _within(sx: np.ndarray, sy: np.ndarray, s2_max: float) -> np.ndarray:
+    """1.0 where |s|^2 <= s2_max, else 0.0 (float64)."""
+    return (sx * sx + sy * sy <= s2_max).astype(np.float64)
 
 
 def allocate_holes(
@@ -242,7 +247,7 @@ class PixelBatch:
         if b.device is not None:
             w = b.device.to_host(self.on_device[0], b.device.order())
         else:
-            w = b.w * (b.sx * b.sx + b.sy * b.sy <= self.s2_max).astype(np.float64)
+            w = b.w * _within(b.sx, b.sy, self.s2_max)
         w.flags.writeable = False
         return w
 
