@@ -17,6 +17,7 @@ from ..defaults import DETECTOR_HALF_UM, RSE_GHOST, RSE_OWN
 from ..design import Design
 from ..raytrace.kernel import STATUS_NAMES
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
+from ..raytrace.sampling import weight_bound
 from ..raytrace.stack import output_pitch
 from ..raytrace.tally import (
     OWN_PATH,
@@ -29,12 +30,14 @@ from ..raytrace.tally import (
 
 #: Ray-count schedule of the precision-driven run: checks after 2^20, 2^21, ... rays.
 FIRST_CHECK = 1 << 20
-#: Width of the bins of ghost light over distance from the pixel's axis (um).
+#: Confidence of the upper bound on the ghost light where no ghost ray was seen.
+BOUND_CONFIDENCE = 0.95
 
 
 @dataclass(frozen=True)
 class GhostPath:
-    """One sequence of holes that leads light to the pixel."""
+    """One sequence of holes that leads light to the pixel (sequences that only rays
+    outside the pixel's acceptance follow carry none and are not listed)."""
 
     holes: list[dict]  # per mask from the object side down: name, row ("own"/"other"), dk
     etendue_um2sr: float
@@ -64,6 +67,9 @@ class GhostResult:
     paths: list[GhostPath]
     landing: dict[str, dict]  # per Z (mm): ghost light over distance from the axis
     ledger: dict[str, dict[str, int]]
+    #: where no ray carried ghost light: a 95 % upper bound on ghost / own-path etendue
+    #: (:func:`ghost_ratio_bound`); None where ghost light was found
+    ghost_ratio_bound: float | None = None
     meta: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
@@ -88,7 +94,8 @@ class GhostResult:
         ``path_nearest_landing_um`` (path, z_mm) and ``hole_dk`` (path, mask; ``hole_row``
         its own/other label); the scalars ``etendue_own_um2sr``, ``etendue_ghost_um2sr``,
         ``ghost_fraction`` and their ``*_se``; ``ledger`` (plane, status), ray counts.
-        Missing values (None in the dicts) are NaN; every variable has ``units``.
+        Missing values (None in the dicts) are NaN; every variable has ``units``. Where
+        no ghost light was found, the attribute ``ghost_ratio_bound`` holds the bound.
         """
         import xarray as xr
 
@@ -217,6 +224,8 @@ class GhostResult:
             attrs["detector_half_um"] = float(detector.pop())
         if "estimator" in self.meta:
             attrs["estimator"] = self.meta["estimator"]
+        if self.ghost_ratio_bound is not None:
+            attrs["ghost_ratio_bound"] = self.ghost_ratio_bound
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
@@ -266,13 +275,22 @@ def analyse_ghosts(
     z_mm : object distances (mm above the reference plane) at which to locate ghost light
     n_rays : fixed number of rays; if None, run until the relative standard errors
         ``rse_own`` and ``rse_ghost`` are reached (checked at 2^20, 2^21, ... rays, a
-        schedule independent of ``chunk``) or ``max_rays``
+        schedule independent of ``chunk``) or ``max_rays``; where no ray has carried
+        ghost light yet, until ``rse_own`` is reached and the 95 % upper bound on
+        ghost / own-path etendue (:func:`ghost_ratio_bound`) is at most ``rse_own``:
+        ghost light too faint to change the own path's figure beyond its own precision
     detector_half_um : half width of the square virtual detector (paper Fig. 4) centred
         on the pixel's axis; ghost etendue landing inside it is reported per Z
     sampling : Sampling, replaces ``n_rays``, ``rse_own``, ``rse_ghost``, ``max_rays``,
         ``seed``, ``fresnel`` and ``chunk`` (its ray count, where None, is ``n_rays``)
     tracer : PixelTracer of this design whose pilot runs to reuse (other analyses of the
         same pixel share them); the sampling is still this call's
+
+    Returns
+    -------
+    GhostResult
+        With ``ghost_ratio_bound`` set where no ray carried ghost light (the ghost
+        etendue and fraction are then 0 and only the bound says how small they are).
     """
     if sampling is None:
         sampling = Sampling(n_rays, seed, fresnel, chunk, rse_own, rse_ghost, max_rays)
@@ -293,6 +311,7 @@ def analyse_ghosts(
     inside2 = np.zeros(len(zs))
     nearest = np.full((len(zs), 0), np.inf)  # per Z and path slot
     ledger = np.zeros((tr.path.slabs.shape[0], 4), np.int64)
+    w_max = weight_bound(tr.path, src, tr.hole_weights(pixel), tr.s2_max)
     done = 0
     for end in _schedule(sampling.n_rays, sampling.max_rays):
         for pb in tr.trace(pixel, end - done, first_id=done, progress=progress):
@@ -338,17 +357,23 @@ def analyse_ghosts(
         n = done
         e_own = _path_estimate(sums, own, n)
         e_gh = _ghost_estimate(sums, own, n)
-        rse_ok = e_own.rse <= sampling.rse_own and e_gh.value > 0 and e_gh.rse <= sampling.rse_ghost
-        if sampling.n_rays is None and rse_ok:
+        if e_gh.value > 0:
+            ghost_ok = e_gh.rse <= sampling.rse_ghost
+        else:  # no ghost light yet: its rse is undefined; stop on the bound instead
+            ghost_ok = ghost_ratio_bound(w_max, n, e_own.value) <= sampling.rse_own
+        if sampling.n_rays is None and e_own.rse <= sampling.rse_own and ghost_ok:
             break
     n = done
     e_own = _path_estimate(sums, own, n)
     e_gh = _ghost_estimate(sums, own, n)
+    bound = None
+    if e_gh.value == 0 and e_own.value > 0:
+        bound = ghost_ratio_bound(w_max, n, e_own.value)
     frac = ratio_estimate(e_own, e_gh, n)
     names = list(tr.path.mask_names)
     paths = []
     for code, sl in sums.keys.items():
-        if code == own:
+        if code == own or sums.s1[sl] <= 0:  # no light: only rays the pixel does not accept
             continue
         e = estimate(sums.s1[sl], sums.s2[sl], n)
         holes = [
@@ -404,7 +429,41 @@ def analyse_ghosts(
         paths=paths,
         landing=landing,
         ledger=led,
+        ghost_ratio_bound=bound,
     )
+
+
+def ghost_ratio_bound(
+    w_max: float, n_rays: int, etendue_own: float, confidence: float = BOUND_CONFIDENCE
+) -> float:
+    """Upper bound on ghost / own-path etendue where none of ``n_rays`` carried ghost light.
+
+    Each ray is a ghost ray carrying light (weight > 0) with some probability p; where
+    none of n is, p < 1 - (1 - confidence)^(1/n) (about 3 / n at 95 %: the rule of
+    three). A ray's weight is at most ``w_max``
+    (:func:`~opticalstamp.raytrace.sampling.weight_bound`), so the ghost etendue
+    E[w; ghost] is below ``w_max`` p. The bound is that over the own-path estimate
+    (whose own relative error, <= ``rse_own`` at the stop, is small against the bound's).
+    The ray count at which :func:`analyse_ghosts` stops is set by the own path's
+    precision and by this bound, which only shrinks with n, not by the ghost rays: the
+    bound is that of a fixed count.
+
+    Parameters
+    ----------
+    w_max : largest weight of a ray (um^2 sr)
+    n_rays : rays traced, none of which carried ghost light
+    etendue_own : own-path etendue (um^2 sr)
+    confidence : of the bound
+
+    Returns
+    -------
+    float
+        The bound (inf where there is no own-path light or no ray).
+    """
+    if n_rays <= 0 or etendue_own <= 0:
+        return float("inf")
+    p = -np.expm1(np.log1p(-confidence) / n_rays)
+    return float(w_max * p / etendue_own)
 
 
 def _grown(nearest: np.ndarray, n_slots: int) -> np.ndarray:

@@ -300,10 +300,15 @@ def ghosts(
     lines = [
         f"design {d.name}: pixel {row}0, {r.n_rays:,} rays",
         f"own-path etendue   {r.etendue_own_um2sr:.5g} +- {r.etendue_own_se:.2g} um^2 sr",
-        f"ghost etendue      {r.etendue_ghost_um2sr:.5g} +- {r.etendue_ghost_se:.2g} um^2 sr",
-        f"ghost fraction     {r.ghost_fraction:.4g} +- {r.ghost_fraction_se:.2g}",
     ]
-    for zk, v in r.landing.items():
+    if r.ghost_ratio_bound is not None:  # no ray carried ghost light: a bound, no rows of 0
+        lines.append(f"no ghost light found: ghost/own < {r.ghost_ratio_bound:.2g} (95 % bound)")
+    else:
+        lines += [
+            f"ghost etendue      {r.etendue_ghost_um2sr:.5g} +- {r.etendue_ghost_se:.2g} um^2 sr",
+            f"ghost fraction     {r.ghost_fraction:.4g} +- {r.ghost_fraction_se:.2g}",
+        ]
+    for zk, v in r.landing.items() if r.ghost_ratio_bound is None else ():
         lines.append(
             f"Z = {zk} mm: nearest ghost light "
             + ("none" if v["nearest_um"] is None else f"{v['nearest_um'] / 1000:.2f} mm")

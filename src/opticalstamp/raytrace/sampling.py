@@ -199,3 +199,49 @@ def _geometric(path: Path, source: Source) -> tuple:
     area = path.hole_area(m0)
     f = area / jacobian(r, d, n)
     return n_pre, hx, hy, area, f / f.sum()
+
+
+def weight_bound(
+    path: Path,
+    source: Source,
+    weights: np.ndarray | None = None,
+    s2_max: float = float("inf"),
+) -> float:
+    """The largest weight an importance-sampled ray of :func:`hole_targets` can carry.
+
+    A ray drawn through hole j of the first mask has the weight
+    A / (q_j |J(r)|) / area_j (``launch``: etendue um^2 sr for an area source, power
+    fraction for a point), times Fresnel and acceptance factors <= 1, where r is the
+    lateral distance from its source point to its point in the hole. |J| grows with r
+    (:func:`jacobian`), so the weight is at most A area_j / (q_j |J(r_min,j)|), r_min,j
+    the least distance between the source and hole j. Holes that only rays outside the
+    pixel's acceptance (|s|^2 > ``s2_max``) reach carry no weight and are left out.
+
+    Parameters
+    ----------
+    path, source, weights : as for :func:`hole_targets` (the same table)
+    s2_max : largest accepted |s|^2 of the rays (the pixel's acceptance cone)
+
+    Returns
+    -------
+    float
+        The bound (um^2 sr per ray for an area source); 0 where no hole is accepted.
+    """
+    n_pre, hx, hy, area, q = _geometric(path, source)
+    if weights is not None and np.sum(weights) > 0:
+        q = DEFENSIVE_SHARE * q + (1 - DEFENSIVE_SHARE) * weights / np.sum(weights)
+    d, n = path.slabs[:n_pre, 0], path.slabs[:n_pre, 1]
+    m0 = int(path.slabs[n_pre - 1, 2])
+    circle, hw, hh = path.masks[m0, 0] == 1, path.masks[m0, 1], path.masks[m0, 2]
+    gx = np.maximum(np.abs(hx - source.x) - source.width / 2, 0.0)
+    gy = np.maximum(np.abs(hy - source.y) - source.height / 2, 0.0)
+    if circle:  # from the source rectangle to the hole's centre, less its radius
+        r_min = np.maximum(np.hypot(gx, gy) - hw, 0.0)
+    else:
+        r_min = np.hypot(np.maximum(gx - hw, 0.0), np.maximum(gy - hh, 0.0))
+    reach = solve_rho(r_min, d, n)
+    ok = (reach * reach <= s2_max) & (q > 0)
+    if not ok.any():
+        return 0.0
+    a = 1.0 / (np.pi * float(path.slabs[0, 1]) ** 2) if source.is_point else source.area
+    return float(np.max(a * area / (q[ok] * jacobian(r_min[ok], d, n))))

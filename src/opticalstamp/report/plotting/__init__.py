@@ -118,14 +118,24 @@ def plot_ghosts(res: GhostResult, top: int = 12):
     )
     a1.set_yticks(range(len(paths)), labels, fontsize=7)
     a1.invert_yaxis()
-    a1.set_xlabel("etendue (um^2 sr)")
+    a1.set_xlabel("etendue (µm² sr)")
     names = " / ".join(h["mask"] for h in paths[0].holes) if paths else ""
+    found = (
+        f"ghost {res.etendue_ghost_um2sr:.3g} µm² sr, fraction {res.ghost_fraction:.3g}"
+        if res.ghost_ratio_bound is None
+        else f"no ghost light found: ghost/own < {res.ghost_ratio_bound:.2g} (95 % bound)"
+    )
     a1.set_title(
-        f"ghost paths: hole offset per mask ({names}; o = other row)\n"
-        f"own {res.etendue_own_um2sr:.3f}, ghost {res.etendue_ghost_um2sr:.3g} um^2 sr,"
-        f" fraction {res.ghost_fraction:.3g}",
+        f"ghost paths: hole offset per mask ({names}; o = other row)\n" * bool(paths)
+        + f"own {res.etendue_own_um2sr:.3f} µm² sr, {found}",
         fontsize=8,
     )
+    if res.ghost_ratio_bound is not None:
+        for ax in (a1, a2):
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.text(0.5, 0.5, "no ghost light found", ha="center", va="center",
+                    transform=ax.transAxes, fontsize=9, color="0.4")  # fmt: skip
     for i, (z, land) in enumerate(res.landing.items()):
         h = np.asarray(land["etendue_by_distance_um2sr"])  # the last bin: all farther light
         total = h.sum()
@@ -142,7 +152,8 @@ def plot_ghosts(res: GhostResult, top: int = 12):
     a2.set_xlabel("distance from the pixel's axis on the object plane (mm)")
     a2.set_ylabel("share of the ghost light landing within")
     a2.set_title("where ghost light lands (cumulative; arrow: the rest lies farther)", fontsize=8)
-    a2.legend(fontsize=7)
+    if a2.get_legend_handles_labels()[0]:
+        a2.legend(fontsize=7)
     fig.suptitle(
         f"{res.design}: ghost analysis of pixel {res.pixel['row']}{res.pixel['k']}", fontsize=9
     )
