@@ -5,6 +5,7 @@ Invalid input raises :class:`DesignError` naming every offending field and its r
 
 from __future__ import annotations
 
+import re
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -21,11 +22,37 @@ KINDS = (STAMP, RODLENS)
 AnyDesign = Design | RodLensDesign
 
 
-def format_validation_error(err: ValidationError, source: str) -> str:
+def slab_where(loc: tuple, data: object = None) -> str:
+    """Where the user finds the slab of the field ``loc`` (pydantic's path, its slab index
+    0-based, sensor first), "" for a field of no slab: the design file's ``[[slabs]]``
+    tables are counted from the sensor, the paper counts slabs and mask layers from the
+    object side (slab 1 is the slab under layer 1). ``data``: the design as read, for the
+    number of slabs and which of them carry a mask."""
+    slabs = data.get("slabs") if isinstance(data, dict) else None
+    if len(loc) < 2 or loc[0] != "slabs" or not isinstance(loc[1], int):
+        return ""
+    if not isinstance(slabs, list | tuple) or not 0 <= loc[1] < len(slabs):
+        return ""
+    i, n = loc[1], len(slabs)
+    side = f"slab {n - i} from the object side"
+    if len(loc) > 2 and loc[2] == "mask_top":
+        layer = sum(isinstance(sl, dict) and sl.get("mask_top") is not None for sl in slabs[i:])
+        side += f", its mask layer {layer}" if layer else ""
+    return f"[[slabs]] table {i + 1} of {n} counted from the sensor ({side})"
+
+
+def format_validation_error(err: ValidationError, source: str, data: object = None) -> str:
+    """One line per offending field: its path (a slab's field after where the user finds
+    it, see :func:`slab_where`; ``data`` is the design as read), the rule, the value given."""
     lines = [f"invalid design {source}:"]
     for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = e["msg"].removeprefix("Value error, ")
+        loc, msg = tuple(e["loc"]), e["msg"].removeprefix("Value error, ")
+        head = re.match(r"(slabs\.(\d+)(?:\.\w+)*): ", msg) if not loc else None
+        if head:  # a rule of the whole design that names a slab's field first
+            loc = tuple(int(p) if p.isdigit() else p for p in head[1].split("."))
+            msg = msg[head.end() :]
+        where = slab_where(loc, data)
+        loc = (f"{where} — " if where else "") + (".".join(map(str, loc)) or "(top level)")
         if e["type"] == "extra_forbidden":
             msg = "unknown key (not part of the design format)"
         got = e.get("input")
@@ -51,7 +78,7 @@ def design_from_dict(data: dict, source: str = "<dict>") -> AnyDesign:
             return RodLensDesign.model_validate(data)
         return Design.model_validate({k: v for k, v in data.items() if k != "kind"})
     except ValidationError as err:
-        raise DesignError(format_validation_error(err, source)) from None
+        raise DesignError(format_validation_error(err, source, data)) from None
     except RecursionError:
         raise DesignError(f"invalid design {source}: nested too deeply") from None
 
