@@ -86,9 +86,11 @@ def _settings(
     --exposure-ms, where given, in place of its illuminance and exposure."""
     from pydantic import ValidationError
 
-    from ..imaging.scan import ScanSettings
+    from ..imaging.scan import KERNELS, ScanSettings
     from ..imaging.sensor import SensorModel
 
+    if kernel not in KERNELS:
+        fail(f"--kernel: expected one of {', '.join(KERNELS)} (got {kernel!r})")
     profile = None
     if illumination not in ("uniform", "ripple"):
         profile = _illumination_profile(Path(illumination))

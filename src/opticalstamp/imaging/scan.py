@@ -24,6 +24,7 @@ white calibration scans (mean of ``calibration_lines`` lines of a black and a wh
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal, get_args
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -31,6 +32,7 @@ from scipy import ndimage, signal
 
 from ..defaults import RAYS_MAP
 from ..design import AnyDesign, Design, RodLensDesign
+from ..raytrace.launch import progress_bar
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import lattice_of, output_pitch
 from ..units import dpi_of_pitch, pitch_of_dpi
@@ -41,6 +43,12 @@ from .kernels import KernelCache, ScanKernel, kernel_cache, scan_kernels
 from .sensor import SensorModel, expose, fixed_pattern, signal_budget
 from .separable import box_taps, inside, x_pass, y_pass
 
+Illumination = Literal["uniform", "ripple"]
+Kernel = Literal["auto", "paraxial", "trace"]
+#: the choices of ScanSettings.illumination and .kernel
+ILLUMINATIONS: tuple[str, ...] = get_args(Illumination)
+KERNELS: tuple[str, ...] = get_args(Kernel)
+
 
 class ScanSettings(BaseModel):
     """Everything about a scan except the document, the design and the height."""
@@ -48,7 +56,7 @@ class ScanSettings(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     sensor: SensorModel = SensorModel()
-    illumination: str = Field("uniform", pattern="^(uniform|ripple)$")
+    illumination: Illumination = "uniform"
     ripple_amplitude: float = Field(0.05, ge=0, lt=1)  # relative, light-guide ripple
     ripple_period_mm: float = Field(8.0, gt=0)  # LED spacing along the light guide
     illumination_profile: tuple[tuple[float, float], ...] | None = None  # (x_mm, rel)
@@ -60,7 +68,7 @@ class ScanSettings(BaseModel):
     calibration_z_mm: float = Field(0.0, ge=0, le=10)
     calibration_lines: int = Field(32, ge=1, le=4096)
     white_reference: float = Field(1.0, gt=0, le=1)
-    kernel: str = Field("auto", pattern="^(auto|paraxial|trace)$")
+    kernel: Kernel = "auto"
     kernel_rays: int = Field(RAYS_MAP, ge=1 << 14, le=1 << 30)
     fresnel: bool = False  # Fresnel transmission losses in the traced kernels
 
@@ -368,10 +376,7 @@ def simulate_scan(
     e_per = st.sensor.electrons_per_um2sr
     raw, darks, whites, pix_x = [], [], [], []
     jobs = [(r, c) for r in range(n_rows) for c in range(n_ch)]
-    if progress:
-        from tqdm import tqdm
-
-        jobs = tqdm(jobs, desc="scan", unit="row-channel")
+    jobs = progress_bar(jobs, desc="scan", unit="row-channel", progress=progress)
     by_row: dict[int, list] = {r: [None] * n_ch for r in range(n_rows)}
     blocks: dict[int, np.ndarray] = {}
     for r, ch in jobs:

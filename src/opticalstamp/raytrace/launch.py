@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 
 import numba as nb
 import numpy as np
+from tqdm.asyncio import tqdm as console_tqdm
 from tqdm.auto import tqdm
 
 from ..device import resolve_device
@@ -28,6 +29,15 @@ BLOCK = 4096
 #: at ~1e11 rays/s outweigh a CPU-sized chunk's trace. It never changes an estimate beyond
 #: rounding (the device's sums are order-free atomics anyway).
 DEVICE_CHUNK = 1 << 24
+
+
+def progress_bar(iterable=None, *, progress: bool, **kwargs) -> tqdm:
+    """A tqdm bar, shown when ``progress`` and stderr is a terminal: in a captured log
+    (a pipe, a file, a batch job) it is left out rather than filling the log with
+    carriage returns. In a notebook (tqdm.auto's widget, no terminal) it is shown
+    whenever ``progress``."""
+    console = tqdm is console_tqdm
+    return tqdm(iterable, disable=(None if console else False) if progress else True, **kwargs)
 
 
 def chunk_for(chunk: int, device: str) -> int:
@@ -168,7 +178,8 @@ def launch(
 
     Rays first_id ... first_id + n_rays - 1 are drawn from the counter-based generator
     keyed by (seed, stream), so any chunking or thread count yields the same rays.
-    Memory is bounded by ``chunk``; a tqdm bar is shown when ``progress``.
+    Memory is bounded by ``chunk``; a progress bar is shown when ``progress``
+    (:func:`progress_bar`).
     ``hole_weights`` (one per lattice site) steers importance sampling towards the holes
     of the first mask that matter (see :func:`~opticalstamp.sources.hole_targets`).
     ``device``: cpu, cuda or auto (:func:`~opticalstamp.device.resolve_device`;
@@ -215,7 +226,7 @@ def launch(
         np.empty((size, nm), np.int8),
         np.empty((size, nm), np.int32),
     )
-    bar = tqdm(total=n_rays, unit="ray", unit_scale=True, disable=not progress, leave=False)
+    bar = progress_bar(total=n_rays, unit="ray", unit_scale=True, leave=False, progress=progress)
     done = 0
     try:
         while done < n_rays:

@@ -40,10 +40,10 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
-from tqdm.auto import tqdm
 
 from ..design.rodlens import RodLensDesign
 from .kernel import fresnel_sp, seed_key, uniform_pair
+from .launch import progress_bar
 
 THROUGH, MISSED_CORE, LEFT_CORE, TIR_EXIT = 0, 1, 2, 3
 STATUS_NAMES = ("through", "missed_core", "left_core", "tir_exit")
@@ -421,7 +421,8 @@ def trace_rods(
 
     ``point``: a point source at each pixel centre (the PSF), else the sensitive area.
     ``s_max``: bound on the launch directions (default :func:`direction_bound`).
-    Memory is bounded by ``chunk``; a tqdm bar is shown when ``progress``.
+    Memory is bounded by ``chunk``; a progress bar is shown when ``progress``
+    (:func:`~.launch.progress_bar`).
     """
     pix = np.ascontiguousarray(pixel_x_um, dtype=np.float64).ravel()
     if pix.size == 0 or n_rays < pix.size:
@@ -434,7 +435,7 @@ def trace_rods(
     key = seed_key(seed, _STREAM)
     keep: list[tuple] = []
     counts = np.zeros(len(STATUS_NAMES), dtype=np.int64)
-    bar = tqdm(total=n_rays, unit="ray", unit_scale=True, disable=not progress, leave=False)
+    bar = progress_bar(total=n_rays, unit="ray", unit_scale=True, leave=False, progress=progress)
     for start in range(0, n_rays, chunk):
         n = min(chunk, n_rays - start)
         st = np.empty(n, np.int8)
