@@ -268,7 +268,7 @@ def ghosts(
     detector_um: Annotated[
         float,
         typer.Option(
-            help="half width of the virtual detector on the object plane (um), (0, 1e6]",
+            help="half width of the virtual detector on the object plane (µm), (0, 1e6]",
             callback=number(0, 1e6, lo_open=True),
         ),
     ] = DETECTOR_HALF_UM,
@@ -299,27 +299,27 @@ def ghosts(
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     lines = [
         f"design {d.name}: pixel {row}0, {r.n_rays:,} rays",
-        f"own-path etendue   {r.etendue_own_um2sr:.5g} +- {r.etendue_own_se:.2g} um^2 sr",
+        f"own-path etendue   {r.etendue_own_um2sr:.5g} ± {r.etendue_own_se:.2g} µm²·sr",
     ]
     if r.ghost_ratio_bound is not None:  # no ray carried ghost light: a bound, no rows of 0
         lines.append(f"no ghost light found: ghost/own < {r.ghost_ratio_bound:.2g} (95 % bound)")
     else:
         lines += [
-            f"ghost etendue      {r.etendue_ghost_um2sr:.5g} +- {r.etendue_ghost_se:.2g} um^2 sr",
-            f"ghost fraction     {r.ghost_fraction:.4g} +- {r.ghost_fraction_se:.2g}",
+            f"ghost etendue      {r.etendue_ghost_um2sr:.5g} ± {r.etendue_ghost_se:.2g} µm²·sr",
+            f"ghost fraction     {r.ghost_fraction:.4g} ± {r.ghost_fraction_se:.2g}",
         ]
     for zk, v in r.landing.items() if r.ghost_ratio_bound is None else ():
         lines.append(
             f"Z = {zk} mm: nearest ghost light "
             + ("none" if v["nearest_um"] is None else f"{v['nearest_um'] / 1000:.2f} mm")
             + " from the axis, "
-            f"{v['within_detector_um2sr']:.3g} um^2 sr inside +-{detector_um:g} um"
+            f"{v['within_detector_um2sr']:.3g} µm²·sr inside ±{detector_um:g} µm"
         )
     for p in r.paths[:10]:
         hs = ", ".join(f"{h['mask']} {h['row']} {h['dk']:+d}" for h in p.holes)
         lines.append(
-            f"  {p.etendue_um2sr:9.4g} um^2 sr  {p.share:6.1%}  [{hs}]  "
-            f"{p.emission_angle_deg[0]:.1f}-{p.emission_angle_deg[1]:.1f} deg"
+            f"  {p.etendue_um2sr:9.4g} µm²·sr  {p.share:6.1%}  [{hs}]  "
+            f"{p.emission_angle_deg[0]:.1f}–{p.emission_angle_deg[1]:.1f}°"
         )
     emit(data, as_json, lines)
     if plot:
@@ -356,7 +356,7 @@ def spots(
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     lines = [
         f"design {d.name}: spots of pixel A0 ({r.n_rays:,} rays)",
-        "Z (mm)  extent x/y (um)   FWHM x/y (um)   centre-cell fraction",
+        "Z (mm)  extent x/y (µm)   FWHM x/y (µm)   centre-cell fraction",
     ]
     for s in r.spots:
         lines.append(
@@ -379,10 +379,10 @@ def psf(
         float, typer.Option(help="object distance Z (mm), 0 to 100", callback=_z_mm)
     ] = 1.0,
     x_obj: Annotated[
-        float, typer.Option(help="object point x (um), |x| <= 1e5", callback=_coordinate)
+        float, typer.Option(help="object point x (µm), |x| ≤ 1e5", callback=_coordinate)
     ] = 0.0,
     y_obj: Annotated[
-        float, typer.Option(help="object point y (um), |y| <= 1e5", callback=_coordinate)
+        float, typer.Option(help="object point y (µm), |y| ≤ 1e5", callback=_coordinate)
     ] = 0.0,
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
@@ -405,7 +405,7 @@ def psf(
     )
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     lines = [
-        f"design {d.name}: point ({x_obj:g}, {y_obj:g}) um at Z = {z:g} mm",
+        f"design {d.name}: point ({x_obj:g}, {y_obj:g}) µm at Z = {z:g} mm",
         f"own pixel {r.own_pixel_id['row']}{r.own_pixel_id['k']}: {r.own_pixel:.4f}",
         f"neighbours, own-path blur: {r.neighbour_own_path:.4f}",
         f"ghosts: {r.neighbour_ghost:.4f}",
@@ -438,8 +438,14 @@ def report(
         str | None,
         typer.Option(
             "--spec",
-            help="figures the design must meet, e.g. dof>=2.2,ghost_radius>=5 (figures: "
-            "ghost_radius, dof, light, f_number, vs_rod_lens, thickness, yield)",
+            help="figures the design must meet, FIGURE>=NUMBER or FIGURE<=NUMBER, "
+            "comma-separated, e.g. dof>=2.2,ghost_radius>=5. Figures and their units: "
+            "ghost_radius (mm: the nearest ghost light on the object plane), dof (mm: depth "
+            "of field), restored_dof (mm: after Wiener restoration), light (own-path light "
+            "as a ratio to the paper's F/10 reference lens; the paper: 1/36 = 0.028), "
+            "f_number (the working F-number; the paper: 60), vs_rod_lens (light as a ratio "
+            "to a 1-row 12° rod-lens array; the paper: 0.01), thickness (mm, sensor to the "
+            "reference plane), yield (tolerance yield, a fraction 0 to 1)",
         ),
     ] = None,
     as_json: Annotated[
