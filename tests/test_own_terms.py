@@ -106,8 +106,9 @@ def test_diffraction_slit_is_the_designs_object_side_hole(paper):
 
 def test_search_resolution_follows_the_design(paper):
     d600 = scale_to_dpi(paper, 600)
-    assert dpi_of_pitch(output_pitch(d600)) == pytest.approx(600.0)
-    assert output_pitch(d600) == pytest.approx(25400.0 / 600.0)
+    # 25.4 mm / 600 on the artwork's 1-nm grid (scale_to_dpi): 600.0047 dpi
+    assert dpi_of_pitch(output_pitch(d600)) == pytest.approx(600.0, rel=1e-4)
+    assert output_pitch(d600) == 42.333
 
 
 def test_the_study_row_that_is_the_design_shows_the_headline_numbers(paper):

@@ -206,10 +206,11 @@ def test_with_stack_round_trip_and_revalidation(paper):
 
 # -- resolution and structure ---------------------------------------------------------------
 def test_scale_to_dpi(paper, data):
-    k = 25400.0 / 600.0 / 84.6
+    # the merged pitch 25.4 mm / 600 on the artwork's 1-nm grid: 42.333 um, not 42.3333...
+    k = 2 * 42.333 / 169.2
     for key in data["sensor"]:
         if key.endswith("_um"):
-            data["sensor"][key] *= k
+            data["sensor"][key] = round(data["sensor"][key] * k, 3)
     for sl, hole in zip(data["slabs"], (20.0, 20.0, 24.0), strict=True):
         sl["mask_top"]["size_um"] = hole  # rounded to 0.1 um
     data["name"] = "paper2016 at 600 dpi"

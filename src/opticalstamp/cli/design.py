@@ -70,7 +70,17 @@ def masks(
 ) -> None:
     """Mask artwork for lithography: one layer per mask (layer 1 = the object side, as the
     paper numbers them), the holes of the whole sensor line as array references, designed
-    misregistration applied, alignment marks, a label with the design's fingerprint."""
+    misregistration applied, alignment marks, a label with the design's fingerprint.
+
+    Tone: the drawn polygons are the holes, clear openings in the absorbing layer
+    (chrome): a dark-field mask, drawn = clear; the alignment crosses (datatype 1) are
+    clear too.
+
+    Grid: GDSII user unit 1 µm, database unit 1 nm; every length drawn is a whole number
+    of nm (hole sizes of 2 nm, as holes are centred), so the arrays read back exactly. A
+    design whose row pitch, row-B stagger, misregistration or hole sizes are off that
+    grid is refused (exit 2) with the nearest values and what snapping would cost, not
+    snapped; designs from search --dpi are on the grid."""
     from ..io.artwork import FORMATS, mask_layouts, write_masks
 
     if fmt is not None and fmt.lower() not in FORMATS:

@@ -190,8 +190,10 @@ def search(
         Path | None,
         typer.Option(
             "--export-designs",
-            help="folder to write every Pareto point into as a design file (NAME-pNN.toml, "
-            "with its provenance) and front.json (replaced as a whole)",
+            help="folder to write every Pareto point into as a design file (STEM-pNN.toml, "
+            "STEM the base design's name without spaces: paper2016-p01.toml, "
+            "paper2016-600dpi-p01.toml at --dpi 600; with its provenance) and front.json "
+            "(replaced as a whole)",
             callback=writable(directory=True, marker="front.json"),
         ),
     ] = None,
@@ -339,7 +341,7 @@ def _export(results: dict, front: list[dict], folder: Path) -> None:
     with replace_folder(folder) as tmp:
         index = []
         for p in points:
-            file = f"{p['name']}.toml"
+            file = p["file"]  # a stem without spaces: STEM-pNN.toml
             write_atomic(tmp / file, design_toml(p["design"], tuple(p["provenance"])))
             index.append(
                 {

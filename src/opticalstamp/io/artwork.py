@@ -6,6 +6,24 @@ hole of used pixel k of row A at (k p, 0) and of row B at (b_x + k p, b_y), k ce
 designed misregistration (``offset_x_um``, ``offset_y_um``) applied to its holes. Seen
 from the object side (the side the masks are drawn on, looking down at the sensor).
 
+Tone: the drawn polygons are the holes, the clear (transparent) openings of the mask;
+everything not drawn is the absorbing layer (chrome on a photomask: a dark-field mask,
+drawn = clear). The alignment crosses are drawn the same way: clear crosses in the
+absorber. A process that draws the absorber instead needs the tone reversed.
+
+Grid: the GDSII database unit is 1 nm (``DBU_UM``; user unit 1 um), and every length the
+artwork draws is a whole number of it, so KLayout and mask writers read the arrays
+exactly as designed (an off-grid array vector is split into sub-arrays whose pitches
+alternate, 84.667/84.666 um for a pitch of 84.66667 um). :func:`grid_problems` lists the
+design's fields that break the rule: the row pitch (the array's pitch), the row-B stagger
+and each mask's misregistration must be whole nanometres, hole sizes whole multiples of
+2 nm (a hole is centred on its grid point, so its half-size is drawn). Such a design is
+refused (:class:`OffGridError`) rather than snapped: the artwork carries the design's
+fingerprint and must be that design; the message gives the nearest values on the grid
+and the error snapping would make over the line. Designs from ``scale_to_dpi`` (and so
+``search --dpi``) are on the grid. DXF has no database unit; it follows the same rule so
+that both formats hold the same geometry.
+
 Layers: GDS layer n (datatype 0) is the mask counted from the object side, as the
 paper numbers them (layer 1 faces the document); its holes are array references of one
 hole cell, one per row of used pixels, so a file for an A4 line stays a few kilobytes.
@@ -18,11 +36,13 @@ after it, the hole as a block inserted as a grid (MINSERT), marks on "<mask> mar
 from __future__ import annotations
 
 import tempfile
+import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..design import Design
-from .files import write_atomic
+from ..design import Design, DesignError
+from ..design.variants import MASK_GRID_UM
+from .files import file_stem, write_atomic
 
 FORMATS = ("gds", "dxf")
 #: Alignment mark: a cross of this arm length and line width (um), this far beyond the
@@ -34,6 +54,17 @@ MARK_GAP_UM = 1000.0
 DXF_MICRONS = 13
 #: Circle holes as polygons: largest distance between the arc and its chords (um).
 CIRCLE_TOLERANCE_UM = 0.01
+#: GDSII database unit (um): every coordinate is a whole number of it (1 nm).
+DBU_UM = MASK_GRID_UM
+#: GDSII user unit (um): lengths in the file are read in micrometres.
+USER_UNIT_UM = 1.0
+#: How far (in database units) a length may sit from the grid and count as on it: the
+#: rounding of a decimal number like 84.6 um in binary floating point.
+GRID_SLACK_DBU = 1e-6
+
+
+class OffGridError(DesignError):
+    """A design whose artwork would not sit on the database grid (1 nm)."""
 
 
 @dataclass(frozen=True)
@@ -48,6 +79,87 @@ class MaskLayout:
     rows: tuple[tuple[float, float], ...]  # (x, y) of each row's first hole
     pitch_um: float
     count: int  # holes per row
+
+
+def _grid_lengths(design: Design) -> list[tuple[str, float, int]]:
+    """``(field, value um, grid step in database units)`` of every length the artwork
+    draws, by the design field it comes from (see :func:`grid_problems`)."""
+    s = design.sensor
+    out = [("sensor.row_pitch_um", s.row_pitch_um, 1)]
+    if s.rows == 2:
+        out += [("sensor.row_b_offset_x_um", s.row_b_offset_x_um, 1)]
+        out += [("sensor.row_b_offset_y_um", s.row_b_offset_y_um, 1)]
+    for i, sl in enumerate(design.slabs):
+        m = sl.mask_top
+        if m is None:
+            continue
+        where = f"slabs.{i}.mask_top"
+        sizes = ("width_um", "height_um") if m.shape == "rectangle" else ("size_um",)
+        out += [(f"{where}.{key}", getattr(m, key), 2) for key in sizes]
+        out += [(f"{where}.{key}", getattr(m, key), 1) for key in ("offset_x_um", "offset_y_um")]
+    return out
+
+
+def grid_problems(design: Design) -> list[str]:
+    """The design's lengths that the artwork cannot draw on its database grid.
+
+    Parameters
+    ----------
+    design : Design
+
+    Returns
+    -------
+    list of str
+        One line per field off the grid (empty: the artwork is exact): the field, its
+        value, the nearest value on the grid and what snapping to it would do. The row
+        pitch (``sensor.row_pitch_um``, the arrays' pitch) and the row-B stagger and each
+        mask's misregistration (the arrays' origins) must be whole multiples of
+        ``DBU_UM`` (1 nm); hole sizes whole multiples of 2 nm, as a hole is drawn centred
+        on its grid point (+-half its size).
+    """
+    n = design.sensor.n_per_row
+    out = []
+    for field, value, step in _grid_lengths(design):
+        steps = value / DBU_UM / step
+        if abs(steps - round(steps)) <= GRID_SLACK_DBU:
+            continue
+        near = round(round(steps) * step * DBU_UM, 3)
+        err_nm = (near - value) * 1000
+        if field == "sensor.row_pitch_um":
+            cost = (
+                f"the pitch {abs(err_nm):.3g} nm {'longer' if err_nm > 0 else 'shorter'}, "
+                f"adding up to {abs(err_nm) * (n - 1) / 1000:.3g} µm at the end of a row of "
+                f"{n} holes"
+            )
+        elif step == 2:
+            cost = (
+                f"the hole {abs(err_nm):.3g} nm {'larger' if err_nm > 0 else 'smaller'}; "
+                "hole sizes are whole multiples of 2 nm, as a hole is drawn centred"
+            )
+        else:
+            cost = f"the holes moved by {abs(err_nm):.3g} nm"
+        out.append(
+            f"{field} = {value!r} µm is off the grid; nearest on it: {near!r} µm (snapped: {cost})"
+        )
+    return out
+
+
+def check_on_grid(design: Design) -> None:
+    """Raise :class:`OffGridError` naming every field :func:`grid_problems` finds."""
+    problems = grid_problems(design)
+    if problems:
+        raise OffGridError(
+            "\n  ".join(
+                [
+                    f"masks: design {design.name!r}: the artwork's database unit is "
+                    f"{DBU_UM * 1000:g} nm (GDSII) and every length it draws must be a whole "
+                    "number of it; these are not (refused rather than snapped: the artwork "
+                    "carries the design's fingerprint, so put the values on the grid in the "
+                    "design file; designs scaled by search --dpi or scale_to_dpi are on it):",
+                    *problems,
+                ]
+            )
+        )
 
 
 def mask_layouts(design: Design) -> list[MaskLayout]:
@@ -79,15 +191,22 @@ def mask_layouts(design: Design) -> list[MaskLayout]:
     return out
 
 
+def _on_grid(value_um: float) -> float:
+    """``value_um`` rounded to the database grid (a whole number of ``DBU_UM``), as the
+    float nearest that decimal (42.3, not 42.300000000000004)."""
+    return round(value_um / DBU_UM) / round(1 / DBU_UM)
+
+
 def mark_positions(design: Design) -> list[tuple[float, float]]:
-    """Centres of the alignment crosses: beyond both ends of the line, between the rows."""
+    """Centres of the alignment crosses: beyond both ends of the line, between the rows
+    (halfway, rounded to the database grid: 21.166 um for a stagger of 42.333 um)."""
     s = design.sensor
     n = s.n_per_row
     k_lo = -(n // 2)
     x0 = k_lo * s.row_pitch_um - MARK_GAP_UM
     x1 = (k_lo + n - 1) * s.row_pitch_um + max(0.0, s.row_b_offset_x_um) + MARK_GAP_UM
     y = s.row_b_offset_y_um / 2 if s.rows == 2 else 0.0
-    return [(x0, y), (x1, y)]
+    return [(_on_grid(x0), _on_grid(y)), (_on_grid(x1), _on_grid(y))]
 
 
 def mark_rectangles(design: Design) -> list[tuple[tuple[float, float], tuple[float, float]]]:
@@ -100,14 +219,28 @@ def mark_rectangles(design: Design) -> list[tuple[tuple[float, float], tuple[flo
 
 
 def _label(design: Design, m: MaskLayout) -> str:
-    return f"{design.name} {design.fingerprint()} layer {m.layer}: {m.name}"
+    """The text on each layer, printable ASCII: the design's name as a file stem (no
+    spaces; an exported design's file name without ``.toml``), its fingerprint, the
+    layer and the mask's name."""
+    text = unicodedata.normalize("NFKD", m.name).encode("ascii", "ignore").decode("ascii")
+    mask = "".join(c for c in text if " " <= c <= "~")
+    return f"{file_stem(design.name)} {design.fingerprint()} layer {m.layer}: {mask}"
 
 
 def gds_bytes(design: Design) -> bytes:
-    """The design's masks as a GDSII stream (gdstk)."""
+    """The design's masks as a GDSII stream (gdstk): user unit 1 um, database unit 1 nm.
+
+    Raises
+    ------
+    OffGridError
+        A length the artwork draws is not on the 1-nm grid (:func:`grid_problems`).
+    """
     import gdstk
 
-    lib = gdstk.Library(f"opticalstamp {design.name}", unit=1e-6, precision=1e-9)
+    check_on_grid(design)
+    lib = gdstk.Library(
+        f"opticalstamp-{file_stem(design.name)}", unit=USER_UNIT_UM * 1e-6, precision=DBU_UM * 1e-6
+    )
     top = lib.new_cell("TOP")
     for m in mask_layouts(design):
         hole = lib.new_cell(f"HOLE_L{m.layer}")
@@ -131,10 +264,13 @@ def gds_bytes(design: Design) -> bytes:
 
 
 def dxf_bytes(design: Design) -> bytes:
-    """The design's masks as DXF (ezdxf): lengths in um, one layer per mask."""
+    """The design's masks as DXF (ezdxf): lengths in um, one layer per mask; the same
+    grid rule as GDSII (:class:`OffGridError`), so both formats hold the same geometry."""
     import io
 
     import ezdxf
+
+    check_on_grid(design)
 
     doc = ezdxf.new("R2010")
     doc.units = DXF_MICRONS
@@ -169,7 +305,15 @@ def dxf_bytes(design: Design) -> bytes:
 
 
 def write_masks(design: Design, path: str | Path, fmt: str | None = None) -> Path:
-    """Write the mask artwork atomically; ``fmt`` gds or dxf (default: the suffix)."""
+    """Write the mask artwork atomically; ``fmt`` gds or dxf (default: the suffix).
+
+    Raises
+    ------
+    ValueError
+        An unknown format.
+    OffGridError
+        The design's lengths are not on the artwork's 1-nm grid (nothing is written).
+    """
     path = Path(path)
     fmt = (fmt or path.suffix.lstrip(".")).lower()
     if fmt not in FORMATS:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import contextlib
 import json
+import re
+import unicodedata
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +42,37 @@ def to_json(data: dict) -> str:
     return json.dumps(
         _clean(json.loads(json.dumps(data, default=_default, allow_nan=True))), indent=2
     )
+
+
+#: Longest file stem :func:`file_stem` returns (characters).
+MAX_STEM = 80
+_UNIT_AFTER_NUMBER = re.compile(r"(?<![A-Za-z0-9.])(?:at\s+)?(\d+(?:\.\d+)?)\s+(dpi|um|mm|nm)\b")
+_UNSAFE = re.compile(r"[^A-Za-z0-9._]+")
+
+
+def file_stem(name: str) -> str:
+    """A design's name as a file stem: no spaces, nothing a shell or a file system treats
+    specially, the same stem for the same name on every run.
+
+    Parameters
+    ----------
+    name : str
+        A design's name, as readable as it likes (``"paper2016 at 600 dpi"``).
+
+    Returns
+    -------
+    str
+        ASCII letters, digits, ``.``, ``_`` and ``-`` only: accents dropped
+        (``é`` -> ``e``), a number and the unit after it joined, an ``at`` before them
+        dropped (``"at 600 dpi"`` -> ``600dpi``), every other run of characters one
+        ``-``; no leading or trailing ``-`` or ``.`` (never an option, never hidden); at
+        most :data:`MAX_STEM` characters; ``"design"`` where nothing is left.
+        ``"paper2016 at 600 dpi"`` -> ``"paper2016-600dpi"``; ``"paper2016"`` stays.
+    """
+    text = unicodedata.normalize("NFKD", name).encode("ascii", "ignore").decode("ascii")
+    text = _UNIT_AFTER_NUMBER.sub(r"\1\2", text)
+    stem = _UNSAFE.sub("-", text).strip("-.")[:MAX_STEM].rstrip("-.")
+    return stem or "design"
 
 
 def provenance(design, seed: int | None, traced: bool = True) -> dict:

@@ -621,15 +621,19 @@ def verify_front(
 
 def front_designs(results: dict[str, SearchResult], front: list[dict]) -> list[dict]:
     """Every point of ``front`` (rows of :func:`merged_front` or of one search's
-    ``pareto``) as a design of its own: ``{"name", "design", "row", "provenance"}``.
+    ``pareto``) as a design of its own: ``{"name", "file", "design", "row", "provenance"}``.
 
     The design is the searched base (of the point's variant) with the point's holes and
     slabs; its name is the base's with ``-pNN`` (NN: the point's rank by depth of field,
-    from 01), its description says where it comes from; ``provenance`` lists the search's
-    settings and the point's surrogate and exact figures (the lines a design file writes
-    as comments).
+    from 01), its description says where it comes from; ``file`` is the name of the file
+    it is written to, ``STEM-pNN.toml`` with STEM the base's name as a file stem without
+    spaces (:func:`~opticalstamp.io.files.file_stem`: ``paper2016-p01.toml``,
+    ``paper2016-600dpi-p01.toml`` for the base ``paper2016 at 600 dpi``; unique, as NN
+    is); ``provenance`` lists the search's settings and the point's surrogate and exact
+    figures (the lines a design file writes as comments).
     """
     from .. import __version__
+    from ..io.files import file_stem
 
     out = []
     for i, row in enumerate(front, start=1):
@@ -671,5 +675,6 @@ def front_designs(results: dict[str, SearchResult], front: list[dict]) -> list[d
                     else "",
                 )
             )
-        out.append({"name": name, "design": d, "row": row, "provenance": prov})
+        file = f"{file_stem(base.name)}-p{i:02d}.toml"
+        out.append({"name": name, "file": file, "design": d, "row": row, "provenance": prov})
     return out
