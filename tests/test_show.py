@@ -22,7 +22,7 @@ def test_show_stamp_table_and_drawing(tmp_path):
     assert data["output_pitch_um"] == 169.2 / 2  # the merged rows' pitch (300.24 dpi)
     png = tmp_path / "stack.png"
     res = run(["show", "paper2016", "--plot", png])
-    assert res.exit_code == 0 and "square 48 x 48 um" in res.output
+    assert res.exit_code == 0 and "square 48 × 48 µm" in res.output
     with Image.open(png) as im:
         assert im.size[0] > 400 and im.size[1] > 400
 

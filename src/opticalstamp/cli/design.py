@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from textwrap import shorten
 from typing import Annotated
 
 import typer
@@ -37,7 +38,8 @@ def presets(ctx: typer.Context) -> None:
     for name in preset_names():
         d = load_design(name)
         kind = "rod-lens-array" if isinstance(d, RodLensDesign) else "stamp"
-        typer.echo(f"{name:<24} {kind:<15} {d.description.split(':')[0][:70]}")
+        summary = d.description.split(":")[0]  # the part before the details
+        typer.echo(f"{name:<24} {kind:<15} {shorten(summary, 70, placeholder='…')}")
 
 
 @presets_app.command("show")
@@ -89,10 +91,21 @@ def masks(
     path = write_masks(d, output, fmt)
     for m in mask_layouts(d):
         typer.echo(
-            f"layer {m.layer} ({m.name}): {len(m.rows)} x {m.count} {m.shape} holes "
-            f"{m.width_um:g} x {m.height_um:g} um, pitch {m.pitch_um:g} um"
+            f"layer {m.layer} ({m.name}): {len(m.rows)} × {m.count} {m.shape} holes "
+            f"{m.width_um:g} × {m.height_um:g} µm, pitch {m.pitch_um:g} µm"
         )
     typer.echo(f"wrote {path} ({path.stat().st_size:,} bytes, fingerprint {d.fingerprint()})")
+
+
+def _derived(key: str, value: float) -> str:
+    """A derived figure as a line: its JSON key's unit written as a unit
+    (``g_per_mm`` -> ``g: 0.3 mm⁻¹``, ``rod_length_mm`` -> ``rod length: 4.2 mm``)."""
+    name, unit = key, ""
+    for suffix, written in (("_per_mm", " mm⁻¹"), ("_mm", " mm")):
+        if key.endswith(suffix):
+            name, unit = key.removesuffix(suffix), written
+            break
+    return f"  {name.replace('_', ' ')}: {value:.4g}{unit}"
 
 
 @command(traces=False)
@@ -124,8 +137,8 @@ def show(
                 "sensor_to_document_mm": d.reference_plane_um / 1000,
             },
         } | {"provenance": provenance(d, None, traced=False)}
-        lines = [f"{d.name}: rod-lens array, {a.rows} row(s) of rods R = {a.rod_radius_um:g} um"]
-        lines += [f"  {k.replace('_', ' ')}: {v:.4g}" for k, v in data["derived"].items()]
+        lines = [f"{d.name}: rod-lens array, {a.rows} row(s) of rods R = {a.rod_radius_um:g} µm"]
+        lines += [_derived(k, v) for k, v in data["derived"].items()]
         emit(data, as_json, lines)
         return
     from ..design.describe import stack_rows
@@ -145,16 +158,16 @@ def show(
     }
     lines = [
         f"{d.name}: {len(d.masks)} aperture layers, {s.rows} row(s) of used pixels every "
-        f"{s.row_pitch_um:g} um ({dpi_of_pitch(pitch):.0f} dpi merged), reference plane "
+        f"{s.row_pitch_um:g} µm ({dpi_of_pitch(pitch):.0f} dpi merged), reference plane "
         f"{d.reference_plane_um / 1000:.3f} mm above the sensor",
         "object side",
-        f"{'layer':>5}  {'medium':<12}{'n':>7}{'thick um':>10}{'z top um':>10}  hole",
+        f"{'layer':>5}  {'medium':<12}{'n':>7}{'thick µm':>10}{'z top µm':>10}  hole",
     ]
     for r in rows:
         m = r["mask"]
-        hole = "" if m is None else f"{m['shape']} {m['width_um']:g} x {m['height_um']:g} um"
+        hole = "" if m is None else f"{m['shape']} {m['width_um']:g} × {m['height_um']:g} µm"
         if m is not None and (m["offset_x_um"] or m["offset_y_um"]):
-            hole += f", offset ({m['offset_x_um']:g}, {m['offset_y_um']:g}) um"
+            hole += f", offset ({m['offset_x_um']:g}, {m['offset_y_um']:g}) µm"
         if r.get("reference_gap"):
             hole = "(reference gap)"
         layer = "" if r["layer"] is None else str(r["layer"])
