@@ -386,6 +386,11 @@ def psf(
     whose axis is nearest the point) through its own holes; *neighbour pixels by own-path
     blur* (another used pixel through that pixel's own holes); *ghosts* (a used pixel
     reached through holes that are not its own); and the *insensitive* area.
+
+    The landing map (``fine_map``, ``bin_um`` bins) covers ``window_um`` either side of
+    the point in x and in y, wherever the sensor's lines are: ghost light lands beyond
+    them (about 100 um off the axis for the prototype). The share of the power reaching
+    the sensor plane that lands outside it is ``meta["outside_map"]``.
     """
     path = forward_path(design, z_mm * 1000.0)
     src = Source(x_obj_um, y_obj_um)
@@ -398,7 +403,7 @@ def psf(
     col0 = int(np.floor(x_obj_um / pitch + 0.5)) - cols
     grid = np.zeros((s.lines, 2 * cols + 1))
     ex = np.arange(-window_um, window_um + bin_um / 2, bin_um) + x_obj_um
-    ey = np.arange(-pitch, s.lines * pitch + bin_um / 2, bin_um) - pitch / 2
+    ey = np.arange(-window_um, window_um + bin_um / 2, bin_um) + y_obj_um
     fine = np.zeros((ey.size - 1, ex.size - 1))
     parts = np.zeros(4)
     reach = np.zeros(1)
@@ -431,6 +436,7 @@ def psf(
                 px, py = lat.centers(r, kk)
                 used.append((float(px), float(py)))
     ox, oy = lat.centers(own_r, own_k)
+    outside = max(float(1 - fine.sum() / reach[0]), 0.0) if reach[0] > 0 else 0.0
     return PSF(
         design.name,
         design.fingerprint(),
@@ -453,5 +459,5 @@ def psf(
         ey,
         used,
         (s.sensitive_width_um, s.sensitive_height_um),
-        {"fresnel": fresnel},
+        {"fresnel": fresnel, "outside_map": outside},
     )

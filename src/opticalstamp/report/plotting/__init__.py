@@ -56,28 +56,54 @@ def plot_spots(res: SpotResult):
 
 
 def plot_psf(p: PSF):
-    """Landing density on the sensor, 600-dpi grid, used pixels outlined (paper Fig. 10)."""
+    """Landing density on the sensor, 600-dpi grid, used pixels outlined (paper Fig. 10).
+
+    The frame is where the light lands (the nonzero part of the landing map, one pixel
+    pitch around it, and the own pixel), not a fixed window: the prototype's ghost light
+    lands about 100 um off the axis, beyond the sensor's lines. The colour bar gives the
+    density in fraction of the point's emitted power per um^2 (log scale, four decades).
+    """
+    from matplotlib import colormaps
+    from matplotlib.colors import LogNorm
     from matplotlib.patches import Rectangle
 
-    fig, ax = _subplots(figsize=(9, 2.6))
     ex, ey = p.fine_edges_x_um, p.fine_edges_y_um
-    img = np.log10(p.fine_map + p.fine_map.max() * 1e-4) if p.fine_map.max() > 0 else p.fine_map
-    ax.imshow(
-        img,
+    pitch = p.grid_pitch_um
+    sw, sh = p.sensitive_um
+    ox, oy = p.own_pixel_id["x_um"], p.own_pixel_id["y_um"]
+    lit_y, lit_x = np.nonzero(p.fine_map > 0)
+    if lit_x.size:
+        x0, x1 = ex[lit_x.min()] - pitch, ex[lit_x.max() + 1] + pitch
+        y0, y1 = ey[lit_y.min()] - pitch, ey[lit_y.max() + 1] + pitch
+    else:
+        x0, x1, y0, y1 = p.x_obj_um - pitch, p.x_obj_um + pitch, oy - pitch, oy + pitch
+    x0, x1 = max(min(x0, ox - sw), ex[0]), min(max(x1, ox + sw), ex[-1])
+    y0, y1 = max(min(y0, oy - sh), ey[0]), min(max(y1, oy + sh), ey[-1])
+    width, plot_w = 7.5, 5.6  # inches: the figure, and the frame (the rest: bar, labels)
+    fig, ax = _subplots(
+        figsize=(width, min(max(plot_w * (y1 - y0) / (x1 - x0), 1.6), 6.0) + 1.1),
+        layout="constrained",
+    )
+    vmax = p.fine_map.max()
+    im = ax.imshow(
+        np.ma.masked_less_equal(p.fine_map, 0.0),
         extent=(ex[0], ex[-1], ey[0], ey[-1]),
         origin="lower",
-        cmap="magma",
+        cmap=colormaps["magma"].with_extremes(bad="black", under="black"),
+        norm=LogNorm(vmin=vmax * 1e-4, vmax=vmax) if vmax > 0 else None,
         aspect="equal",
         interpolation="nearest",
     )
-    pitch = p.grid_pitch_um
-    for g in np.arange(np.floor(ex[0] / pitch) - 0.5, np.ceil(ex[-1] / pitch) + 1) * pitch:
+    ax.set_facecolor("black")
+    bar = fig.colorbar(im, ax=ax, shrink=0.9, pad=0.02, extend="min")
+    bar.set_label("landing power density\n(fraction of emitted power per µm²)", fontsize=8)
+    bar.ax.tick_params(labelsize=7)
+    for g in np.arange(np.floor(x0 / pitch) - 0.5, np.ceil(x1 / pitch) + 1) * pitch:
         ax.axvline(g, color="0.6", lw=0.4)
-    for g in np.arange(-0.5, p.grid_power.shape[0] + 0.5) * pitch:
+    for g in np.arange(-0.5, p.grid_power.shape[0] + 0.5) * pitch:  # the sensor's lines
         ax.axhline(g, color="0.6", lw=0.4)
-    sw, sh = p.sensitive_um
     for cx, cy in p.used_pixels:
-        own = abs(cx - p.own_pixel_id["x_um"]) < 1e-6 and abs(cy - p.own_pixel_id["y_um"]) < 1e-6
+        own = abs(cx - ox) < 1e-6 and abs(cy - oy) < 1e-6
         ax.add_patch(
             Rectangle(
                 (cx - sw / 2, cy - sh / 2),
@@ -89,14 +115,17 @@ def plot_psf(p: PSF):
             )
         )
     ax.plot([p.x_obj_um], [p.y_obj_um], "+", color="lime", ms=8)
-    ax.set_xlim(ex[0], ex[-1])
-    ax.set_ylim(ey[0], ey[-1])
-    ax.set_xlabel("x on sensor (um)")
-    ax.set_ylabel("y (um)")
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_xlabel("x on sensor (µm)")
+    ax.set_ylabel("y (µm)")
+    out = p.meta.get("outside_map", 0.0)
+    half = min(p.x_obj_um - ex[0], ex[-1] - p.x_obj_um, p.y_obj_um - ey[0], ey[-1] - p.y_obj_um)
     ax.set_title(
-        f"{p.design}: PSF of a point at X = {p.x_obj_um:g} um, Z = {p.z_mm:g} mm "
-        f"(log density; own {p.own_pixel:.1%}, blur {p.neighbour_own_path:.1%}, "
-        f"ghost {p.neighbour_ghost:.1%}, insensitive {p.insensitive:.1%})",
+        f"{p.design}: PSF of a point at X = {p.x_obj_um:g} µm, Z = {p.z_mm:g} mm\n"
+        f"own {p.own_pixel:.1%}, blur {p.neighbour_own_path:.1%}, "
+        f"ghost {p.neighbour_ghost:.1%}, insensitive {p.insensitive:.1%}"
+        + (f"; {out:.1%} lands beyond this map (> {half:g} µm away)" if out > 5e-4 else ""),
         fontsize=8,
     )
     return fig
@@ -195,31 +224,44 @@ def plot_rmtf(res, paper_points: dict | None = None):
 
 
 def plot_efficiency(res):
-    """Collected etendue vs Z for finite uniform objects, and the sensitive-area effect."""
-    fig, (a1, a2) = _subplots(1, 2, figsize=(10, 3.6))
+    """Collected etendue vs Z for finite uniform objects, and the sensitive-area effect.
+
+    The title gives the headline figures: the own-path light (the signal) against the
+    paper's F/10 reference lens and its working F-number (``ratio_own``,
+    ``working_f_number_own``), then those with the ghost light. The etendue axis starts
+    at 0, so that the few per cent between the curves look as small as they are.
+    """
+    fig, (a1, a2) = _subplots(1, 2, figsize=(9.6, 3.8), layout="constrained")
     zs = sorted(res.by_object_radius, key=float)
     radii = list(res.by_object_radius[zs[0]])
+    top = 0.0
     for i, r in enumerate(radii):
         vals = [res.by_object_radius[z][r] for z in zs]
+        top = max(top, *vals)
         lab = "infinite object" if r == "inf" else f"object radius {r} mm"
-        a1.plot([float(z) for z in zs], vals, "o-", color=f"C{i}", label=lab)
+        a1.plot([float(z) for z in zs], vals, "o-", color=f"C{i}", label=lab, ms=4)
     a1.axhline(res.etendue_own_um2sr, color="k", lw=0.6, ls=":", label="own path")
+    a1.set_ylim(0, 1.15 * max(top, res.etendue_own_um2sr))
     a1.set_xlabel("object distance Z (mm)")
-    a1.set_ylabel("etendue collected (um^2 sr)")
+    a1.set_ylabel("etendue collected (µm² sr)")
     a1.set_title(
-        f"ratio to reference lens 1/{1 / res.ratio:.1f}, working F {res.working_f_number:.0f}",
+        f"own-path light 1/{1 / res.ratio_own:.1f} of the F/{res.reference_f_number:g} "
+        f"lens, working F {res.working_f_number_own:.1f}\n"
+        f"with the ghost light 1/{1 / res.ratio:.1f}, F {res.working_f_number:.1f}",
         fontsize=9,
     )
-    a1.legend(fontsize=7)
+    a1.legend(fontsize=8, loc="lower right")
     areas = res.sensitive_area
     x = np.arange(len(areas))
     a2.bar(x - 0.2, [a["gain_own_vs_design"] for a in areas], 0.4, label="own path")
     a2.bar(x + 0.2, [a["gain_vs_design"] for a in areas], 0.4, label="own + ghost")
-    a2.plot(x, [a["area_scale"] for a in areas], "k_", ms=30, label="area ratio")
-    a2.set_xticks(x, [f"{a['sensitive_um'][0]:.1f} um" for a in areas])
+    a2.hlines([a["area_scale"] for a in areas], x - 0.4, x + 0.4, color="k", label="area ratio")
+    a2.set_ylim(0, 1.15 * max(max(a["area_scale"], a["gain_vs_design"]) for a in areas))
+    a2.set_xticks(x, [f"{a['sensitive_um'][0]:.1f} µm" for a in areas])
+    a2.set_xlabel("side of the sensitive area")
     a2.set_ylabel("light relative to the design")
-    a2.set_title("sensitive-area size (paper: 4x area -> 4x light)", fontsize=9)
-    a2.legend(fontsize=7)
+    a2.set_title("sensitive-area size (paper: 4× area → 4× light)", fontsize=9)
+    a2.legend(fontsize=8, loc="center left")
     fig.suptitle(f"{res.design}: light efficiency (paper Fig. 13)", fontsize=10)
     return fig
 
@@ -467,41 +509,55 @@ def plot_pareto(res, title: str = ""):
     return fig
 
 
+#: Width (inches) of a figure the report shows at its natural size: the page's 1,100 px
+#: column less its padding, at the 110 dpi figures are saved at (io.files.figure_png).
+REPORT_WIDTH_IN = 9.6
+
+
 def plot_tolerance(res):
-    """Tolerance study: histograms of RMTF, DOF, efficiency, ghosts; sensitivity bars."""
+    """Tolerance study: histograms of RMTF, DOF and ghost fraction; sensitivity bars.
+
+    Two by two, :data:`REPORT_WIDTH_IN` wide, every text at least 8 pt: the report shows
+    it at its natural size, where 8 pt reads as about 9 pt.
+    """
     ok = [s for s in res.samples if s is not None]
-    fig, axes = _subplots(1, 4, figsize=(15, 3.4))
+    fig, axes = _subplots(2, 2, figsize=(REPORT_WIDTH_IN, 6.6), layout="constrained")
+    axes = axes.ravel()
     z_show = [z for z in res.z_mm if z in (1.0, 2.0, 3.0)] or res.z_mm[:3]
     for i, z in enumerate(z_show):
         v = [s["rmtf_at"][f"{z:g}"] for s in ok]
         axes[0].hist(v, bins=30, alpha=0.6, color=f"C{i}", label=f"Z = {z:g} mm")
         axes[0].axvline(res.nominal["rmtf_at"][f"{z:g}"], color=f"C{i}", ls="--")
-    axes[0].set_xlabel(f"RMTF at {res.dpi:g} dpi (dashed: nominal)")
-    axes[0].legend(fontsize=7)
+    axes[0].set_xlabel(f"RMTF at {res.dpi:g} dpi (dashed: nominal)", fontsize=9)
+    axes[0].legend(fontsize=8)
     for ax, k, lab in (
-        (axes[1], "dof_mm", "depth of field (mm)"),
-        (axes[2], "ghost_fraction", "ghost fraction"),
+        (axes[1], "dof_mm", "depth of field (mm; dashed: nominal)"),
+        (axes[2], "ghost_fraction", "ghost fraction (dashed: nominal)"),
     ):
         ax.hist([s[k] for s in ok], bins=30, color="C0")
         ax.axvline(res.nominal[k], color="k", ls="--")
-        ax.set_xlabel(lab)
+        ax.set_xlabel(lab, fontsize=9)
+    for ax in axes[:3]:
+        ax.set_ylabel("samples", fontsize=9)
+        ax.yaxis.get_major_locator().set_params(integer=True)
     rows = res.sensitivity[:10][::-1]
     axes[3].barh([r["error"] for r in rows], [r["d_dof_mm"] for r in rows], color="C3")
-    axes[3].set_xlabel("mean |change in DOF| at +-1 sigma (mm)")
-    axes[3].tick_params(labelsize=7)
+    axes[3].set_xlabel("mean |change in DOF| at ±1 σ (mm)", fontsize=9)
+    axes[3].set_title("the ten errors the DOF is most sensitive to", fontsize=9)
+    for ax in axes:
+        ax.tick_params(labelsize=8)
     s = res.sigmas
     fig.suptitle(
-        f"{res.design}: {len(res.samples)} samples, misregistration {s['misregistration_um']:g}"
-        f" um, holes {s['hole_um']:g} um, thickness {s['thickness_um']:g} um, tilt "
-        f"{s['tilt_deg']:g} deg (1 sigma)"
+        f"{res.design}: {len(res.samples)} samples; 1 σ: misregistration "
+        f"{s['misregistration_um']:g} µm, holes {s['hole_um']:g} µm, thickness "
+        f"{s['thickness_um']:g} µm, tilt {s['tilt_deg']:g}°"
         + (
-            f"; yield {res.yield_fraction:.1%} for {res.spec}"
+            f"\nyield {res.yield_fraction:.1%} for {res.spec}"
             if res.yield_fraction is not None
             else ""
         ),
         fontsize=9,
     )
-    fig.tight_layout()
     return fig
 
 
@@ -533,11 +589,13 @@ def plot_pareto_variants(results: dict):
     return fig
 
 
-def plot_compare_contrast(rows: list[dict], dof_dpi: float = 200.0, threshold: float = 0.3):
+def plot_compare_contrast(rows: list[dict], dof_dpi: float | None = None, threshold: float = 0.3):
     """Contrast vs object height from the document reference, every design on one axis.
 
-    One panel per chart resolution; stamps solid, rod-lens arrays dashed.
+    One panel per chart resolution; stamps solid, rod-lens arrays dashed. ``dof_dpi``:
+    the depth-of-field chart (default: the rows' own, ``dof_dpi`` of the first).
     """
+    dof_dpi = rows[0].get("dof_dpi", 200.0) if dof_dpi is None else dof_dpi
     keys = [
         k for k in rows[0]["contrast"]["by_dpi"] if all(k in r["contrast"]["by_dpi"] for r in rows)
     ]
@@ -564,21 +622,35 @@ def plot_compare_contrast(rows: list[dict], dof_dpi: float = 200.0, threshold: f
 
 
 def plot_compare_light(rows: list[dict]):
-    """Light relative to the paper's F/10 reference (log axis), with thickness."""
-    fig, (a1, a2) = _subplots(1, 2, figsize=(10, 3.4))
+    """Light relative to the paper's F/10 reference, as points on a log axis (a bar's
+    length means nothing on a log axis), with its working F-number; and the thickness
+    (bars: a linear axis)."""
+    fig, (a1, a2) = _subplots(
+        1, 2, figsize=(9.6, 0.9 + 0.45 * len(rows)), layout="constrained", sharey=True
+    )
     names = [r["name"] for r in rows]
     y = np.arange(len(rows))
-    light = [r["light_vs_f10"] for r in rows]
-    a1.barh(y, light, color=[f"C{i}" for i in range(len(rows))])
+    light = np.array([r["light_vs_f10"] for r in rows])
+    se = np.array([r.get("light_vs_f10_se", 0.0) or 0.0 for r in rows])
+    colours = [f"C{i}" for i in range(len(rows))]
+    for yi, v, e, c in zip(y, light, se, colours, strict=True):
+        a1.errorbar(v, yi, xerr=e if e > 0 else None, fmt="o", color=c, ms=7, capsize=3)
     a1.set_xscale("log")
     a1.axvline(1.0, color="k", lw=0.6, ls=":")
-    for yi, v in zip(y, light, strict=True):
-        a1.text(v, yi, f" {v:.3g}", va="center", fontsize=8)
+    for yi, r in zip(y, rows, strict=True):
+        f = r.get("working_f_number")
+        tag = f"{r['light_vs_f10']:.3g}" + (f" (F {f:.1f})" if f else "")
+        a1.annotate(tag, (r["light_vs_f10"], yi), xytext=(7, 5), textcoords="offset points",
+                    fontsize=8, va="bottom")  # fmt: skip
+    lo, hi = light[light > 0].min(initial=1.0), light.max(initial=1.0)
+    a1.set_xlim(min(lo, 1.0) / 3, max(hi, 1.0) * 6)
+    a1.set_ylim(len(rows) - 0.4, -0.6)
     a1.set_yticks(y, names, fontsize=8)
-    a1.set_xlabel("light vs F/10 1:1 lens (own path; log)")
-    a2.barh(y, [r["thickness_mm"] for r in rows], color=[f"C{i}" for i in range(len(rows))])
-    a2.set_yticks(y, [""] * len(rows))
+    a1.grid(axis="x", which="major", lw=0.4, alpha=0.5)
+    a1.set_xlabel("light vs F/10 1:1 lens (own path; log axis; dotted: equal)")
+    a2.barh(y, [r["thickness_mm"] for r in rows], color=colours, height=0.5)
     a2.set_xlabel("sensor to document reference (mm)")
+    a2.tick_params(labelleft=False)
     fig.suptitle("light and thickness", fontsize=10)
     return fig
 
