@@ -1,7 +1,7 @@
 """Cheap, complete evaluation of one design for the search and the tolerancing.
 
-- Own-path etendue and RMTF: the paraxial closed form (rectangular holes; within 0.2 %
-  of the exact tracer for the prototype, docs/metrics.md), with misregistration.
+- Own-path etendue and RMTF: the paraxial closed form (rectangular holes; 0.05 % above
+  the exact etendue for the prototype, docs/metrics.md), with misregistration.
 - Ghost light: the exact tracer with importance sampling (``ghost_rays`` rays): ghost
   etendue, and the nearest ghost light on the object plane at each Z (the *near-ghost*
   check of the paper's virtual detector, §3).
