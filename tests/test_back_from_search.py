@@ -12,7 +12,6 @@ from edges import assert_clean_refusal, run
 from opticalstamp.analysis.rmtf import depth_of_field, rmtf, spurious_ranges
 from opticalstamp.design import design_toml, load_design, stack_params, with_stack
 from opticalstamp.report.build import (
-    DEFAULT_TOLERANCE_SPEC,
     is_paper_preset,
     report_work,
     tolerance_spec,
@@ -129,8 +128,9 @@ def test_tolerance_spec_follows_the_report_spec():
         "dof>=2.2,ghost_radius>=5"
     )
     assert tolerance_spec(parse_report_spec("light>=0.03")) == "efficiency>=0.03"
-    assert tolerance_spec(parse_report_spec("thickness<=3")) == DEFAULT_TOLERANCE_SPEC
-    assert tolerance_spec([]) == DEFAULT_TOLERANCE_SPEC
+    # no hidden specification: no yield where the user bounds none of its figures
+    assert tolerance_spec(parse_report_spec("thickness<=3")) is None
+    assert tolerance_spec([]) is None
 
 
 def test_paper_sections_only_for_the_papers_presets():

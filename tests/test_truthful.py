@@ -13,7 +13,9 @@ def test_dof_that_reaches_the_last_z_is_a_lower_bound():
     assert all(d["dof_open_ended"].values())  # every chart stays above 0.3 up to 1 mm
     assert d["dof_mm"]["200"] == 1.0
     res = run(["rmtf", "--method", "paraxial", "--z", "0:1:0.25"])
-    assert "200 dpi >= 1.00 mm" in res.output
+    # the figure named with its rule: the chart at 2/3 of the design's resolution
+    assert "200-dpi chart (2/3 of the design's 300 dpi)" in res.output
+    assert "): ≥ 1.00 mm" in res.output
     res = run(["rmtf", "--method", "paraxial", "--z", "0:4.5:0.25", "--json"])
     d = json.loads(res.stdout)
     assert not d["dof_open_ended"]["200"] and d["dof_mm"]["200"] < 4.5

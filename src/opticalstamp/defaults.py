@@ -10,8 +10,8 @@ from types import MappingProxyType
 
 # RMTF and depth of field (paper Eq. 1, Fig. 11)
 PAPER_CHART_DPI = (100.0, 150.0, 200.0, 247.0)  # the paper's bar charts
-DOF_THRESHOLD = 0.3  # depth of field: largest Z with RMTF >= 0.3 ...
-DOF_DPI = 200.0  # ... for the 200-dpi chart
+DOF_THRESHOLD = 0.3  # depth of field: first Z where RMTF falls below 0.3 on the chart at
+# 2/3 of the design's own resolution (200 dpi for 300 dpi; design/resolution.py)
 Z_GRID_MM = "0:4.5:0.25"  # object distances of the RMTF curves (START:STOP:STEP)
 WINDOW_UM = 5000.0  # chart window over which Imax and Imin are taken
 SHIFT_STEP_UM = 1.0  # chart shift step (the maximum over shifts suppresses Moire)

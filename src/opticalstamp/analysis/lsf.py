@@ -49,6 +49,9 @@ class FoldedLSF:
     method : "trace" or "paraxial"
     n_rays : rays per row (trace) or 0
     ghosts, fresnel : what light is included
+    slope_power : (len(SLOPE_EDGES) - 1,) etendue (um^2 sr) per bin of |dX/dZ|, the
+        lateral slope along x of the light in the object medium (traced; None where not
+        tallied): how fast its image moves with Z (:func:`fast_light`)
     """
 
     z_mm: np.ndarray
@@ -59,10 +62,38 @@ class FoldedLSF:
     n_rays: int
     ghosts: bool
     fresnel: bool
+    slope_power: np.ndarray | None = None
 
     @property
     def n_batches(self) -> int:
         return self.h[0].shape[1]
+
+
+#: bins of the lateral slope |dX/dZ| of the light in the object medium (the last bin
+#: takes every slope beyond)
+SLOPE_EDGES = np.linspace(0.0, 4.0, 161)
+
+
+def fast_light(lsf: FoldedLSF) -> dict | None:
+    """How fast the light's image moves with Z: ``slope`` (lower edges of SLOPE_EDGES)
+    and ``beyond``, the fraction of the light whose lateral slope |dX/dZ| in the object
+    medium exceeds each. Light of slope t moves one chart period P in Z = P / t: ghost
+    copies of a periodic chart (slopes far from the own path's) make the RMTF oscillate
+    with that period in Z, which a coarser grid aliases (:func:`~opticalstamp.analysis.
+    rmtf.crossing_brackets` sets its step from this). None where not tallied."""
+    if lsf.slope_power is None or lsf.slope_power.sum() <= 0:
+        return None
+    beyond = np.cumsum(lsf.slope_power[::-1])[::-1] / lsf.slope_power.sum()
+    return {"slope": SLOPE_EDGES[:-1].tolist(), "beyond": beyond.tolist()}
+
+
+def _slopes(b, w: np.ndarray, n_obj: float) -> np.ndarray:
+    """Etendue per bin of SLOPE_EDGES of the rays ``b`` (weights ``w``)."""
+    keep = w != 0
+    sx, sy = b.sx[keep], b.sy[keep]
+    c = np.sqrt(np.maximum(n_obj * n_obj - sx * sx - sy * sy, 1e-300))
+    t = np.minimum(np.abs(sx) / c, SLOPE_EDGES[-1] * (1 - 1e-12))
+    return np.histogram(t, SLOPE_EDGES, weights=w[keep])[0]
 
 
 @numba.njit(parallel=True, cache=True)
@@ -201,11 +232,13 @@ def _traced_folds(
     per = np.asarray(periods_um, dtype=np.float64)
     nb = _bins(per)
     hs = [[np.zeros((design.sensor.rows, n_batches, zs.size, int(n))) for n in nb] for _ in kinds]
+    slope_tallies = [np.zeros(SLOPE_EDGES.size - 1) for _ in kinds]  # over the rows
     rows = []
     for row, k in row_pixels(design):
         src = tr.source((row, k))
         rows.append((src.x, src.y))
         outs = [np.zeros((per.size, n_batches, zs.size, int(nb.max()))) for _ in kinds]
+        slopes = [np.zeros(SLOPE_EDGES.size - 1) for _ in kinds]
         on_gpu = None  # the same tallies on the device, where a GPU keeps the rays
         for pb in tr.trace((row, k), progress=progress):
             b = pb.rays
@@ -217,18 +250,31 @@ def _traced_folds(
                     gpu.fold(pb, not ghosts, zs * 1000.0, tr.n_obj, per, nb, n_batches, res)
                 continue
             batch = (b.ids % n_batches).astype(np.int64)
-            for ghosts, out in zip(kinds, outs, strict=True):
+            for ghosts, out, sl in zip(kinds, outs, slopes, strict=True):
                 w = pb.w if ghosts else pb.w * pb.own
                 _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, tr.n_obj, per, nb, out)
+                sl += _slopes(b, w, tr.n_obj) / n_rays
         for out, res in zip(outs, on_gpu or (), strict=False):  # nothing on the CPU
             out += res.copy_to_host()
+        for tally, sl in zip(slope_tallies, slopes, strict=True):
+            tally += sl if on_gpu is None else np.nan  # not tallied on the device
         for h, out in zip(hs, outs, strict=True):
             for p in range(per.size):
                 # each batch holds n_rays / n_batches samples: scale so batches sum to the mean
                 h[p][row] = out[p, :, :, : nb[p]] / n_rays
     return [
-        FoldedLSF(zs, per, rows, h, "trace", n_rays, ghosts, sampling.fresnel)
-        for ghosts, h in zip(kinds, hs, strict=True)
+        FoldedLSF(
+            zs,
+            per,
+            rows,
+            h,
+            "trace",
+            n_rays,
+            ghosts,
+            sampling.fresnel,
+            None if np.isnan(sl).any() else sl / len(rows),
+        )
+        for ghosts, h, sl in zip(kinds, hs, slope_tallies, strict=True)
     ]
 
 

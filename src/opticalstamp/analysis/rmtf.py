@@ -22,7 +22,6 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from ..defaults import (
-    DOF_DPI,
     DOF_THRESHOLD,
     PAPER_CHART_DPI,
     RAYS_LSF,
@@ -31,13 +30,18 @@ from ..defaults import (
     Z_GRID_MM,
 )
 from ..design import Design
+from ..design.resolution import chart_dpis, dof_chart_dpi
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import lattice_of
 from ..units import period_of_dpi
 from ..validate import check_memory, parse_grid
-from .lsf import FoldedLSF, paraxial_folded_lsf, traced_folded_lsf
+from .dof import depth_of_field, dof_bounds, dof_text, refine_points, spurious_ranges
+from .lsf import FoldedLSF, fast_light, paraxial_folded_lsf, traced_folded_lsf
 
-#: The paper's chart periods (um) and their names in dpi (one bar = one dot).
+__all__ = ["depth_of_field", "dof_bounds", "dof_text", "refine_points", "spurious_ranges"]
+
+#: The paper's chart periods (um) and their names in dpi (one bar = one dot), for its
+#: 300-dpi line; a design's own charts: :func:`~opticalstamp.design.resolution.chart_dpis`
 PAPER_DPI = PAPER_CHART_DPI
 DEFAULT_Z_MM = parse_grid(Z_GRID_MM, "z_mm", 0.0, 100.0)
 
@@ -78,8 +82,14 @@ def rmtf_curves(
     *,
     window_um: float = WINDOW_UM,
     shift_step_um: float = SHIFT_STEP_UM,
+    shading: bool = True,
 ) -> dict:
     """RMTF max / mean / min over chart shifts, per period and Z, with standard errors.
+
+    ``shading``: the merged line as a scanner delivers it, each pixel divided by its own
+    white response (shading correction: each row's signals over the row's signal from a
+    white page at that Z), so rows that collect different light (misregistered layers)
+    are not read as contrast; False: the raw merged line.
 
     Returns arrays of shape (n_periods, nz) under keys ``max``, ``mean``, ``min``,
     ``max_se``, ``best_shift_um``.
@@ -89,6 +99,8 @@ def rmtf_curves(
     out = {k: np.zeros(shape) for k in ("max", "mean", "min", "max_se", "best_shift_um")}
     for ip, per in enumerate(lsf.periods_um):
         h = lsf.h[ip]  # (rows, batches, nz, n)
+        if shading:
+            h = h / white_level(h)[:, None, :, None]
         n = h.shape[-1]
         shifts = np.arange(0.0, per, shift_step_um)
         c_full = chart_correlation(h.sum(axis=1))  # (rows, nz, n)
@@ -115,6 +127,13 @@ def rmtf_curves(
     return out
 
 
+def white_level(h: np.ndarray) -> np.ndarray:
+    """(rows, nz) signal of each row's pixel from a white page (the folded LSF's total,
+    um^2 sr), 1 where a row collects nothing (its signals stay 0)."""
+    w = h.sum(axis=(1, 3))
+    return np.where(w > 0, w, 1.0)
+
+
 def chart_waveform(
     lsf: FoldedLSF,
     design: Design,
@@ -122,11 +141,16 @@ def chart_waveform(
     z_index: int,
     shift_um: float,
     window_um: float = WINDOW_UM,
+    shading: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel x (um) and signals (um^2 sr; white = the etendue) of the merged line for a
-    chart shifted by ``shift_um`` (paper Fig. 12 c, d), sorted by x."""
+    """Pixel x (um) and signals of the merged line for a chart shifted by ``shift_um``
+    (paper Fig. 12 c, d), sorted by x: relative to each pixel's white response
+    (``shading``, as :func:`rmtf_curves`), else in um^2 sr (white = the etendue)."""
     per = lsf.periods_um[period_index]
-    h = lsf.h[period_index].sum(axis=1)[:, z_index]  # (rows, n)
+    hp = lsf.h[period_index]
+    if shading:
+        hp = hp / white_level(hp)[:, None, :, None]
+    h = hp.sum(axis=1)[:, z_index]  # (rows, n)
     n = h.shape[-1]
     xs, sig = [], []
     for r, x in enumerate(merged_pixels(design, window_um)):
@@ -138,101 +162,103 @@ def chart_waveform(
     return x[order], s[order]
 
 
-def depth_of_field(z_mm: np.ndarray, rmtf: np.ndarray, threshold: float = DOF_THRESHOLD) -> float:
-    """Largest Z (mm) up to which RMTF stays >= threshold, interpolated linearly.
-
-    0 if RMTF starts below the threshold; the last Z if it never drops below.
-    """
-    z = np.asarray(z_mm, dtype=np.float64)
-    r = np.asarray(rmtf, dtype=np.float64)
-    if r[0] < threshold:
-        return 0.0
-    below = np.flatnonzero(r < threshold)
-    if below.size == 0:
-        return float(z[-1])
-    return _crossing(z, r, int(below[0]), threshold)
-
-
-def _crossing(z: np.ndarray, r: np.ndarray, i: int, threshold: float) -> float:
-    """Z where the RMTF crosses ``threshold`` between samples i - 1 and i (linear)."""
-    return float(z[i - 1] + (r[i - 1] - threshold) / (r[i - 1] - r[i]) * (z[i] - z[i - 1]))
-
-
-def spurious_ranges(
-    z_mm: np.ndarray, rmtf: np.ndarray, threshold: float = DOF_THRESHOLD
-) -> list[list[float]]:
-    """Ranges [from, to] of Z (mm) past the depth of field where the RMTF is back at or
-    above the threshold; each end is the crossing interpolated linearly between samples
-    (the last Z where the RMTF is still over the threshold there).
-
-    The RMTF (paper Eq. 1) is a modulation, blind to the sign of the contrast: past a zero
-    of the transfer function the bars come back reversed (dark where the chart is light),
-    *spurious resolution*. Such ranges are reported and never counted in the depth of
-    field (:func:`depth_of_field` stops at the first crossing).
-    """
-    z = np.asarray(z_mm, dtype=np.float64)
-    r = np.asarray(rmtf, dtype=np.float64)
-    below = np.flatnonzero(r < threshold)
-    if below.size == 0:
-        return []
-    out: list[list[float]] = []
-    start = None
-    for i in range(int(below[0]) + 1, z.size):
-        if r[i] >= threshold and start is None:
-            start = _crossing(z, r, i, threshold)
-        if start is not None and r[i] < threshold:
-            out.append([start, _crossing(z, r, i, threshold)])
-            start = None
-    if start is not None:
-        out.append([start, float(z[-1])])
-    return out
+def merged_samples(res: RMTFResult, key: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Z (mm), RMTF and its standard error of chart ``key`` on the grid and at the
+    refined Z of ``res`` together, ascending in Z."""
+    ref = res.meta.get("refined", {})
+    z = np.concatenate([np.asarray(res.z_mm, dtype=np.float64), ref.get("z_mm", [])])
+    r = np.concatenate([res.rmtf_max[key], ref.get("rmtf_max", {}).get(key, [])])
+    e = np.concatenate([res.rmtf_max_se[key], ref.get("rmtf_max_se", {}).get(key, [])])
+    order = np.argsort(z, kind="stable")
+    return z[order], r[order], e[order]
 
 
 def crossing_brackets(results, steps: int = 8) -> np.ndarray:
-    """Z (mm) that resolve the threshold crossings of RMTF results finer: ``steps - 1``
-    points inside every grid interval where an RMTF curve crosses its threshold (the
-    depth of field, the ends of spurious ranges) and on both sides of every sampled
-    local maximum below the threshold past the first crossing (where a narrow spurious
-    range may hide between samples), over all charts of all ``results``. Empty where
-    nothing crosses. A range narrower than the grid step that leaves no local maximum
-    in the samples is still missed: a finer grid finds it."""
+    """Z (mm) at which to sample RMTF results again so that their threshold crossings
+    are resolved: :func:`refine_points` over every chart of every result (on its grid
+    and refined samples together). Empty where nothing needs it."""
     fine: set[float] = set()
     for res in results:
-        z = np.asarray(res.z_mm, dtype=np.float64)
-        for curve in res.rmtf_max.values():
-            r = np.asarray(curve, dtype=np.float64)
-            above = r >= res.dof_threshold
-            cross = np.flatnonzero(above[1:] != above[:-1])
-            spans = [(i, i + 1) for i in cross]
-            if cross.size:
-                peak = np.flatnonzero((r[1:-1] >= r[:-2]) & (r[1:-1] >= r[2:]) & ~above[1:-1]) + 1
-                spans += [(i - 1, i + 1) for i in peak if i > cross[0]]
-            for a, b in spans:
-                grid = np.linspace(z[a], z[b], steps * (b - a) + 1)[1:-1]
-                fine.update(g for g in grid.round(9).tolist() if g not in set(z.tolist()))
+        for d in res.dpi:
+            key = _key(d)
+            z, r, e = merged_samples(res, key)
+            fast = res.meta.get("fast_light") if key == res.dof_key else None
+            step = None if fast is None else _step_for_margin(fast, period_of_dpi(d))
+            pts = refine_points(z, r, e, res.dof_threshold, steps=steps, step_for_margin=step)
+            fine.update(pts.tolist())
     return np.array(sorted(fine), dtype=np.float64)
 
 
+def _step_for_margin(fast: dict, period_um: float):
+    """margin -> the Z step (mm) that resolves the curve of a chart of period ``period_um``
+    to within that margin of RMTF: a quarter of the Z over which light of slope t moves
+    one period (P / 4 t), for the slope t that all but margin / 2 of the light stays
+    under (light carrying a fraction g of the signal moves the RMTF by at most about
+    2 g); ``fast``: ``meta["fast_light"]`` (:func:`~opticalstamp.analysis.lsf.fast_light`)."""
+    slope, beyond = np.asarray(fast["slope"]), np.asarray(fast["beyond"])
+
+    def step(margin):
+        i = np.searchsorted(-beyond, -np.maximum(np.asarray(margin), 0.0) / 2.0, side="left")
+        t = np.where(i < slope.size, slope[np.minimum(i, slope.size - 1)], slope[-1])
+        return period_um / (4.0 * np.maximum(t, slope[1])) / 1000.0
+
+    return step
+
+
 def refine_crossings(res: RMTFResult, fine_lsf: FoldedLSF, design: Design) -> RMTFResult:
-    """``res`` with its depth of field and spurious ranges taken from its curves merged
-    with the RMTF at ``fine_lsf``'s Z (the same periods, light and rays; from
-    :func:`crossing_brackets`): crossings interpolated over a finer step where the RMTF
-    changes fast. The curves on the grid stay as they were; the finer samples are kept
-    in ``meta["refined"]``."""
+    """``res`` with its depth of field, its range and the spurious ranges taken from its
+    samples merged with the RMTF at ``fine_lsf``'s Z (the same periods, light and rays;
+    from :func:`crossing_brackets`). The curves on the grid stay as they were; the finer
+    samples are kept in ``meta["refined"]`` (added to those of earlier rounds)."""
     if fine_lsf.z_mm.size == 0:
         return res
-    cur = rmtf_curves(fine_lsf, design, window_um=res.window_um, shift_step_um=res.shift_step_um)
-    z_all = np.concatenate([np.asarray(res.z_mm, dtype=np.float64), fine_lsf.z_mm])
-    order = np.argsort(z_all, kind="stable")
-    dof, spurious, refined = dict(res.dof_mm), dict(res.spurious_mm), {}
+    cur = rmtf_curves(
+        fine_lsf,
+        design,
+        window_um=res.window_um,
+        shift_step_um=res.shift_step_um,
+        shading=res.shading,
+    )
+    old = res.meta.get("refined", {"z_mm": [], "rmtf_max": {}, "rmtf_max_se": {}})
+    refined = {
+        "z_mm": list(old["z_mm"]) + fine_lsf.z_mm.tolist(),
+        "rmtf_max": {},
+        "rmtf_max_se": {},
+    }
     for i, key in enumerate(_key(d) for d in res.dpi):
-        r_all = np.concatenate([np.asarray(res.rmtf_max[key]), cur["max"][i]])[order]
-        if not res.dof_open_ended.get(key):
-            dof[key] = depth_of_field(z_all[order], r_all, res.dof_threshold)
-        spurious[key] = spurious_ranges(z_all[order], r_all, res.dof_threshold)
-        refined[key] = cur["max"][i].tolist()
-    meta = res.meta | {"refined": {"z_mm": fine_lsf.z_mm.tolist(), "rmtf_max": refined}}
-    return replace(res, dof_mm=dof, spurious_mm=spurious, meta=meta)
+        for name, part in (("rmtf_max", "max"), ("rmtf_max_se", "max_se")):
+            refined[name][key] = list(old[name].get(key, [])) + cur[part][i].tolist()
+    out = replace(res, meta=res.meta | {"refined": refined})
+    return _with_crossings(out)
+
+
+def _with_crossings(res: RMTFResult) -> RMTFResult:
+    """``res`` with its depth of field, range and spurious ranges from all its samples."""
+    dof, bounds, spurious, open_ended = {}, {}, {}, {}
+    for key in (_key(d) for d in res.dpi):
+        z, r, e = merged_samples(res, key)
+        dof[key] = depth_of_field(z, r, res.dof_threshold)
+        bounds[key] = dof_bounds(z, r, e, res.dof_threshold)
+        spurious[key] = spurious_ranges(z, r, res.dof_threshold)
+        # a depth of field that reaches the last Z is a lower bound: the range ended first
+        open_ended[key] = bool(r.min() >= res.dof_threshold)
+    return replace(
+        res, dof_mm=dof, dof_range_mm=bounds, spurious_mm=spurious, dof_open_ended=open_ended
+    )
+
+
+def refine_results(results: list, trace, design: Design, *, steps: int = 8, passes: int = 1):
+    """RMTF results refined where their crossings need it, ``passes`` rounds of
+    :func:`crossing_brackets` / :func:`refine_crossings`; ``trace(z)`` returns one
+    :class:`FoldedLSF` per result at the Z given (the same rays as the grid's)."""
+    results = list(results)
+    for _ in range(passes if steps > 1 else 0):
+        fine = crossing_brackets(results, steps)
+        if fine.size == 0:
+            break
+        lsfs = trace(fine)
+        results = [refine_crossings(r, f, design) for r, f in zip(results, lsfs, strict=True)]
+    return results
 
 
 @dataclass(frozen=True)
@@ -265,14 +291,24 @@ class RMTFResult:
     #: per dpi: Z ranges [from, to] (mm) past the depth of field where the RMTF is back
     #: over the threshold (spurious resolution, :func:`spurious_ranges`; not in dof_mm)
     spurious_mm: dict[str, list[list[float]]] = field(default_factory=dict)
+    #: per dpi: [low, high] (mm), the depth of field of the curves 2 standard errors
+    #: below and above (:func:`dof_bounds`)
+    dof_range_mm: dict[str, list[float]] = field(default_factory=dict)
+    #: the merged line shading-corrected (each pixel over its white response), as a
+    #: scanner delivers it; False: the raw merged line
+    shading: bool = True
 
     def to_dict(self) -> dict:
         return asdict(self)
 
     def dof_text(self, key: str) -> str:
-        """The depth of field for chart ``key`` as text: "2.48 mm" or ">= 4.50 mm"."""
-        v = self.dof_mm[key]
-        return f">= {v:.2f} mm" if self.dof_open_ended.get(key) else f"{v:.2f} mm"
+        """The depth of field for chart ``key`` as text (:func:`dof_text`)."""
+        return dof_text(self.to_dict(), key)
+
+    @property
+    def dof_key(self) -> str:
+        """The key of the depth-of-field chart."""
+        return _key(self.dof_dpi)
 
     def to_dataset(self):
         """The curves as an xarray Dataset on coordinates ``dpi`` and ``z_mm``.
@@ -332,7 +368,7 @@ def check_rmtf_memory(
 def rmtf(
     design: Design,
     *,
-    dpi=PAPER_DPI,
+    dpi=None,
     z_mm=DEFAULT_Z_MM,
     method: str = "trace",
     ghosts: bool = True,
@@ -342,30 +378,43 @@ def rmtf(
     window_um: float = WINDOW_UM,
     shift_step_um: float = SHIFT_STEP_UM,
     dof_threshold: float = DOF_THRESHOLD,
-    dof_dpi: float = DOF_DPI,
+    dof_dpi: float | None = None,
     progress: bool = False,
     tracer: PixelTracer | None = None,
     refine: int = 8,
+    passes: int = 1,
+    shading: bool = True,
 ) -> RMTFResult:
     """RMTF of paper Eq. 1 for bar charts of the given dpi versus Z, and depth of field.
 
     Parameters
     ----------
-    dpi : chart resolutions; period = 2 * 25.4 mm / dpi (508, 339, 254, 206 um)
+    dpi : chart resolutions; period = 2 * 25.4 mm / dpi; default: the paper's 100, 150,
+        200 and 247 dpi scaled to the design's resolution
+        (:func:`~opticalstamp.design.resolution.chart_dpis`)
     method : "trace" (exact tracer, own and ghost light) or "paraxial" (own path,
         closed form, rectangular holes; no ghosts, no Fresnel)
     window_um : width of the chart window over which Imax and Imin are taken
     shift_step_um : step of the chart shifts over one period
-    dof_threshold, dof_dpi : depth of field = largest Z with RMTF(dof_dpi) >= threshold
+    dof_threshold, dof_dpi : depth of field = first Z where RMTF(dof_dpi) falls below the
+        threshold; default chart: 2/3 of the design's resolution (200 dpi for 300,
+        :func:`~opticalstamp.design.resolution.dof_chart_dpi`), added to ``dpi`` in order
+        when it is not there
     tracer : a :class:`~opticalstamp.raytrace.pixel.PixelTracer` of this design whose
         pilot runs are reused (analyses of one report share one)
-    refine : the threshold crossings (depth of field, spurious ranges) are found again
-        with the RMTF at ``refine - 1`` more Z inside each grid interval where a curve
-        crosses (:func:`refine_crossings`; the same rays); 0 or 1: on the grid alone
+    refine, passes : the threshold crossings (depth of field, its range, spurious
+        ranges) are found again with the RMTF at ``refine - 1`` more Z inside each
+        interval where a curve crosses, comes near the threshold or jumps
+        (:func:`refine_points`; the same rays), ``passes`` rounds (one: steps of 1/32 mm
+        on the default grid; a second resolves dips narrower than that); ``refine`` 0 or
+        1: on the grid alone
+    shading : the merged line shading-corrected, as a scanner delivers it (each pixel
+        over its white response); False: the raw merged line (:func:`rmtf_curves`)
     """
-    dpis = [float(d) for d in dpi]
+    dpis = sorted({float(d) for d in (chart_dpis(design) if dpi is None else dpi)})
+    dof_dpi = float(dof_chart_dpi(design) if dof_dpi is None else dof_dpi)
     if dof_dpi not in dpis:
-        dpis.append(float(dof_dpi))
+        dpis = sorted(dpis + [dof_dpi])
     if any(d <= 0 for d in dpis):
         raise ValueError("dpi: every chart resolution must be > 0")
     if window_um <= 0 or shift_step_um <= 0:
@@ -400,9 +449,10 @@ def rmtf(
         shift_step_um=shift_step_um,
         dof_threshold=dof_threshold,
         dof_dpi=dof_dpi,
+        shading=shading,
     )
-    fine = crossing_brackets([res], refine) if refine > 1 else np.zeros(0)
-    return refine_crossings(res, lsf_at(fine), design) if fine.size else res
+    (res,) = refine_results([res], lambda z: [lsf_at(z)], design, steps=refine, passes=passes)
+    return res
 
 
 def rmtf_from_lsf(
@@ -414,19 +464,23 @@ def rmtf_from_lsf(
     window_um: float = WINDOW_UM,
     shift_step_um: float = SHIFT_STEP_UM,
     dof_threshold: float = DOF_THRESHOLD,
-    dof_dpi: float = DOF_DPI,
+    dof_dpi: float | None = None,
+    shading: bool = True,
 ) -> RMTFResult:
-    """RMTF and depth of field from folded LSFs (periods in the order of ``dpi``)."""
+    """RMTF and depth of field from folded LSFs (periods in the order of ``dpi``) on
+    their Z alone (:func:`refine_results` refines the crossings); ``dof_dpi`` default as
+    :func:`rmtf`. ``meta["fast_light"]``: the fraction of the light whose image moves
+    faster than each slope with Z (:func:`~opticalstamp.analysis.lsf.fast_light`), from
+    which :func:`crossing_brackets` sets the Z step that resolves the curve."""
     dpis = [float(d) for d in dpi]
+    dof_dpi = float(dof_chart_dpi(design) if dof_dpi is None else dof_dpi)
     zs = lsf.z_mm
-    cur = rmtf_curves(lsf, design, window_um=window_um, shift_step_um=shift_step_um)
+    cur = rmtf_curves(
+        lsf, design, window_um=window_um, shift_step_um=shift_step_um, shading=shading
+    )
     keys = [_key(d) for d in dpis]
     pick = {name: {k: cur[name][i].tolist() for i, k in enumerate(keys)} for name in cur}
-    dof = {k: depth_of_field(zs, cur["max"][i], dof_threshold) for i, k in enumerate(keys)}
-    # a depth of field that reaches the last Z is a lower bound: the range ended first
-    open_ended = {k: bool(min(cur["max"][i]) >= dof_threshold) for i, k in enumerate(keys)}
-    spurious = {k: spurious_ranges(zs, cur["max"][i], dof_threshold) for i, k in enumerate(keys)}
-    return RMTFResult(
+    res = RMTFResult(
         design=design.name,
         fingerprint=design.fingerprint(),
         seed=seed,
@@ -441,12 +495,15 @@ def rmtf_from_lsf(
         rmtf_max_se=pick["max_se"],
         rmtf_mean=pick["mean"],
         rmtf_min=pick["min"],
-        dof_mm=dof,
+        dof_mm={},
         dof_threshold=dof_threshold,
         dof_dpi=dof_dpi,
         window_um=window_um,
         shift_step_um=shift_step_um,
-        meta={"best_shift_um": pick["best_shift_um"]},
-        dof_open_ended=open_ended,
-        spurious_mm=spurious,
+        meta={
+            "best_shift_um": pick["best_shift_um"],
+            "fast_light": fast_light(lsf),
+        },
+        shading=shading,
     )
+    return _with_crossings(res)

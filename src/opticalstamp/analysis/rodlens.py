@@ -27,7 +27,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..defaults import DOF_DPI, DOF_THRESHOLD, PAPER_CHART_DPI, SHIFT_STEP_UM, WINDOW_UM
+from ..defaults import DOF_THRESHOLD, SHIFT_STEP_UM, WINDOW_UM
+from ..design.resolution import chart_dpis, dof_chart_dpi
 from ..design.rodlens import RodLensDesign
 from ..raytrace.rodlens import RodRays, trace_rods
 from ..units import mm_to_um, period_of_dpi
@@ -265,7 +266,7 @@ def first_crossings(
 def rod_contrast(
     design: RodLensDesign,
     *,
-    dpi=PAPER_CHART_DPI,
+    dpi=None,
     heights_mm=HEIGHTS_MM,
     n_rays: int = RAYS_CONTRAST,
     seed: int = 0,
@@ -273,17 +274,22 @@ def rod_contrast(
     window_um: float = WINDOW_UM,
     shift_step_um: float = SHIFT_STEP_UM,
     threshold: float = DOF_THRESHOLD,
-    dof_dpi: float = DOF_DPI,
+    dof_dpi: float | None = None,
     lsf_half_um: float | None = None,
     progress: bool = False,
 ) -> RodContrast:
-    """Contrast and MTF of bar charts against height, the depth of field and the LSF."""
+    """Contrast and MTF of bar charts against height, the depth of field and the LSF.
+
+    ``dpi``, ``dof_dpi``: the charts and the depth-of-field chart; default, as for a
+    stamp, the paper's charts scaled to the array's resolution and 2/3 of it
+    (:mod:`opticalstamp.design.resolution`)."""
     pitch = design.sensor.pixel_pitch_um
     x = np.arange(0.0, window_um, pitch)
     rays = trace_rods(design, x, n_rays=n_rays, seed=seed, fresnel=fresnel, progress=progress)
     line = _Line(design, rays, BATCHES)
     hs = np.asarray(heights_mm, dtype=np.float64)
-    dpis = [float(d) for d in dpi]
+    dpis = [float(d) for d in (chart_dpis(design) if dpi is None else dpi)]
+    dof_dpi = float(dof_chart_dpi(design) if dof_dpi is None else dof_dpi)
     con = np.zeros((len(dpis), hs.size))
     se = np.zeros_like(con)
     mtf = np.zeros_like(con)

@@ -10,7 +10,7 @@ from typing import Annotated
 
 import typer
 
-from ..defaults import DETECTOR_HALF_UM, DOF_DPI, RAYS_MAP, RSE_GHOST, RSE_OWN
+from ..defaults import DETECTOR_HALF_UM, RAYS_MAP, RSE_GHOST, RSE_OWN
 from ..design import AnyDesign, Design, RodLensDesign, load_design
 from ..validate import (
     InputError,
@@ -467,13 +467,15 @@ def report(
         ),
     ] = None,
     dpi: Annotated[
-        float,
+        float | None,
         typer.Option(
             help="chart (dpi) of the depth of field, the verdict, the search and the "
-            "tolerance study, 50 to 2400",
+            "tolerance study, 50 to 2400 [default: 2/3 of the design's resolution: 200 for "
+            "300 dpi, 400 for 600]",
             callback=number(50, 2400),
+            show_default=False,
         ),
-    ] = DOF_DPI,
+    ] = None,
     paper_sections: Annotated[
         str,
         typer.Option(

@@ -8,9 +8,7 @@ from typing import Annotated
 import typer
 
 from ..defaults import (
-    DOF_DPI,
     DOF_THRESHOLD,
-    PAPER_CHART_DPI,
     RAYS_LSF,
     SHIFT_STEP_UM,
     WINDOW_UM,
@@ -47,9 +45,14 @@ def rmtf(
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
     rays: RaysOpt = None,
-    dpi: Annotated[str, typer.Option(help="chart resolutions (dpi), comma-separated")] = ",".join(
-        f"{v:g}" for v in PAPER_CHART_DPI
-    ),
+    dpi: Annotated[
+        str | None,
+        typer.Option(
+            help="chart resolutions (dpi), comma-separated [default: the paper's 100, 150, "
+            "200, 247 dpi scaled to the design's resolution, with the depth-of-field chart]",
+            show_default=False,
+        ),
+    ] = None,
     z: Annotated[str, typer.Option(help="object distances (mm), or START:STOP:STEP")] = Z_GRID_MM,
     ghosts: Annotated[bool, typer.Option("--ghosts/--no-ghosts", help="count ghost light")] = True,
     method: Annotated[str, typer.Option(help="trace (exact) or paraxial (closed form)")] = "trace",
@@ -73,15 +76,30 @@ def rmtf(
         ),
     ] = DOF_THRESHOLD,
     dof_dpi: Annotated[
-        float,
-        typer.Option(help="chart dpi of the depth of field, 1 to 5000", callback=number(1, 5000)),
-    ] = DOF_DPI,
+        float | None,
+        typer.Option(
+            help="chart dpi of the depth of field, 1 to 5000 [default: 2/3 of the design's "
+            "resolution: 200 for 300 dpi, 400 for 600]",
+            callback=number(1, 5000),
+            show_default=False,
+        ),
+    ] = None,
+    shading: Annotated[
+        bool,
+        typer.Option(
+            "--shading/--raw-line",
+            help="the merged line shading-corrected, each pixel over its own white response, "
+            "as a scanner delivers it (default), or raw",
+        ),
+    ] = True,
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:
     """RMTF of bar charts versus object distance and the depth of field (paper Fig. 11)."""
+    from ..analysis.dof import dof_lines
     from ..analysis.rmtf import rmtf as run
+    from ..design.resolution import nominal_dpi
     from ..io.files import provenance
 
     d = open_design(design)
@@ -92,7 +110,7 @@ def rmtf(
     zs = z_grid(z)
     r = run(
         d,
-        dpi=_dpi_list(dpi),
+        dpi=None if dpi is None else _dpi_list(dpi),
         z_mm=zs,
         method=method,
         ghosts=ghosts,
@@ -104,18 +122,16 @@ def rmtf(
         dof_threshold=threshold,
         dof_dpi=dof_dpi,
         progress=not as_json,
+        shading=shading,
     )
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     keys = list(r.rmtf_max)
-    lines = [f"design {d.name}: RMTF (max over chart shifts), {r.method}, ghosts {r.ghosts}"]
+    light = "with ghost light" if r.ghosts else "own path only"
+    lines = [f"design {d.name}: RMTF (max over chart shifts), {r.method}, {light}"]
     lines.append("Z (mm) " + "".join(f"{k + ' dpi':>10}" for k in keys))
     for i, zz in enumerate(r.z_mm):
         lines.append(f"{zz:6.2f} " + "".join(f"{r.rmtf_max[k][i]:10.3f}" for k in keys))
-    lines.append(
-        "depth of field (RMTF >= "
-        + f"{threshold:g}): "
-        + ", ".join(f"{k} dpi {r.dof_text(k)}" for k in r.dof_mm)
-    )
+    lines += dof_lines(r.to_dict(), nominal_dpi(d))
     emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_rmtf
@@ -145,22 +161,26 @@ def efficiency(
             fail("--study: the study of the paper's unstated parameters is for stamps")
         _rod_efficiency(d, seed, fresnel, as_json, plot)
         return
+    from ..design import load_design
+
     r = run(d, seed=seed, fresnel=fresnel, progress=not as_json)
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     lines = [
-        f"design {d.name}: etendue of one pixel {r.etendue_um2sr:.4g} +- {r.etendue_se:.2g}"
-        f" um^2 sr (own path {r.etendue_own_um2sr:.4g})",
+        f"design {d.name}: etendue of one pixel {r.etendue_um2sr:.4g} ± {r.etendue_se:.2g}"
+        f" µm²·sr (own path {r.etendue_own_um2sr:.4g})",
         f"reference lens (F {r.reference_f_number:g}, "
-        f"{r.meta['reference_lens']['pixel_um']:.1f} um pixel): "
-        f"{r.reference_etendue_um2sr:.4g} um^2 sr",
+        f"{r.meta['reference_lens']['pixel_um']:.1f} µm pixel): "
+        f"{r.reference_etendue_um2sr:.4g} µm²·sr",
         f"light efficiency (own path: the signal) 1/{1 / r.ratio_own:.1f}, working F-number "
         f"{r.working_f_number_own:.1f}; with the ghost light (crosstalk, not signal) "
-        f"1/{1 / r.ratio:.1f}, F {r.working_f_number:.1f}; paper: 1/36, F 60",
+        f"1/{1 / r.ratio:.1f}, F {r.working_f_number:.1f}",
     ]
+    if d.fingerprint() == load_design("paper2016").fingerprint():  # the paper's own design
+        lines[-1] += "; the paper (its prototype, Fig. 13): 1/36, F 60"
     for a in r.sensitive_area:
         lines.append(
-            f"sensitive area {a['sensitive_um'][0]:.1f} um ({a['area_scale']:g}x area): "
-            f"{a['gain_vs_design']:.2f}x the light ({a['gain_own_vs_design']:.2f}x own path)"
+            f"sensitive area {a['sensitive_um'][0]:.1f} µm ({a['area_scale']:g}× area): "
+            f"{a['gain_vs_design']:.2f}× the light ({a['gain_own_vs_design']:.2f}× own path)"
         )
     if study:
         from ..analysis.paper_study import parameter_study
@@ -172,8 +192,8 @@ def efficiency(
             ok = "yes" if row["consistent_efficiency"] and row["consistent_dof"] else ""
             lines.append(
                 f"{row['hole_shape']:7} {row['sensitive_um']:5.1f} {str(row['gap_medium']):5} "
-                f"{str(row['fresnel']):7} {row['glass_index']:5.2f}  {row['inverse_ratio']:6.1f}"
-                f" {row['working_f_number']:5.1f} {row['dof_mm']:6.2f}  "
+                f"{'yes' if row['fresnel'] else 'no':7} {row['glass_index']:5.2f}  "
+                f"{row['inverse_ratio']:6.1f} {row['working_f_number']:5.1f} {row['dof_mm']:6.2f}  "
                 f"{row['ghost_fraction']:.3f}  {ok}"
             )
     emit(data, as_json, lines)
@@ -190,12 +210,12 @@ def _rod_efficiency(d, seed: int, fresnel: bool, as_json: bool, plot) -> None:
     r = rod_efficiency(d, seed=seed, fresnel=fresnel, progress=not as_json)
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     lines = [
-        f"design {d.name} (rod-lens array): etendue of one pixel {r.etendue_um2sr:.4g} +- "
-        f"{r.etendue_se:.2g} um^2 sr, averaged along the array",
+        f"design {d.name} (rod-lens array): etendue of one pixel {r.etendue_um2sr:.4g} ± "
+        f"{r.etendue_se:.2g} µm²·sr, averaged along the array",
         f"reference lens (F {r.reference_f_number:g}, "
-        f"{r.meta['reference_lens']['pixel_um']:.1f} um pixel): "
-        f"{r.reference_etendue_um2sr:.4g} um^2 sr",
-        f"ratio {r.ratio:.3f} +- {r.ratio_se:.3f}; working F-number {r.working_f_number:.2f}",
+        f"{r.meta['reference_lens']['pixel_um']:.1f} µm pixel): "
+        f"{r.reference_etendue_um2sr:.4g} µm²·sr",
+        f"ratio {r.ratio:.3f} ± {r.ratio_se:.3f}; working F-number {r.working_f_number:.2f}",
         f"ripple along one rod period {r.ripple:.3f} (noise alone ~{r.ripple_noise:.3f})",
     ]
     emit(data, as_json, lines)
@@ -211,11 +231,11 @@ def diffraction(
     slit_um: Annotated[
         float | None,
         typer.Option(
-            help="slit width (um), (0, 10000] (default: the design's object-side hole)",
+            help="slit width (µm), (0, 10000] (default: the design's object-side hole)",
             callback=number(0, 1e4, lo_open=True),
         ),
     ] = None,
-    wavelength_um: Annotated[str, typer.Option(help="wavelengths (um), comma-separated")] = (
+    wavelength_um: Annotated[str, typer.Option(help="wavelengths (µm), comma-separated")] = (
         "0.4,0.7"
     ),
     z: Annotated[
@@ -224,14 +244,14 @@ def diffraction(
     gap_um: Annotated[
         float | None,
         typer.Option(
-            help="air-equivalent source gap above Z=0 (um), 0 to 1e6 (default: the design's)",
+            help="air-equivalent source gap above Z=0 (µm), 0 to 1e6 (default: the design's)",
             callback=number(0, 1e6),
         ),
     ] = None,
     next_um: Annotated[
         float | None,
         typer.Option(
-            help="air-equivalent distance to the next layer (um), (0, 1e6] (default: the design's)",
+            help="air-equivalent distance to the next layer (µm), (0, 1e6] (default: the design's)",
             callback=number(0, 1e6, lo_open=True),
         ),
     ] = None,
@@ -251,20 +271,20 @@ def diffraction(
     b = diffraction_budget(d, z_mm=z, wavelengths_um=waves)
     data = r.to_dict() | {"budget": b}
     lines = [
-        f"slit {slit_um:g} um, source Z = {z:g} mm (R1 {r.r1_um:.0f} um), next layer "
-        f"{r.r2_um:.0f} um: geometric edge X = {r.geometric_edge_um:.2f} um",
+        f"slit {slit_um:g} µm, source Z = {z:g} mm (R1 {r.r1_um:.0f} µm), next layer "
+        f"{r.r2_um:.0f} µm: geometric edge X = {r.geometric_edge_um:.2f} µm",
     ]
     for k, v in r.fraction_outside.items():
-        lines.append(f"  {k} um: {v:.1%} of the light outside the geometric edge")
+        lines.append(f"  {k} µm: {v:.1%} of the light outside the geometric edge")
     lines.append(f"design {d.name}, per-layer budget at Z = {z:g} mm:")
     for row in b["layers"]:
         outs = ", ".join(
-            f"{k} um: {row['outside_shadow'][k]:.1%} outside shadow, "
+            f"{k} µm: {row['outside_shadow'][k]:.1%} outside shadow, "
             f"{row['outside_next'][k]:.1%} outside {row['next']}"
             for k in row["outside_shadow"]
         )
         lines.append(
-            f"  {row['layer']} ({row['hole_um']:g} um {row['shape']}): {outs} "
+            f"  {row['layer']} ({row['hole_um']:g} µm {row['shape']}): {outs} "
             f"(geometric {row['outside_next_geometric']:.1%})"
         )
     for w in b["warnings"]:
@@ -338,7 +358,7 @@ def measure_rmtf(
     lines = [
         f"{image} at {use:g} dpi (amplitude: the fitted fundamental over the ideal's; CNR: "
         "contrast to noise; overshoot past white or black):",
-        "period (um)   dpi    periods  Imax    Imin    RMTF  amplitude      CNR  overshoot",
+        "period (µm)   dpi    periods  Imax    Imin    RMTF  amplitude      CNR  overshoot",
     ]
     for b in blocks:
         lines.append(
@@ -403,7 +423,7 @@ def sfr(
         r["roi"] = [v + (x0, y0)[i % 2] for i, v in enumerate(r["roi"])]
     data = {"image": str(image), "dpi": use} | r
     lines = [
-        f"{image} at {use:g} dpi: edge along {r['direction']}, angle {r['edge_angle_deg']:.2f} deg",
+        f"{image} at {use:g} dpi: edge along {r['direction']}, angle {r['edge_angle_deg']:.2f}°",
         f"MTF50 {r['mtf50_cy_per_mm']:.3f} cycles/mm; SFR at 100 dpi {r['sfr_at_dpi']['100']:.3f}"
         f", at 200 dpi {r['sfr_at_dpi']['200']:.3f}",
     ]

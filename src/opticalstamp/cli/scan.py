@@ -289,7 +289,8 @@ def scan(
         )["restoration"]
     sg = r.meta["signal"]
     lines = [
-        f"signal: {sg['electrons_white']:,.0f} e- at white ({sg['full_well_fraction_white']:.0%} "
+        f"signal: {sg['electrons_white']:,.0f} e- at white (own path + the ghost light a white "
+        f"page adds; {sg['full_well_fraction_white']:.0%} "
         f"of the full well), SNR {sg['snr_white']:.0f} at white, {sg['snr_grey18']:.0f} at 18 % "
         f"grey; SNR {sg['target_snr_white']:g} at white needs {sg['exposure_for_target_ms']:.3g} "
         f"ms per line (at most {sg['max_line_rate_for_target_hz']:,.0f} lines/s)"

@@ -8,7 +8,6 @@ from typing import Annotated
 import typer
 
 from ..defaults import (
-    DOF_DPI,
     SEARCH_BUDGET_MM,
     SEARCH_GENERATIONS,
     SEARCH_NEAR_MM,
@@ -115,14 +114,25 @@ def _check_estimator(name: str) -> None:
 @command()
 def search(
     dpi: Annotated[
-        float,
-        typer.Option(help="target resolution of the merged line (dpi), 50 to 2400", callback=_DPI),
-    ] = 300.0,
+        float | None,
+        typer.Option(
+            help="rescale the design to this resolution of the merged line (dpi), 50 to "
+            "2400 [default: the design's own; a design is rescaled only when asked]",
+            callback=_DPI,
+            show_default=False,
+        ),
+    ] = None,
     design: DesignOpt = "paper2016",
     seed: SeedOpt = 0,
     dof_dpi: Annotated[
-        float, typer.Option(help="chart dpi of the depth of field, 50 to 2400", callback=_DPI)
-    ] = DOF_DPI,
+        float | None,
+        typer.Option(
+            help="chart dpi of the depth of field, 50 to 2400 [default: 2/3 of the searched "
+            "resolution: 200 for 300 dpi, 400 for 600]",
+            callback=_DPI,
+            show_default=False,
+        ),
+    ] = None,
     budget_mm: Annotated[
         float,
         typer.Option(help="total stack thickness budget (mm), 0.2 to 20", callback=number(0.2, 20)),
@@ -263,7 +273,7 @@ def search(
         data["variants"] = {k: v.to_dict() for k, v in results.items()}
     lines = [
         f"{base.name}: {sum(len(v.records) for v in results.values())} designs in "
-        f"{len(results)} variant(s); Pareto front (holes and slabs in um, object side first)"
+        f"{len(results)} variant(s); Pareto front (holes and slabs in µm, object side first)"
         + (
             "; every design traced exactly (--estimator trace):"
             if estimator == "trace"
@@ -360,29 +370,44 @@ def tolerance(
     seed: SeedOpt = 0,
     misregistration_um: Annotated[
         float,
-        typer.Option(help="sigma of x/y misregistration (um), 0 to 100", callback=number(0, 100)),
+        typer.Option(help="sigma of x/y misregistration (µm), 0 to 100", callback=number(0, 100)),
     ] = TOLERANCE_SIGMAS["misregistration_um"],
     hole_um: Annotated[
-        float, typer.Option(help="sigma of the hole sizes (um), 0 to 100", callback=number(0, 100))
+        float, typer.Option(help="sigma of the hole sizes (µm), 0 to 100", callback=number(0, 100))
     ] = TOLERANCE_SIGMAS["hole_um"],
     thickness_um: Annotated[
         float,
-        typer.Option(help="sigma of plates and gaps (um), 0 to 1000", callback=number(0, 1000)),
+        typer.Option(help="sigma of plates and gaps (µm), 0 to 1000", callback=number(0, 1000)),
     ] = TOLERANCE_SIGMAS["thickness_um"],
     tilt_deg: Annotated[
-        float, typer.Option(help="sigma of the stack tilt (deg), 0 to 5", callback=number(0, 5))
+        float, typer.Option(help="sigma of the stack tilt (°), 0 to 5", callback=number(0, 5))
     ] = TOLERANCE_SIGMAS["tilt_deg"],
     samples: Annotated[
         int,
         typer.Option(help="Monte Carlo samples, 1 to 1e6", callback=number(1, 1e6, integer=True)),
     ] = TOLERANCE_SAMPLES,
     dpi: Annotated[
-        float, typer.Option(help="chart dpi of the RMTF, 50 to 2400", callback=_DPI)
-    ] = DOF_DPI,
+        float | None,
+        typer.Option(
+            help="chart dpi of the RMTF and the depth of field, 50 to 2400 [default: 2/3 of "
+            "the design's resolution: 200 for 300 dpi, 400 for 600]",
+            callback=_DPI,
+            show_default=False,
+        ),
+    ] = None,
     z: Annotated[str, typer.Option(help="distances of the RMTF (mm)")] = "0.5,1,2,3,3.5",
-    spec: Annotated[str | None, typer.Option(help="e.g. dof>=2.2,ghost<=0.2,rmtf@2>=0.35")] = (
-        None
-    ),
+    spec: Annotated[
+        str | None,
+        typer.Option(
+            help="what a good part must meet, for the yield: FIGURE>=NUMBER or "
+            "FIGURE<=NUMBER, comma-separated, e.g. dof>=2.2,ghost<=0.2,rmtf@2>=0.35. "
+            "Figures and their units: dof (mm: depth of field at --dpi), ghost (a fraction "
+            "0 to 1: the ghost light's share of the pixel's light), ghost_radius (mm: the "
+            "nearest ghost light on the object plane), efficiency (own-path light as a "
+            "ratio to the paper's F/10 reference lens; the paper: 1/36 = 0.028), rmtf@Z "
+            "(RMTF at --dpi, 0 to 1, at Z mm; Z one of --z)"
+        ),
+    ] = None,
     estimator: EstimatorOpt = "surrogate",
     workers: WorkersOpt = None,
     dask: DaskOpt = None,
@@ -430,6 +455,7 @@ def tolerance(
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     if output is not None:
         save_dataset(tolerance_dataset(r, d), output)
+    dpi = r.dpi
     key = f"rmtf{dpi:g}"
     lines = [f"{d.name}: {samples} samples ({data['n_failed']} failed)"]
     for zz, pc in data[key].items():

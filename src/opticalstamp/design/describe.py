@@ -54,3 +54,45 @@ def stack_rows(design: Design) -> list[dict]:
         }
     )
     return rows[::-1]
+
+
+def describe(design: Design) -> str:
+    """One sentence generated from the design itself (never from its free ``description``):
+    layers, holes (object side first), slabs, sensor rows and resolution, thickness."""
+    from .resolution import nominal_dpi, output_pitch_um
+
+    rows = stack_rows(design)
+    holes = []
+    for r in rows:
+        m = r["mask"]
+        if m is not None:
+            size = (
+                f"{m['width_um']:g}"
+                if m["width_um"] == m["height_um"]
+                else f"{m['width_um']:g} × {m['height_um']:g}"
+            )
+            holes.append(f"{size} µm {m['shape']}")
+    slabs = [
+        f"{r['thickness_um']:g} µm {_medium(r['medium'])}"
+        for r in rows
+        if not r.get("reference_gap")
+    ]
+    s = design.sensor
+    stagger = "two staggered rows" if s.rows == 2 else "one row"
+    return (
+        f"{len(holes)} aperture layer{'s' if len(holes) != 1 else ''} (object side first: "
+        f"holes {', '.join(holes)}) over slabs of {', '.join(slabs)}; {stagger} of used pixels "
+        f"every {s.row_pitch_um:g} µm on a {s.pixel_pitch_um:g}-µm sensor, merged line "
+        f"{output_pitch_um(design):.4g} µm ({nominal_dpi(design):g} dpi); "
+        f"{design.reference_gap.thickness_um:g} µm reference gap, "
+        f"{design.reference_plane_um / 1000:.3g} mm from sensor to the reference plane; "
+        f"λ = {design.wavelength_um:g} µm."
+    )
+
+
+def _medium(medium) -> str:
+    return (
+        "air"
+        if medium == "air"
+        else (f"glass n = {medium:g}" if not isinstance(medium, str) else medium)
+    )

@@ -28,9 +28,10 @@ from types import MappingProxyType
 from ..analysis.ghosts import analyse_ghosts
 from ..analysis.paper_study import with_headline
 from ..analysis.spots import psf, spots
-from ..defaults import DOF_DPI, RAYS_LSF, RAYS_MAP
+from ..defaults import RAYS_LSF, RAYS_MAP
 from ..design import Design, load_design
 from ..design.describe import stack_rows
+from ..design.resolution import chart_dpis, dof_chart_dpi
 from ..io.files import (
     figure_png,
     provenance,
@@ -195,7 +196,7 @@ def build_report(
     quick: bool = False,
     spec: str | None = None,
     z_mm: tuple[float, ...] | None = None,
-    dpi: float = DOF_DPI,
+    dpi: float | None = None,
     paper_sections: bool | None = None,
 ) -> dict:
     """Run every analysis and write report.json, PNG figures and index.html to out_dir.
@@ -215,11 +216,12 @@ def build_report(
         and in report.json (``quick``, ``left_out``, ``reduced``)
     spec : figures the design must meet (:func:`~opticalstamp.report.summary.parse_report_spec`);
         its depth of field, light and ghost-radius bounds are also the tolerance study's
-        yield spec (:func:`tolerance_spec`)
+        yield spec (:func:`tolerance_spec`; no yield without them)
     z_mm : heights (mm) of the ghost landings and the spots (default 0 ... 4 mm); the RMTF
         curves run at least as far
-    dpi : the chart (dpi) of the depth of field, the verdict, the search and the tolerance
-        study (default 200, the paper's)
+    dpi : the chart (dpi) of the depth of field, the verdict, the search, the tolerance
+        study, the chart scans and the restoration (default 2/3 of the design's
+        resolution: 200 dpi for 300, as the paper; 400 for 600)
     paper_sections : the paper's own sections (its Fig. 1 concepts, the study of its
         unstated parameters, the paper-vs-model table); None: only for the paper's presets
 
@@ -237,6 +239,7 @@ def build_report(
 
     t0 = time.perf_counter()
     clock = _Clock()
+    dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     if paper_sections is None:
         paper_sections = is_paper_preset(design)
     work = report_work(quick, n_rays, z_mm, paper_sections)
@@ -304,6 +307,7 @@ def build_report(
                 fresnel=fresnel,
                 tracer=tracer,
                 own_lsf=quality.pop("lsf_own"),
+                chart_dpi=dpi,
             )
         clock.lap("scans")
         with background.cores():
@@ -326,7 +330,7 @@ def build_report(
             "scan_bars.png": (
                 panels,
                 scans.pop("bar_panels"),
-                "200-dpi chart (paper Fig. 12 a, b)",
+                f"{dpi:g}-dpi chart (paper Fig. 12 a, b)",
                 2,
             ),
             "scan_profiles.png": (plotting.plot_scan_profiles, scans["profiles"]),
@@ -476,7 +480,7 @@ def _quality(
     fresnel: bool,
     progress: bool,
     tracer: PixelTracer,
-    dof_dpi: float = DOF_DPI,
+    dof_dpi: float,
 ) -> dict:
     """RMTF and depth of field (at ``dof_dpi``), chart profiles, efficiency, diffraction."""
     import numpy as np
@@ -486,17 +490,15 @@ def _quality(
     from ..analysis.lsf import traced_folded_lsf_pair
     from ..analysis.rmtf import (
         DEFAULT_Z_MM,
-        PAPER_DPI,
         chart_waveform,
-        crossing_brackets,
         period_of_dpi,
-        refine_crossings,
+        refine_results,
         rmtf,
         rmtf_from_lsf,
     )
     from ..imaging.measure import measure_rmtf
 
-    dpis = list(PAPER_DPI) + ([] if float(dof_dpi) in PAPER_DPI else [float(dof_dpi)])
+    dpis = sorted(set(chart_dpis(design)) | {float(dof_dpi)})
     periods = [period_of_dpi(d) for d in dpis]
     zs = np.asarray(DEFAULT_Z_MM if work.lsf_z_mm is None else work.lsf_z_mm)
 
@@ -515,36 +517,38 @@ def _quality(
     lsf, lsf_own = pair(zs, progress)
     res = rmtf_from_lsf(lsf, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
     own = rmtf_from_lsf(lsf_own, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
-    fine = crossing_brackets([res, own])  # the crossings again on a finer Z step
-    if fine.size:
-        fine_lsf, fine_own = pair(fine, False)
-        res = refine_crossings(res, fine_lsf, design)
-        own = refine_crossings(own, fine_own, design)
+    # the crossings again on a finer Z step where they need it (the same rays)
+    res, own = refine_results([res, own], lambda z: pair(z, False), design)
     rect = all(m.shape != "circle" for m in design.masks)
     par = rmtf(design, dpi=dpis, z_mm=zs, method="paraxial", dof_dpi=dof_dpi) if rect else own
-    # Fig. 12 analogue: the merged line's waveform for the 200-dpi chart at 0.5 and 3.5 mm,
-    # and the RMTF measured back from it as from an image
-    ip = dpis.index(200.0)
+    # Fig. 12 analogue: the merged line's waveform for the depth-of-field chart (200 dpi for
+    # the paper) at 0.5 and 3.5 mm, and the RMTF measured back from it as from an image
+    ip = dpis.index(float(dof_dpi))
+    key = res.dof_key
     profiles = []
     px_um = output_pitch(design) / 4  # waveform drawn at 4 samples per output pixel
     for z in (0.5, 3.5):
         iz = int(np.argmin(np.abs(zs - z)))
-        shift = res.meta["best_shift_um"]["200"][iz]
+        shift = res.meta["best_shift_um"][key][iz]
         x, sig = chart_waveform(lsf, design, ip, iz, shift)
         img = np.repeat(sig / sig.max(), 4)[None, :].repeat(8, axis=0)
         blocks = measure_rmtf(img, dpi_of_pitch(px_um))
         profiles.append(
             {
                 "z_mm": float(zs[iz]),
-                "dpi": 200.0,
+                "dpi": float(dof_dpi),
                 "shift_um": shift,
                 "x_um": x.tolist(),
                 "signal": (sig / sig.max()).tolist(),
-                "rmtf_computed": res.rmtf_max["200"][iz],
+                "rmtf_computed": res.rmtf_max[key][iz],
                 "rmtf_measured_from_waveform": blocks[0]["rmtf"] if blocks else None,
             }
         )
-    eff = efficiency(design, seed=seed, fresnel=fresnel, ghosts=g, area_scales=work.area_scales)
+    # the sensitive-area study only with areas the design can hold (within the pitch)
+    sen = design.sensor
+    big = max(sen.sensitive_width_um, sen.sensitive_height_um)
+    scales = tuple(k for k in work.area_scales if k * big <= sen.pixel_pitch_um + 1e-9)
+    eff = efficiency(design, seed=seed, fresnel=fresnel, ghosts=g, area_scales=scales)
     return {
         "lsf_own": lsf_own,  # the scans' computed RMTF folds it again (see _scans)
         "rmtf_result": res,
@@ -565,12 +569,16 @@ def _scans(
     fresnel: bool,
     tracer: PixelTracer,
     own_lsf=None,
+    chart_dpi: float = 200.0,
 ) -> dict:
     """Simulated scans of the built-in charts (paper Figs. 8, 9, 12) and their measures.
 
-    ``own_lsf``: the own-path folded LSF of the RMTF section (:func:`_quality`), whose
-    folds at 0.5 and 3.5 mm and 200 dpi are those of the computed RMTF here where it was
-    traced alike (same rays, no Fresnel losses): that RMTF is then not traced again.
+    ``chart_dpi``: the bar chart scanned (the depth-of-field chart). ``own_lsf``: the
+    own-path folded LSF of the RMTF section (:func:`_quality`), whose folds at 0.5 and
+    3.5 mm and ``chart_dpi`` are those of the computed RMTF here where it was traced alike
+    (same rays, no Fresnel losses): that RMTF is then not traced again. A measurement
+    that the scan does not allow (an edge too blurred for an SFR) is reported as not
+    measurable, with the reason, and the section goes on.
     """
     import numpy as np
 
@@ -636,11 +644,12 @@ def _scans(
         for got, (_, (truth_, face, points, z)) in zip(texts, reads, strict=False):
             cer = character_error_rate(truth_, got)
             res["ocr"].append({"face": face, "points": points, "z_mm": z, "cer": cer})
-    bars = bar_chart(dpi, chart_dpi=(200.0,), block_mm=10.0, height_mm=4.0)
+    bars = bar_chart(dpi, chart_dpi=(chart_dpi,), block_mm=10.0, height_mm=4.0)
     # RMTF compared on the own path: the chart is a finite patch on a white page, so its
     # ghost background differs from the infinite chart of the computed RMTF
-    ref_dpi = [200.0] + ([] if DOF_DPI == 200.0 else [float(DOF_DPI)])  # as rmtf() adds it
-    ref_args = dict(seed=seed, window_um=8000.0)
+    ref_dpi = [float(chart_dpi)]
+    key = f"{chart_dpi:g}"
+    ref_args = dict(seed=seed, window_um=8000.0, dof_dpi=chart_dpi)
     sub = None  # own_lsf was traced with work.lsf_rays rays, seed, and this tracer's pilots
     if own_lsf is not None and own_lsf.method == "trace":
         if not own_lsf.ghosts and not own_lsf.fresnel:  # as the rmtf() call below
@@ -651,7 +660,7 @@ def _scans(
     else:
         ref = rmtf(
             design,
-            dpi=(200.0,),
+            dpi=ref_dpi,
             z_mm=(0.5, 3.5),
             ghosts=False,
             n_rays=work.lsf_rays,
@@ -670,15 +679,20 @@ def _scans(
                 "x_mm": (np.arange(mid.size) + 0.5) * r.pitch_um / 1000,
                 "profile": mid,
                 "rmtf_measured": blocks[0]["rmtf"] if blocks else float("nan"),
-                "rmtf_computed_max": ref.rmtf_max["200"][iz],
-                "rmtf_computed_min": ref.rmtf_min["200"][iz],
+                "rmtf_computed_max": ref.rmtf_max[key][iz],
+                "rmtf_computed_min": ref.rmtf_min[key][iz],
             }
         )
     edge = edge_chart(dpi)
     res["sfr"] = []
     for z in (0.5, 3.5):
         r = scan(edge, z_mm=z)
-        for axis, v in sfr_xy(r.image, r.dpi).items():
+        try:
+            measured = sfr_xy(r.image, r.dpi)
+        except ValueError as err:  # an edge too blurred (or ghost-ridden) to measure
+            res["sfr"].append({"z_mm": z, "not_measurable": str(err)})
+            continue
+        for axis, v in measured.items():
             res["sfr"].append(
                 {
                     "z_mm": z,
@@ -711,7 +725,7 @@ def _restoration(
     seed: int,
     fresnel: bool,
     tracer: PixelTracer,
-    dof_dpi: float = DOF_DPI,
+    dof_dpi: float,
 ) -> dict:
     """Restoration with the known blur (issue 13): the study against height, text crops
     raw and restored, OCR of small text before and after."""
@@ -822,15 +836,17 @@ def _run_study(
     return parameter_study(design, seed=seed, deferred=deferred, part=part)
 
 
-def _run_rodlens(seed: int, fresnel: bool):  # pragma: no cover - a background process
+def _run_rodlens(seed: int, fresnel: bool, dof_dpi: float):  # pragma: no cover - background
     """The rod-lens presets' comparison rows (the report's "stamp against a rod-lens
-    array" section): each preset evaluated as `compare` does."""
+    array" section): each preset evaluated as `compare` does, its depth of field on the
+    report's chart ``dof_dpi``."""
     from ..studies.compare import RODLENS_PRESETS, evaluate_rodlens, labelled
 
     rows = []
     for name in RODLENS_PRESETS:
         d = load_design(name)
-        row = evaluate_rodlens(d, seed=seed, fresnel=fresnel, **REPORT_ROD_CURVES)
+        curves = REPORT_ROD_CURVES | {"dpi": tuple(sorted({*REPORT_ROD_CURVES["dpi"], dof_dpi}))}
+        row = evaluate_rodlens(d, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi, **curves)
         rows.append(labelled(d, row, seed, fresnel))
     return rows
 
@@ -888,20 +904,18 @@ def _run_tolerance(design: Design, seed: int, dpi: float, spec: str):  # pragma:
     return tolerance(design, samples=200, seed=seed, dpi=dpi, spec=spec, workers=1)
 
 
-#: The tolerance study's yield spec where the report's --spec bounds none of its figures.
-DEFAULT_TOLERANCE_SPEC = "dof>=2.2,ghost<=0.2"
 #: report --spec figures that the tolerance study evaluates -> its name for them
 _TOLERANCE_FIGURES = MappingProxyType(
     {"dof": "dof", "light": "efficiency", "ghost_radius": "ghost_radius"}
 )
 
 
-def tolerance_spec(spec: list[tuple[str, str, float]]) -> str:
+def tolerance_spec(spec: list[tuple[str, str, float]]) -> str | None:
     """The tolerance study's yield spec from a report spec (:func:`parse_report_spec`): its
-    bounds on the depth of field, the light and the ghost-free radius; the default
-    (``DEFAULT_TOLERANCE_SPEC``) when it bounds none of them."""
+    bounds on the depth of field, the light and the ghost-free radius; None (no yield:
+    no hidden specification) when it bounds none of them."""
     parts = [f"{_TOLERANCE_FIGURES[n]}{op}{v:g}" for n, op, v in spec if n in _TOLERANCE_FIGURES]
-    return ",".join(parts) or DEFAULT_TOLERANCE_SPEC
+    return ",".join(parts) or None
 
 
 def is_paper_preset(design: Design) -> bool:
@@ -920,8 +934,8 @@ def _studies(
     seed: int,
     fresnel: bool,
     work: Work,
-    dpi: float = DOF_DPI,
-    tol_spec: str = DEFAULT_TOLERANCE_SPEC,
+    dpi: float,
+    tol_spec: str | None = None,
 ) -> dict:
     """The report's studies as background jobs: name -> list of (function, arguments),
     the tasks whose results make the job (:func:`_joined`). The parameter study of the
@@ -931,7 +945,7 @@ def _studies(
     if work.paper:
         parts = [(i, STUDY_PARTS) for i in range(STUDY_PARTS)]
         jobs["parameter_study"] = [(_run_study, (design, seed, fresnel, p)) for p in parts]
-    jobs["rodlens"] = [(_run_rodlens, (seed, fresnel))]
+    jobs["rodlens"] = [(_run_rodlens, (seed, fresnel, dpi))]
     if all(m.shape != "circle" for m in design.masks):
         jobs["search"] = [(_run_search, (design, seed, dpi))]
         jobs["tolerance"] = [(_run_tolerance, (design, seed, dpi, tol_spec))]

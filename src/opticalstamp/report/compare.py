@@ -41,7 +41,7 @@ def rows_table(rows: list[dict]) -> str:
         "light vs first",
         "working F",
         "thickness (mm)",
-        "200-dpi DOF (mm from nominal)",
+        f"{rows[0]['dof_dpi']:g}-dpi DOF (mm from nominal)",
         "DOF span (mm)",
         "ghost fraction",
     ]

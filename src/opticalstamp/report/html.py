@@ -5,14 +5,23 @@ from __future__ import annotations
 import html
 import math
 
+from ..analysis.dof import dof_text
 from ..design import Design
+from ..design.describe import describe
+from ..design.resolution import dof_chart_dpi, nominal_dpi
 from ..raytrace.stack import output_pitch
 from .paper import one_in
 from .summary import PAPER
 
 
-def _scans_html(s: dict, pitch_um: float) -> str:
-    sfr = [[x["z_mm"], x["axis"], x["mtf50_cy_per_mm"], x["sfr100"], x["sfr200"]] for x in s["sfr"]]
+def _scans_html(s: dict, pitch_um: float, ghost_span: str = "") -> str:
+    sfr = [
+        [x["z_mm"], x["axis"], x["mtf50_cy_per_mm"], x["sfr100"], x["sfr200"]]
+        if "not_measurable" not in x
+        else [x["z_mm"], "x, y", f"not measurable: {x['not_measurable']}", None, None]
+        for x in s["sfr"]
+    ]
+    chart = s.get("chart_dpi", 200.0)
     # OCR: a row per text (face, size), a column per Z
     texts = list(dict.fromkeys((o.get("face", "sans"), o.get("points", 8.0)) for o in s["ocr"]))
     zs = sorted({o["z_mm"] for o in s["ocr"]})
@@ -39,11 +48,11 @@ the document moves one {pitch_um:.1f} um line per period, the rows are merged wi
 and dark/white shading correction is applied. See <code>opticalstamp scan</code>.</p>
 <img src="scan_text.png">{ocr_p}
 <img src="scan_bars.png"><img src="scan_profiles.png">
-<p>RMTF measured on simulated 200-dpi scans (own path, ghost light off, noise on) against
+<p>RMTF measured on simulated {chart:g}-dpi scans (own path, ghost light off, noise on) against
 the RMTF computed from the folded line-spread functions (own path; minimum and maximum
 over chart positions). With ghost light on they differ for a reason, not an error: ghost
-light comes from 6-34 mm away, so a finite chart on a white page gets a different veiling
-background than the infinite chart of the computed RMTF.</p>
+light comes from {ghost_span or "far from the pixel's axis"}, so a finite chart on a white
+page gets a different veiling background than the infinite chart of the computed RMTF.</p>
 {table(prof, ["Z (mm)", "measured on the scan", "computed min", "computed max"])}
 <p>Slanted-edge SFR (ISO 12233) of the simulated scans of the slanted-square chart, along
 x (main scan) and y (sub-scan, which adds the motion smear of one line):</p>
@@ -289,7 +298,11 @@ font-size:13px;text-align:right}}img{{max-width:100%}}</style></head><body>
 <h1>opticalstamp report: {html.escape(design.name)}</h1>{_quick_html(d)}
 {_summary_html(d.get("summary"))}
 {_paper_html(d.get("paper_vs_model"))}
-<p>{html.escape(design.description)}</p>
+<p>{html.escape(describe(design))}{
+        f" The design file's note: <i>{html.escape(design.description)}</i>"
+        if design.description
+        else ""
+    }</p>
 <p>design fingerprint {prov["design_fingerprint"]}, seed {prov["seed"]},
 opticalstamp {prov["opticalstamp_version"]}, Fresnel losses {"on" if prov["fresnel"] else "off"},
 pixel acceptance half-angle {design.sensor.acceptance_half_angle_deg:g} deg.
@@ -364,11 +377,11 @@ lands inside the virtual detector (&plusmn;{
         )
     }
 <img src="psf_x0.png"><img src="psf_x42.png">
-{_quality_html(d)}
-{_scans_html(d["scans"], pitch_um)}
+{_quality_html(d, design)}
+{_scans_html(d["scans"], pitch_um, _ghost_span(g))}
 {_restoration_html(d.get("restoration"))}
 {_search_html(d["search"], d["tolerance"], d.get("quick", False))}
-{rodlens_html(d.get("rodlens"))}
+{rodlens_html(d.get("rodlens"), paper=d.get("paper_vs_model") is not None)}
 <p>Generated in {d["elapsed_s"]:.1f} s.</p>
 </body></html>
 """
@@ -451,7 +464,7 @@ def _dof(res: dict, key: str) -> str:
     return f"≥ {v:.2f} mm" if res.get("dof_open_ended", {}).get(key) else f"{v:.2f} mm"
 
 
-def _quality_html(d: dict) -> str:
+def _quality_html(d: dict, design: Design) -> str:
     r, own, par = d["rmtf"], d["rmtf_traced_own"], d["rmtf_paraxial_own"]
     keys = list(r["rmtf_max"])
     dk = f"{r['dof_dpi']:g}"
@@ -518,18 +531,27 @@ def _quality_html(d: dict) -> str:
                 ]
             )
     warn = "".join(f"<p><b>warning:</b> {html.escape(w)}</p>" for w in df["budget"]["warnings"])
+    merged = (
+        "shading-corrected (each pixel over its own white response), as a scanner delivers it"
+        if r.get("shading", True)
+        else "raw (no shading correction)"
+    )
     return f"""<h2>RMTF and depth of field (paper Eq. 1, Fig. 11)</h2>
 <p>Bar charts of {", ".join(f"{k} dpi" for k in keys)} over a {r["window_um"]:g} um window,
 shifted in {r["shift_step_um"]:g} um steps; RMTF is the maximum over shifts ({r["method"]},
 ghost light {"included" if r["ghosts"] else "left out"}, {r["n_rays"]:,} rays per pixel row).
-Depth of field: largest Z with RMTF({r["dof_dpi"]:g} dpi) &ge; {r["dof_threshold"]:g}:
-<b>{_dof(r, dk)}</b>{" (paper: 3.5 mm measured)" if paper else ""}.{_spurious_html(r)}</p>
+The merged line {merged}.
+Depth of field: first Z where RMTF on the {r["dof_dpi"]:g}-dpi chart{_chart_why(r, design)}
+falls below {r["dof_threshold"]:g}:
+<b>{html.escape(dof_text(r, dk))}</b>{" (paper: 3.5 mm measured)" if paper else ""}.{
+        _spurious_html(r)
+    }</p>
 {table(rows, ["Z (mm)"] + [f"{k} dpi" for k in keys] + [f"SE ({dk} dpi)"])}
 <img src="rmtf.png">
 <p>Depth of field (mm) by model: the paraxial closed form against the exact tracer shows
 how far the paraxial limit is off; the ghost light's uniform background lowers contrast.</p>
 {table(dof_rows, ["model"] + [f"{k} dpi" for k in dof_keys])}
-<h3>The 200-dpi chart as the merged line sees it (paper Fig. 12 c, d)</h3>
+<h3>The {r["dof_dpi"]:g}-dpi chart as the merged line sees it (paper Fig. 12 c, d)</h3>
 <p>Signals of the pixels under the chart at the best shift; the RMTF measured back from
 this waveform as from an image agrees with the computed one.</p>
 {table(prof, ["Z (mm)", "chart shift (um)", "RMTF computed", "RMTF measured from waveform"])}
@@ -539,8 +561,7 @@ this waveform as from an image agrees with the computed one.</p>
 design's output pitch ({e["meta"]["reference_lens"]["pixel_um"]:.1f} um; the paper's 84.6 um):
 {e["reference_etendue_um2sr"]:.4g} um&sup2;sr (working F {e["reference_f_number"]:g}).</p>
 {table(eff_rows, ["light", "etendue (um2 sr)", "ratio", "1/ratio", "working F"])}
-<p>Effect of the sensitive-area size (the paper expects 4x the light from 4x the area):</p>
-{table(area_rows, ["side (um)", "area ratio", "own-path gain", "total gain", "ghost fraction"])}
+{_area_html(area_rows)}
 <img src="efficiency.png">
 {signal_html(d.get("signal"), e)}
 <h2>Diffraction (paper Fig. 6)</h2>
@@ -602,8 +623,12 @@ def signal_html(s: dict | None, eff: dict | None = None) -> str:
     ]
     ghost = ""
     if eff and s["etendue_own_um2sr"] > 0:
-        more = eff["etendue_um2sr"] / s["etendue_own_um2sr"] - 1
-        ghost = f"; a white page adds its ghost light, {100 * more:.2g} % more"
+        more = eff["etendue_um2sr"] / s["etendue_own_um2sr"]
+        ghost = (
+            f". The table counts the own path (the signal); a white page adds its ghost "
+            f"light, {100 * (more - 1):.0f} % more: {num(s['electrons_white'] * more)} e- at "
+            "white in all, the figure <code>opticalstamp scan</code> prints"
+        )
     target = (
         f"SNR {s['target_snr_white']:g} at white needs an exposure of "
         f"<b>{s['exposure_for_target_ms']:.3g} ms</b> per line: at most "
@@ -628,14 +653,24 @@ def signal_html(s: dict | None, eff: dict | None = None) -> str:
 page, {el["exposure_ms"]:.3g} ms per line, QE {el["quantum_efficiency"]:.2g},
 {well:,.0f} e- full well, {el["read_noise_e"]:.3g} e- read noise,
 {el["adc_bits"]}-bit ADC; a design file's <code>[electronics]</code>) and its own-path
-etendue of {s["etendue_own_um2sr"]:.4g} um&sup2;sr{ghost}. Temporal SNR: photon and dark
+etendue of {s["etendue_own_um2sr"]:.4g} µm²·sr{ghost}. Temporal SNR: photon and dark
 shot noise, read noise, quantisation (the shading correction removes PRNU).</p>
-{table(rows, ["reflectance", "electrons", "of the full well", "SNR"])}
+{table(rows, ["reflectance", "electrons (own path)", "of the full well", "SNR"])}
 <p>{target}.</p>
 {warn}"""
 
 
-def rodlens_html(r: dict | None) -> str:
+def _ghost_span(g: dict) -> str:
+    """Where the ghost light lands on the object plane, as "6.1-34 mm away" (at Z = 0)."""
+    land = [v for v in g["landing"].values() if v.get("nearest_um") is not None]
+    if not land:
+        return ""
+    near = min(v["nearest_um"] for v in land) / 1000
+    med = max(v.get("median_um") or 0.0 for v in land) / 1000
+    return f"{near:.1f} mm (nearest) to {med:.0f} mm (median) from the pixel's axis"
+
+
+def rodlens_html(r: dict | None, paper: bool = False) -> str:
     """The report's "stamp against a rod-lens array" section: the paper's statements next
     to the model's for each rod-lens design, and which class the paper's figure fits.
 
@@ -660,21 +695,22 @@ def rodlens_html(r: dict | None) -> str:
                 "{:.2f} .. {:.2f}".format(*r["dof_mm"]),
             ]
         )
-    body.append(
-        [
-            f"paper (stamp: {stamp['name']})",
-            f"about {one_in(PAPER['vs_rod_lens'])}",
-            one_in(PAPER["vs_rod_lens_4x_area"]),
-            f">= {PAPER['rod_lens_thickness_min']:g} (stamp {PAPER['thickness']:g})",
-            "-",
-        ]
-    )
+    if paper:  # the paper's statements, for its own prototype only
+        body.append(
+            [
+                f"the paper's statement (its prototype, {stamp['name']})",
+                f"about {one_in(PAPER['vs_rod_lens'])}",
+                one_in(PAPER["vs_rod_lens_4x_area"]),
+                f"≥ {PAPER['rod_lens_thickness_min']:g} (stamp {PAPER['thickness']:g})",
+                "-",
+            ]
+        )
     head = [
         "rod-lens array",
         "stamp's light / array's",
         "with a 4x sensor area",
         "array thickness (mm)",
-        "array's 200-dpi DOF (mm from focus)",
+        f"array's {stamp.get('dof_dpi', 200.0):g}-dpi DOF (mm from focus)",
     ]
     best = min(
         rods,
@@ -686,9 +722,14 @@ def rodlens_html(r: dict | None) -> str:
     return (
         "<h2>The stamp against a rod-lens array (paper §4, §5)</h2>"
         + table(body, head)
-        + f"<p>The paper's ~1/100 fits <b>{html.escape(best['name'])}</b> (model 1/{fit:.0f}). "
-        f"The stamp ({html.escape(stamp['name'])}) is {stamp['thickness_mm']:.2f} mm from sensor "
-        f"to document reference and keeps 200-dpi contrast >= 0.3 up to "
+        + (
+            f"<p>The paper's ~1/100 fits <b>{html.escape(best['name'])}</b> (model 1/{fit:.0f}). "
+            if paper
+            else "<p>"
+        )
+        + f"The stamp ({html.escape(stamp['name'])}) is {stamp['thickness_mm']:.2f} mm from "
+        f"sensor to document reference and keeps {stamp.get('dof_dpi', 200.0):g}-dpi contrast "
+        f"≥ 0.3 up to "
         f"{stamp['dof_mm'][1]:.2f} mm; light is the stamp's own path (ghost light is "
         "crosstalk, not signal). Model and assumptions: docs/rodlens.md; any designs side by "
         "side: <code>opticalstamp compare</code>.</p>"
@@ -735,6 +776,7 @@ def _summary_html(s: dict | None) -> str:
         unit = f" {f['unit']}" if f["unit"] else ""
         ratio = f["figure"] in ("light", "vs_rod_lens")  # written as 1/N
         shown = f"{'≥ ' if f['bound'] else ''}{one_in(v) if ratio else _fmt(float(v))}{unit}"
+        shown = f.get("text") or shown
         c = f["check"]
         verdict = (
             "-"
@@ -742,7 +784,7 @@ def _summary_html(s: dict | None) -> str:
             else f"{c['spec']}: "
             + ("PASS" if c["pass"] else ("FAIL" if c["pass"] is False else "not computed"))
         )
-        dof_like = f["figure"] in ("dof", "restored_dof")
+        dof_like = f["figure"] in ("dof", "raw_dof", "restored_dof")
         what = f["what"] + (f" at {s['dof_dpi']:g} dpi" if dof_like else "")
         row = [what, shown, verdict]
         if paper:
@@ -778,6 +820,30 @@ def _spurious_html(r: dict) -> str:
     return (
         " Spurious resolution (RMTF back over the threshold past the depth of field, "
         "contrast after a reversal; not counted): " + "; ".join(parts) + "."
+    )
+
+
+def _chart_why(r: dict, design: Design) -> str:
+    """Why the depth-of-field chart is the one it is, where it is the default."""
+    line = nominal_dpi(design)
+    if abs(r["dof_dpi"] - dof_chart_dpi(design)) < 1e-9:
+        return f" (2/3 of the design's {line:g} dpi, as the paper's 200 dpi for its 300)"
+    return f" (chosen; the default is {dof_chart_dpi(design):g} dpi, 2/3 of {line:g} dpi)"
+
+
+def _area_html(area_rows: list) -> str:
+    """The sensitive-area study, where it could be run (a larger area that fits the pitch)."""
+    if len(area_rows) < 2:
+        return (
+            "<p>Sensitive-area study: not run (a larger sensitive area would exceed the "
+            "pixel pitch of this design).</p>"
+        )
+    return (
+        "<p>Effect of the sensitive-area size (the paper expects 4x the light from 4x the "
+        "area, with a custom sensor):</p>"
+        + table(
+            area_rows, ["side (µm)", "area ratio", "own-path gain", "total gain", "ghost fraction"]
+        )
     )
 
 

@@ -15,15 +15,22 @@ import math
 import re
 from types import MappingProxyType
 
+from ..analysis.dof import dof_text
 from ..validate import InputError
 
 #: Figures a spec may name: key -> (what, unit).
 FIGURES = MappingProxyType(
     {
         "ghost_radius": ("ghost-free radius on the object plane", "mm"),
-        "dof": ("depth of field", "mm"),
+        "dof": ("depth of field (RMTF rule: first Z where the RMTF falls below 0.3)", "mm"),
+        "raw_dof": (
+            "depth of field of the raw scan by the restoration's rule (fundamental "
+            "amplitude and contrast to noise)",
+            "mm",
+        ),
         "restored_dof": (
-            "depth of field restored with the known blur (Wiener, height known)",
+            "depth of field restored with the known blur (Wiener, height known), by the "
+            "same rule as the raw scan's above",
             "mm",
         ),
         "light": ("light vs the F/10 lens (own path)", ""),
@@ -48,6 +55,8 @@ PAPER = MappingProxyType(
         "rod_lens_thickness_min": 15.0,
     }
 )
+#: the restoration study's depth-of-field figures -> its name for the version
+_RESTORED = MappingProxyType({"raw_dof": "raw", "restored_dof": "wiener"})
 _SPEC_RE = re.compile(r"^([a-z_]+)(>=|<=)([-+0-9.eE]+)$")
 
 
@@ -91,10 +100,12 @@ def headline_figures(data: dict) -> dict:
         "thickness": data["stack"][0]["z_top_um"] / 1000 if data.get("stack") else None,
         "vs_rod_lens": None,
         "yield": None,
+        "raw_dof": None,
         "restored_dof": None,
     }
     rest = data.get("restoration")
     if rest and "wiener" in rest["study"]["dof"]:
+        values["raw_dof"] = rest["study"]["dof"]["raw"]["dof_mm"]
         values["restored_dof"] = rest["study"]["dof"]["wiener"]["dof_mm"]
     rod = data.get("rodlens")
     if rod and len(rod["rows"]) > 1:
@@ -129,12 +140,13 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
                 "unit": unit,
                 "bound": (name == "dof" and bool(r.get("dof_open_ended", {}).get(key)))
                 or (
-                    name == "restored_dof"
+                    name in _RESTORED
                     and bool(data.get("restoration"))
-                    and bool(data["restoration"]["study"]["dof"]["wiener"]["open_ended"])
+                    and bool(data["restoration"]["study"]["dof"][_RESTORED[name]]["open_ended"])
                 ),
                 "check": checks.get(name),
                 "paper": PAPER.get(name) if paper else None,
+                "text": dof_text(r) if name == "dof" else None,
             }
         )
     return {

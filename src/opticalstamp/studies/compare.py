@@ -12,8 +12,10 @@ Every design is evaluated with the definitions shared by both kinds:
 * Heights: measured from the document reference, positive away from the scanner, for
   both kinds. A stamp's nominal object plane is its reference plane (its contrast is
   highest there and the document cannot come closer); a rod-lens array's is its focus.
-* ``dof_mm``: heights where the 200-dpi contrast (shading-corrected RMTF, maximised over
-  the chart's shift) stays >= 0.3, as ``[low, high]`` relative to the nominal object
+* ``dof_mm``: heights where the contrast on one chart for every design (shading-corrected
+  RMTF, maximised over the chart's shift) stays >= 0.3 — by default the first design's
+  depth-of-field chart, 2/3 of its resolution (200 dpi for a 300-dpi design), ``dof_dpi``
+  in every row —, as ``[low, high]`` relative to the nominal object
   plane, ``dof_span_mm`` their span; each end at the first crossing from the best height
   (``dof_detail``: whether an end is the grid's, and a note).
 * ``ghost_fraction``: the stamp's traced ghost light over all light; 0 for a rod-lens
@@ -31,6 +33,7 @@ from ..analysis.rmtf import rmtf
 from ..analysis.rodlens import RAYS_CONTRAST, rod_contrast, rod_efficiency
 from ..defaults import Z_GRID_MM
 from ..design import AnyDesign, Design, RodLensDesign
+from ..design.resolution import dof_chart_dpi
 from ..validate import parse_grid
 
 #: The rod-lens presets a report compares its design with (docs/rodlens.md).
@@ -53,9 +56,18 @@ def _kind(design: AnyDesign) -> str:
     return "rod-lens-array" if isinstance(design, RodLensDesign) else "stamp"
 
 
-def evaluate_stamp(design: Design, *, seed: int = 0, fresnel: bool = False) -> dict:
+def evaluate_stamp(
+    design: Design, *, seed: int = 0, fresnel: bool = False, dof_dpi: float | None = None
+) -> dict:
     eff = efficiency(design, seed=seed, fresnel=fresnel, area_scales=(1.0,), z_mm=(0.0,))
-    r = rmtf(design, dpi=COMPARE_DPI, z_mm=STAMP_HEIGHTS_MM, seed=seed, fresnel=fresnel)
+    r = rmtf(
+        design,
+        dpi=COMPARE_DPI,
+        z_mm=STAMP_HEIGHTS_MM,
+        seed=seed,
+        fresnel=fresnel,
+        dof_dpi=dof_dpi,
+    )
     return stamp_row(design, eff, r)
 
 
@@ -83,7 +95,11 @@ def stamp_row(design: Design, eff, r) -> dict:
         "ghost_note": "traced ghost (crosstalk) light over all light reaching the pixel",
         "contrast": {
             "heights_mm": list(r.z_mm),
-            "by_dpi": {k: list(v) for k, v in r.rmtf_max.items() if float(k) in COMPARE_DPI},
+            "by_dpi": {
+                k: list(v)
+                for k, v in r.rmtf_max.items()
+                if float(k) in COMPARE_DPI or float(k) == r.dof_dpi
+            },
         },
         "estimator": r.method,
     }
@@ -97,12 +113,21 @@ def evaluate_rodlens(
     dpi=COMPARE_DPI,
     heights_mm=ROD_HEIGHTS_MM,
     n_rays: int = RAYS_CONTRAST,
+    dof_dpi: float | None = None,
 ) -> dict:
     """A rod-lens array's comparison figures (``dpi``, ``heights_mm``, ``n_rays``: of the
-    contrast curves; the depth of field is refined by bisection whatever the grid)."""
+    contrast curves; the depth of field, on the ``dof_dpi`` chart, is refined by
+    bisection whatever the grid)."""
     eff = rod_efficiency(design, seed=seed, fresnel=fresnel)
+    dof_dpi = dof_chart_dpi(design) if dof_dpi is None else float(dof_dpi)
     con = rod_contrast(
-        design, dpi=dpi, heights_mm=heights_mm, n_rays=n_rays, seed=seed, fresnel=fresnel
+        design,
+        dpi=sorted({float(d) for d in dpi} | {dof_dpi}),
+        heights_mm=heights_mm,
+        n_rays=n_rays,
+        seed=seed,
+        fresnel=fresnel,
+        dof_dpi=dof_dpi,
     )
     a = design.array
     return {
@@ -122,6 +147,7 @@ def evaluate_rodlens(
             k: con.dof_mm[k] for k in ("clipped_low", "clipped_high", "usable_from_reference")
         }
         | {"note": "each end at the first 0.3 crossing from the best focus"},
+        "dof_dpi": con.dof_dpi,
         "ghost_fraction": 0.0,
         "ghost_note": "no stray path in the model: rod skin and black resin absorb",
         "contrast": {
@@ -141,10 +167,15 @@ def evaluate_rodlens(
     }
 
 
-def evaluate(design: AnyDesign, *, seed: int = 0, fresnel: bool = False) -> dict:
-    """One design's comparison figures (see the module's docstring for definitions)."""
+def evaluate(
+    design: AnyDesign, *, seed: int = 0, fresnel: bool = False, dof_dpi: float | None = None
+) -> dict:
+    """One design's comparison figures (see the module's docstring for definitions);
+    ``dof_dpi``: the depth-of-field chart (default: the design's own, 2/3 of its
+    resolution)."""
     run = evaluate_rodlens if isinstance(design, RodLensDesign) else evaluate_stamp
-    return labelled(design, run(design, seed=seed, fresnel=fresnel), seed, fresnel)
+    row = run(design, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi)
+    return labelled(design, row, seed, fresnel)
 
 
 def labelled(design: AnyDesign, row: dict, seed: int, fresnel: bool) -> dict:
@@ -158,9 +189,15 @@ def labelled(design: AnyDesign, row: dict, seed: int, fresnel: bool) -> dict:
     } | row
 
 
-def compare(designs, *, seed: int = 0, fresnel: bool = False) -> list[dict]:
-    """Evaluate each design; add each one's light relative to the first."""
-    return relative_to_first([evaluate(d, seed=seed, fresnel=fresnel) for d in designs])
+def compare(
+    designs, *, seed: int = 0, fresnel: bool = False, dof_dpi: float | None = None
+) -> list[dict]:
+    """Evaluate each design, every depth of field on one chart (``dof_dpi``; default the
+    first design's, 2/3 of its resolution); add each one's light relative to the first."""
+    designs = list(designs)
+    dof_dpi = dof_chart_dpi(designs[0]) if dof_dpi is None else float(dof_dpi)
+    rows = [evaluate(d, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi) for d in designs]
+    return relative_to_first(rows)
 
 
 def relative_to_first(rows: list[dict]) -> list[dict]:

@@ -17,13 +17,14 @@ itself by the same rule.
 
 from __future__ import annotations
 
+import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..defaults import DOF_DPI
 from ..design import Design
+from ..design.resolution import dof_chart_dpi
 from ..imaging.charts import bar_chart
 from ..imaging.measure import measure_rmtf
 from ..imaging.outputkernel import output_kernel
@@ -70,14 +71,16 @@ def restoration_study(
     methods=METHODS,
     settings: ScanSettings | None = None,
     seed: int = 0,
-    dpi: float = DOF_DPI,
+    dpi: float | None = None,
     threshold: float = AMPLITUDE_THRESHOLD,
     cnr_floor: float = CNR_FLOOR,
     model_error: float = MODEL_ERROR,
     tracer=None,
 ) -> dict:
     """Amplitude, contrast to noise, overshoot and noise gain against height, raw and per
-    method, and each one's restored depth of field (see the module's docstring)."""
+    method, and each one's restored depth of field (see the module's docstring); ``dpi``:
+    the chart (default 2/3 of the design's resolution, as the depth of field's)."""
+    dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     st = settings or ScanSettings(sensor=design.electronics)
     zs = [float(z) for z in z_mm]
     chart = bar_chart(CHART_DPI, chart_dpi=(dpi,), block_mm=6.0, height_mm=6.0)
@@ -108,7 +111,8 @@ def restoration_study(
             kw = {"method": job[1], "sigma": sigma, "surround": st.surround}
             img = restore(img, ok, **kw).image
             wimg = restore(wimg, ok, **kw).image
-        return _block(img, scan.dpi, dpi), _interior_std(wimg) / _interior_std(page.image)
+        raw = _interior_std(page.image)  # 0 where white clips at full well: no gain
+        return _block(img, scan.dpi, dpi), _interior_std(wimg) / raw if raw > 0 else math.nan
 
     # the restorations (FFTs and numpy: no numba) at once, on every core
     jobs = [(i, n) for i in range(len(zs)) for n in names]
@@ -166,7 +170,7 @@ def restoration_study(
 def restored_dof_closed_form(
     design: Design,
     *,
-    dpi: float = DOF_DPI,
+    dpi: float | None = None,
     ghost_fraction: float = 0.0,
     settings: ScanSettings | None = None,
     z_step_mm: float = 0.25,
@@ -182,10 +186,12 @@ def restored_dof_closed_form(
     contrast to noise 2 (2/pi) amplitude / (sigma_sensor G), G the Wiener noise gain on
     white noise (closed form); the depth of field by the rule of
     :func:`restoration_study` (its simulated figure for the prototype: docs/restore.md).
-    Heights run in ``z_step_mm`` until a criterion fails or ``z_max_mm``.
+    Heights run in ``z_step_mm`` until a criterion fails or ``z_max_mm``; ``dpi``: the
+    chart (default 2/3 of the design's resolution).
     """
     from ..imaging.restore import Grid, prior_spectrum, wiener_noise_gain
 
+    dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     base = settings or ScanSettings(sensor=design.electronics)
     st = base.model_copy(update={"kernel": "paraxial"})
     n = 128

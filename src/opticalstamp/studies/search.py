@@ -7,7 +7,8 @@ thickness (``thickness_step_um`` steps; glass plates and air gaps between ``boun
 any of them can be pinned. Constraints: no ghost light within ``near_mm`` of the pixel's
 axis at Z = 0 ... 4 mm (the paper's virtual detector), optionally a ghost-fraction bound,
 a total stack-thickness budget, and a diffraction spill below ``max_spill``. Objectives:
-light efficiency (ratio to the paper's reference lens) and depth of field at ``dpi``.
+light efficiency (ratio to the paper's reference lens) and depth of field on the chart at
+``dof_dpi`` (default 2/3 of the design's resolution: 200 dpi for 300, 400 for 600).
 
 The optimiser is Optuna's NSGA-II (multi-objective, constraint-aware), seeded, driven by
 batches of ``population`` designs that are evaluated in parallel (:mod:`execute`); the
@@ -36,6 +37,7 @@ from ..design import (
     structural_variants,
     with_stack,
 )
+from ..design.resolution import dof_chart_dpi, nominal_dpi
 from ..io.journal import journal_lock
 from ..raytrace.stack import output_pitch
 from ..units import pitch_of_dpi
@@ -174,8 +176,8 @@ def _optuna_warnings_only(fn):
 def search(
     design: Design,
     *,
-    dpi: float = 300.0,
-    dof_dpi: float = 200.0,
+    dpi: float | None = None,
+    dof_dpi: float | None = None,
     budget_mm: float = SEARCH_BUDGET_MM,
     near_mm: float = SEARCH_NEAR_MM,
     max_ghost: float | None = None,
@@ -212,6 +214,9 @@ def search(
     """
     check_seed(seed)
     import optuna
+
+    dpi = nominal_dpi(design) if dpi is None else float(dpi)
+    dof_dpi = dof_chart_dpi(design) if dof_dpi is None else float(dof_dpi)
 
     if any(m.shape == "circle" for m in design.masks):
         raise ValueError("search: the closed-form evaluation needs square holes")
@@ -446,11 +451,12 @@ def search_dataset(res: SearchResult, design: Design, seed: int):
     )
 
 
-def search_base(design: Design, dpi: float) -> Design:
-    """The design to search at ``dpi``: itself when its output pitch is within
-    SAME_RESOLUTION of 25.4 mm / dpi (300 dpi is 84.67 um; the paper's sensor gives 84.6 um),
-    else the design scaled to that resolution (:func:`~opticalstamp.design.scale_to_dpi`)."""
-    if abs(pitch_of_dpi(dpi) / output_pitch(design) - 1) < SAME_RESOLUTION:
+def search_base(design: Design, dpi: float | None = None) -> Design:
+    """The design to search at ``dpi``: itself when ``dpi`` is None (its own resolution)
+    or its output pitch is within SAME_RESOLUTION of 25.4 mm / dpi (300 dpi is 84.67 um;
+    the paper's sensor gives 84.6 um), else the design scaled to that resolution
+    (:func:`~opticalstamp.design.scale_to_dpi`: only when asked)."""
+    if dpi is None or abs(pitch_of_dpi(dpi) / output_pitch(design) - 1) < SAME_RESOLUTION:
         return design
     return scale_to_dpi(design, dpi)
 
@@ -475,14 +481,15 @@ def journal_of(results_path: Path | None) -> Path | None:
 def search_variants(
     design: Design,
     *,
-    dpi: float = 300.0,
+    dpi: float | None = None,
     layers: tuple[int, ...] | None = None,
     stagger: tuple[str, ...] | None = None,
     results_path: Path | None = None,
     **options,
 ) -> dict[str, SearchResult]:
-    """Search the design at ``dpi`` and, with ``layers``/``stagger``, its structural
-    variants (numbers of mask layers, staggered or one row), one :func:`search` each.
+    """Search the design at ``dpi`` (default: its own resolution) and, with
+    ``layers``/``stagger``, its structural variants (numbers of mask layers, staggered or
+    one row), one :func:`search` each.
 
     Parameters
     ----------
@@ -508,7 +515,7 @@ def search_variants(
     out = {}
     for i, (name, b) in enumerate(bases.items()):
         path = variant_path(results_path, i, len(bases))
-        out[name] = search(b, dpi=dpi, journal=journal_of(path), **options)
+        out[name] = search(b, journal=journal_of(path), **options)
     return out
 
 

@@ -23,8 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..defaults import DOF_DPI, TOLERANCE_SAMPLES, TOLERANCE_SIGMAS
+from ..defaults import TOLERANCE_SAMPLES, TOLERANCE_SIGMAS
 from ..design import Design, design_from_dict, stack_params, with_stack
+from ..design.resolution import dof_chart_dpi
 from ..raytrace.stack import lattice_of
 from ..validate import check_seed
 from .runner import run_tasks, task_key
@@ -285,7 +286,7 @@ def tolerance(
     *,
     samples: int = TOLERANCE_SAMPLES,
     sigmas: dict | None = None,
-    dpi: float = DOF_DPI,
+    dpi: float | None = None,
     z_mm=(0.5, 1.0, 2.0, 3.0, 3.5),
     spec: str | None = None,
     seed: int = 0,
@@ -299,6 +300,8 @@ def tolerance(
 ) -> ToleranceResult:
     """Monte Carlo of assembly errors, sensitivity table and yield (see module doc).
 
+    ``dpi``: the chart of the RMTF and the depth of field (default: 2/3 of the design's
+    resolution, :func:`~opticalstamp.design.resolution.dof_chart_dpi`).
     ``verify``: the nominal design is also traced exactly
     (:func:`~opticalstamp.studies.verify.exact_figures`); its figures are in
     ``meta["nominal_exact"]`` and the figures where the surrogate is off beyond its stated
@@ -309,6 +312,7 @@ def tolerance(
     """
     check_estimator(estimator)
     check_seed(seed)
+    dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     sg = DEFAULT_SIGMAS | (sigmas or {})
     if any(v < 0 for v in sg.values()):
         raise ValueError("sigmas must be >= 0")

@@ -1,0 +1,40 @@
+"""`report --quick` on every stamp preset and on a 600-dpi design (issue 21): no section
+takes the report down with it, and the depth of field is judged at the design's own
+resolution and says so."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from opticalstamp.design import load_design, preset_names, scale_to_dpi, with_stack
+from opticalstamp.design.resolution import dof_chart_dpi
+from opticalstamp.report.build import build_report
+
+
+def half_scale_prototype():
+    """The prototype with every length halved: a 600-dpi stamp."""
+    d = scale_to_dpi(load_design("paper2016"), 600)
+    return with_stack(d, thicknesses_um=(500, 200, 225), name="paper2016-half")
+
+
+def stamp_presets():
+    return [n for n in preset_names() if not n.startswith("sla-") and n != "paper2016"]
+
+
+@pytest.mark.parametrize("name", [*stamp_presets(), "half"])
+def test_quick_report_on_every_design(name, tmp_path):
+    d = half_scale_prototype() if name == "half" else load_design(name)
+    data = build_report(d, tmp_path / "r", quick=True)
+    assert (tmp_path / "r" / "index.html").is_file()
+    saved = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert saved["rmtf"]["dof_dpi"] == dof_chart_dpi(d) == data["summary"]["dof_dpi"]
+    page = (tmp_path / "r" / "index.html").read_text()
+    assert f"{dof_chart_dpi(d):g}-dpi chart" in page
+    if name == "half":
+        assert dof_chart_dpi(d) == 400.0
+        # the paper's statements only for the paper's own design
+        assert "the paper's statement" not in page
+    for row in saved["scans"]["sfr"]:  # measured, or said why not
+        assert "not_measurable" in row or row["mtf50_cy_per_mm"] is not None
