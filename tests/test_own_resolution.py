@@ -158,3 +158,28 @@ def test_rmtf_cli_names_the_rule(paper, tmp_path):
     assert data["dof_dpi"] == 400.0 and data["shading"]
     res = run(["rmtf", "-d", str(path), "--method", "paraxial", "--z", "0:1:0.5"])
     assert "400-dpi chart (2/3 of the design's 600 dpi)" in res.output
+
+
+def test_a_row_off_the_sensors_lines_is_named(paper):
+    from opticalstamp.design.describe import sensor_warnings
+
+    assert sensor_warnings(paper) == []
+    assert sensor_warnings(scale_to_dpi(paper, 600)) == []  # on the grid to 1 nm
+    w = sensor_warnings(replace(paper, {"sensor.row_b_offset_y_um": 120.0}))
+    assert len(w) == 2 and all("sensor.row_b_offset_y_um" in x for x in w)
+    assert "sensor.lines" in w[1]
+
+
+def test_text_crops_cut_no_letter():
+    from opticalstamp.imaging.charts import clear_crop, text_chart
+
+    doc, _ = text_chart(600.0, 6.0)
+    f = 2.0  # a 300-dpi scan of a 600-dpi document
+    rows, cols = clear_crop(doc, f, slice(20, 40), slice(10, 70))
+    assert rows.start <= 20 and rows.stop >= 40 and cols.start <= 10 and cols.stop >= 70
+    band = doc[int(rows.start * f) : int(rows.stop * f)]
+    for c in (cols.start, cols.stop - 1):  # the edge columns hold no ink in these rows
+        assert (band[:, int(c * f) : int((c + 1) * f)] >= 0.98).all()
+    across = doc[:, int(cols.start * f) : int(cols.stop * f)]
+    for r in (rows.start, rows.stop - 1):
+        assert (across[int(r * f) : int((r + 1) * f)] >= 0.98).all()

@@ -314,8 +314,10 @@ class RMTFResult:
         """The curves as an xarray Dataset on coordinates ``dpi`` and ``z_mm``.
 
         Variables ``rmtf`` (max over chart shifts, paper Eq. 1), ``rmtf_se``, ``rmtf_mean``,
-        ``rmtf_min`` (dpi, z_mm), ``period_um`` and ``dof_mm`` (dpi); the method, ghosts,
-        Fresnel setting, seed and design in the attributes.
+        ``rmtf_min`` (dpi, z_mm), ``period_um``, ``dof_mm``, ``dof_open_ended`` (a lower
+        bound: the Z range ended first) and ``dof_low_mm`` / ``dof_high_mm`` (the range at
+        ±2 SE) (dpi); the method, ghosts, shading, Fresnel setting, seed, design and the
+        depth-of-field chart in the attributes.
         """
         import xarray as xr
 
@@ -333,6 +335,19 @@ class RMTFResult:
                 "rmtf_min": (dims, grid(self.rmtf_min)),
                 "period_um": ("dpi", np.asarray(self.periods_um, dtype=np.float64)),
                 "dof_mm": ("dpi", np.array([self.dof_mm.get(k, np.nan) for k in keys])),
+                # the depth of field is a lower bound where the curve never fell below
+                "dof_open_ended": (
+                    "dpi",
+                    np.array([self.dof_open_ended.get(k, False) for k in keys], np.int8),
+                ),
+                "dof_low_mm": (
+                    "dpi",
+                    np.array([self.dof_range_mm.get(k, [np.nan])[0] for k in keys]),
+                ),
+                "dof_high_mm": (
+                    "dpi",
+                    np.array([self.dof_range_mm.get(k, [np.nan])[-1] for k in keys]),
+                ),
             },
             coords={"dpi": np.asarray(self.dpi, dtype=np.float64), "z_mm": self.z_mm},
             attrs={
@@ -343,6 +358,8 @@ class RMTFResult:
                 "ghosts": int(self.ghosts),
                 "fresnel": int(self.fresnel),
                 "dof_threshold": self.dof_threshold,
+                "dof_dpi": self.dof_dpi,
+                "shading": int(self.shading),
             },
         )
 

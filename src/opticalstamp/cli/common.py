@@ -200,6 +200,7 @@ def open_design(spec: str, kinds: tuple[str, ...] = ("stamp",)) -> AnyDesign:
     message naming the command's scope and the commands that take it.
     """
     from ..analysis.diffraction import geometric_optics_warnings
+    from ..design.describe import sensor_warnings
 
     d = load_design(spec)
     kind = "rod-lens-array" if isinstance(d, RodLensDesign) else "stamp"
@@ -209,7 +210,7 @@ def open_design(spec: str, kinds: tuple[str, ...] = ("stamp",)) -> AnyDesign:
             f"{' and '.join(kinds)} designs (a rod-lens array: `opticalstamp compare`)"
         )
     if isinstance(d, Design):
-        for w in geometric_optics_warnings(d):
+        for w in sensor_warnings(d) + geometric_optics_warnings(d):
             typer.echo(f"warning: {w}", err=True)
     return d
 

@@ -516,18 +516,20 @@ def compare(
     fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
 ) -> None:
-    """Designs side by side: light vs F/10, working F-number, thickness, 200-dpi depth of
-    field, ghost fraction, and contrast vs height on one axis (paper §4: the stamp has
-    ~1/100 of a rod-lens array's light; a rod-lens scanner is >= 15 mm thick)."""
+    """Designs side by side: light vs F/10, working F-number, thickness, depth of field on
+    one chart (the first design's, 2/3 of its resolution: 200 dpi for 300), ghost
+    fraction, and contrast vs height on one axis (paper §4: the stamp has ~1/100 of a
+    rod-lens array's light; a rod-lens scanner is ≥ 15 mm thick)."""
     from ..report.compare import write_comparison
 
     if len(designs) < 2:
         fail("compare: give at least two designs")
     ds = [open_design(s, kinds=BOTH_KINDS) for s in designs]
     rows = write_comparison(ds, out, seed=seed, fresnel=fresnel)
+    dof_head = f"DOF{rows[0]['dof_dpi']:g} mm (low..high)"
     lines = [
         f"{'design':<22} {'kind':<15} {'light/F10':>10} {'vs first':>9} {'F_w':>6} "
-        f"{'thick mm':>8} {'DOF200 mm (low..high)':>22} {'ghost':>6}"
+        f"{'thick mm':>8} {dof_head:>22} {'ghost':>6}"
     ]
     for r in rows:
         lines.append(

@@ -96,3 +96,33 @@ def _medium(medium) -> str:
         if medium == "air"
         else (f"glass n = {medium:g}" if not isinstance(medium, str) else medium)
     )
+
+
+def sensor_warnings(design: Design) -> list[str]:
+    """Where the used pixels leave the sensor's own grid (the figures stay right, but a
+    real sensor has no pixel there and a per-pixel picture such as ``psf`` cannot show
+    it): row B's offsets and the row pitch off the pixel pitch, row B beyond the declared
+    ``lines``. One sentence each, naming the field."""
+    s = design.sensor
+    p = s.pixel_pitch_um
+    out = []
+
+    def off_grid(v: float) -> bool:  # beyond the 1-nm mask grid's rounding
+        return abs(v - round(v / p) * p) > 0.005
+
+    checks = [("row_pitch_um", s.row_pitch_um)]
+    if s.rows == 2:
+        checks += [("row_b_offset_x_um", s.row_b_offset_x_um)]
+        checks += [("row_b_offset_y_um", s.row_b_offset_y_um)]
+    for name, v in checks:
+        if off_grid(v):
+            out.append(
+                f"sensor.{name} = {v:g} µm is not a whole number of pixels of the sensor's "
+                f"{p:g}-µm pitch ({v / p:.3g}): no sensor pixel sits there"
+            )
+    if s.rows == 2 and abs(s.row_b_offset_y_um) > (s.lines - 0.5) * p + 1e-9:
+        out.append(
+            f"sensor.row_b_offset_y_um = {s.row_b_offset_y_um:g} µm lies beyond the sensor's "
+            f"{s.lines} lines of {p:g} µm (sensor.lines): row B is off the sensor"
+        )
+    return out

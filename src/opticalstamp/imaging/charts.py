@@ -188,3 +188,35 @@ def make_chart(
     if kind == "lines":
         return line_chart(dpi), None
     raise ValueError(f"chart kind must be one of {', '.join(KINDS)} (got {kind!r})")
+
+
+def clear_crop(doc: np.ndarray, factor: float, rows: slice, cols: slice, white: float = 0.98):
+    """A crop of a scan of ``doc`` that cuts no letter: the scan-pixel slices ``rows`` and
+    ``cols`` widened outward to the nearest rows (within the columns asked for) and then
+    columns (within those rows) where the document is blank (every document pixel there
+    over ``white``). ``factor``: document pixels per scan pixel (1200 / 300 = 4 for the
+    report's scans); ``doc`` (ny, nx) in [0, 1], white = 1. Returns (rows, cols) slices
+    in scan pixels."""
+    dark = doc < white
+
+    def edges(n_doc: int) -> np.ndarray:
+        return np.floor(np.arange(int(n_doc / factor) + 1) * factor).astype(int)
+
+    def to_doc(s: slice) -> slice:
+        return slice(int(s.start * factor), int(np.ceil(s.stop * factor)))
+
+    def blank(ink: np.ndarray) -> np.ndarray:  # ink per document row or column
+        e = edges(ink.size)
+        return np.array([not ink[a:b].any() for a, b in zip(e[:-1], e[1:], strict=True)])
+
+    def widen(s: slice, free: np.ndarray) -> slice:
+        a, b = max(s.start or 0, 0), min(s.stop if s.stop is not None else free.size, free.size)
+        while a > 0 and not free[a]:
+            a -= 1
+        while b < free.size and not free[b - 1]:
+            b += 1
+        return slice(a, b)
+
+    rows = widen(rows, blank(dark[:, to_doc(cols)].any(axis=1)))
+    cols = widen(cols, blank(dark[to_doc(rows), :].any(axis=0)))
+    return rows, cols

@@ -327,6 +327,12 @@ def build_report(
             "efficiency.png": (plotting.plot_efficiency, quality["efficiency_result"]),
             "diffraction.png": (plotting.plot_diffraction, quality["slit_result"]),
             "scan_text.png": (panels, scans.pop("text_panels"), "8-pt text (paper Fig. 8)"),
+            "scan_text_zoom.png": (
+                panels,
+                scans.pop("text_zoom"),
+                "the first words of the 8-pt text, each scan pixel enlarged",
+                1,
+            ),
             "scan_bars.png": (
                 panels,
                 scans.pop("bar_panels"),
@@ -584,7 +590,7 @@ def _scans(
 
     from ..analysis.lsf import folded_subset
     from ..analysis.rmtf import rmtf, rmtf_from_lsf
-    from ..imaging.charts import bar_chart, edge_chart, line_chart, text_chart
+    from ..imaging.charts import bar_chart, clear_crop, edge_chart, line_chart, text_chart
     from ..imaging.heightmap import shape_map
     from ..imaging.measure import measure_rmtf, sfr_xy
     from ..imaging.ocr import (
@@ -628,9 +634,13 @@ def _scans(
 
         reads.append(((linear_to_srgb(r.image), r.dpi), (truth, face, points, z)))
 
+    res["text_zoom"] = []  # the first words, pixels enlarged: the blur by height
     for z in (0.5, 1.5, 2.5):
         r = scan(text, z_mm=z)
         res["text_panels"].append((f"Z = {z:g} mm", r.image))
+        h, w = r.image.shape
+        rows, cols = clear_crop(text, dpi / r.dpi, slice(h // 12, h // 6), slice(0, w // 7))
+        res["text_zoom"].append((f"Z = {z:g} mm", r.image[rows, cols]))
         if ocr:
             read(r, z, truth, "sans", 8.0)
     if ocr:
@@ -731,7 +741,7 @@ def _restoration(
     raw and restored, OCR of small text before and after."""
     import numpy as np
 
-    from ..imaging.charts import text_chart
+    from ..imaging.charts import clear_crop, text_chart
     from ..imaging.ocr import (
         OCRUnavailable,
         character_error_rate,
@@ -781,7 +791,12 @@ def _restoration(
             charts[6.0][0], dpi, design, z_mm=z, seed=seed, settings=page, kernels=kernels
         )
         h, w = r.image.shape
-        crop = (slice(h // 8, h // 8 + max(h // 3, 8)), slice(w // 20, w // 20 + w // 3))
+        crop = clear_crop(  # no letter cut at the crop's edges
+            charts[6.0][0],
+            dpi / r.dpi,
+            slice(h // 8, h // 8 + max(h // 3, 8)),
+            slice(w // 20, w // 20 + w // 3),
+        )
         m = 48  # restore the crop with a margin of context, then cut the margin off
         region = tuple(slice(max(c.start - m, 0), c.stop + m) for c in crop)
         inner = tuple(

@@ -7,7 +7,7 @@ import math
 
 from ..analysis.dof import dof_text
 from ..design import Design
-from ..design.describe import describe
+from ..design.describe import describe, sensor_warnings
 from ..design.resolution import dof_chart_dpi, nominal_dpi
 from ..raytrace.stack import output_pitch
 from .paper import one_in
@@ -46,7 +46,7 @@ def _scans_html(s: dict, pitch_um: float, ghost_span: str = "") -> str:
 <p>Built-in charts at 1200 dpi through the scan simulation ({html.escape(s["settings"])}):
 the document moves one {pitch_um:.1f} um line per period, the rows are merged with the line delay,
 and dark/white shading correction is applied. See <code>opticalstamp scan</code>.</p>
-<img src="scan_text.png">{ocr_p}
+<img src="scan_text.png"><img src="scan_text_zoom.png">{ocr_p}
 <img src="scan_bars.png"><img src="scan_profiles.png">
 <p>RMTF measured on simulated {chart:g}-dpi scans (own path, ghost light off, noise on) against
 the RMTF computed from the folded line-spread functions (own path; minimum and maximum
@@ -302,7 +302,7 @@ font-size:13px;text-align:right}}img{{max-width:100%}}</style></head><body>
         f" The design file's note: <i>{html.escape(design.description)}</i>"
         if design.description
         else ""
-    }</p>
+    }</p>{"".join(f"<p><b>warning:</b> {html.escape(w)}</p>" for w in sensor_warnings(design))}
 <p>design fingerprint {prov["design_fingerprint"]}, seed {prov["seed"]},
 opticalstamp {prov["opticalstamp_version"]}, Fresnel losses {"on" if prov["fresnel"] else "off"},
 pixel acceptance half-angle {design.sensor.acceptance_half_angle_deg:g} deg.
@@ -817,9 +817,20 @@ def _spurious_html(r: dict) -> str:
     if not sp:
         return ""
     parts = [f"{k} dpi at " + ", ".join(f"{a:.2f}-{b:.2f} mm" for a, b in v) for k, v in sp.items()]
+    why = (
+        "ghost copies of the periodic chart, landing beside the direct image, add in and "
+        "out of phase as Z changes, and past a zero of the transfer function bars come back "
+        "reversed; a real page is not periodic, so judge such a design by its own-path "
+        "curve and its ghost analysis too"
+        if r.get("ghosts", True)
+        else "contrast after a reversal of the bars past a zero of the transfer function"
+    )
     return (
-        " Spurious resolution (RMTF back over the threshold past the depth of field, "
-        "contrast after a reversal; not counted): " + "; ".join(parts) + "."
+        " RMTF back over the threshold past the depth of field, not counted in it ("
+        + why
+        + "; the heights were sampled finely there): "
+        + "; ".join(parts)
+        + "."
     )
 
 

@@ -193,14 +193,22 @@ def plot_ghosts(res: GhostResult, top: int = 12):
 def plot_rmtf(res, paper_points: dict | None = None):
     """RMTF versus object distance, one line per chart dpi (paper Fig. 11).
 
-    Solid: maximum over chart shifts (the paper's RMTF); band: minimum to maximum.
-    ``paper_points`` ({dpi: [(z, rmtf), ...]}) are drawn as dots when given.
+    Solid: maximum over chart shifts (the paper's RMTF), through the grid's samples and
+    the finer ones taken where the curve crosses, nears the threshold or jumps (dots);
+    band: minimum to maximum on the grid. ``paper_points`` ({dpi: [(z, rmtf), ...]}) are
+    drawn as circles when given.
     """
+    from ...analysis.rmtf import merged_samples
+
     fig, ax = _subplots(figsize=(6.4, 4.2))
     z = np.asarray(res.z_mm)
+    fine = set(res.meta.get("refined", {}).get("z_mm", []))
     for i, (key, vals) in enumerate(res.rmtf_max.items()):
         c = f"C{i}"
-        ax.plot(z, vals, "-", color=c, label=f"{key} dpi ({res.periods_um[i]:.0f} um)")
+        zm, rm, _ = merged_samples(res, key)
+        ax.plot(zm, rm, "-", color=c, lw=1.2, label=f"{key} dpi ({res.periods_um[i]:.0f} µm)")
+        extra = np.isin(zm, list(fine))
+        ax.plot(zm[extra], rm[extra], ".", color=c, ms=2.5)
         ax.fill_between(z, res.rmtf_min[key], vals, color=c, alpha=0.12, lw=0)
         if paper_points and key in paper_points:
             pz, pv = zip(*paper_points[key], strict=True)
@@ -217,7 +225,8 @@ def plot_rmtf(res, paper_points: dict | None = None):
     ax.legend(fontsize=8, loc="lower left")
     what = "own + ghost light" if res.ghosts else "own path only"
     ax.set_title(
-        f"{res.design}: RMTF vs Z ({res.method}, {what}; band = min..max over chart shifts)",
+        f"{res.design}: RMTF vs Z ({res.method}, {what}; band = min..max over chart shifts;"
+        f"\ndots: finer samples; DOF on the {res.dof_dpi:g}-dpi chart)",
         fontsize=9,
     )
     return fig
