@@ -192,6 +192,7 @@ def sfr(
     *,
     direction: str = "auto",
     oversample: int = 4,
+    at_dpi=(100.0, 200.0),
 ) -> dict:
     """Spatial frequency response of a slanted edge (ISO 12233 e-SFR method).
 
@@ -207,8 +208,9 @@ def sfr(
     measured on the square's left edge (:func:`square_edge_rois`; its region is returned
     as "roi", x0, y0, x1, y1).
 
-    Returns freq_cy_per_mm, sfr, mtf50_cy_per_mm, sfr_at_dpi ({"100": ., "200": .}, at
-    the fundamental of the paper's bar charts: 1/period), edge_angle_deg, direction.
+    Returns freq_cy_per_mm, sfr, mtf50_cy_per_mm, sfr_at_dpi ({"100": ., "200": .} for
+    the default ``at_dpi``, at the fundamental of those bar charts: 1/period),
+    edge_angle_deg, direction.
 
     Raises
     ------
@@ -329,7 +331,7 @@ def sfr(
         mtf50 = float(f_mm[i - 1] + (s[i - 1] - 0.5) / (s[i - 1] - s[i]) * (f_mm[i] - f_mm[i - 1]))
     else:
         mtf50 = float("nan")
-    at = {f"{d:g}": float(np.interp(d / 50.8, f_mm, s)) for d in (100.0, 200.0)}
+    at = {f"{d:g}": float(np.interp(d / 50.8, f_mm, s)) for d in at_dpi}
     return {
         "direction": direction,
         "edge_angle_deg": angle,
@@ -367,11 +369,17 @@ def square_edge_rois(image: np.ndarray) -> dict[str, tuple[int, int, int, int]]:
     }
 
 
-def sfr_xy(image: np.ndarray, dpi: float, oversample: int = 4) -> dict[str, dict]:
+def sfr_xy(
+    image: np.ndarray, dpi: float, oversample: int = 4, at_dpi=(100.0, 200.0)
+) -> dict[str, dict]:
     """SFR along x and along y from a slanted dark square (:func:`square_edge_rois`)."""
     out = {}
     for axis, (x0, y0, x1, y1) in square_edge_rois(image).items():
         out[axis] = sfr(
-            np.asarray(image)[y0:y1, x0:x1], dpi, direction=axis, oversample=oversample
+            np.asarray(image)[y0:y1, x0:x1],
+            dpi,
+            direction=axis,
+            oversample=oversample,
+            at_dpi=at_dpi,
         ) | {"roi": [x0, y0, x1, y1]}
     return out

@@ -550,11 +550,13 @@ def _quality(
                 "rmtf_measured_from_waveform": blocks[0]["rmtf"] if blocks else None,
             }
         )
-    # the sensitive-area study only with areas the design can hold (within the pitch)
-    sen = design.sensor
-    big = max(sen.sensitive_width_um, sen.sensitive_height_um)
-    scales = tuple(k for k in work.area_scales if k * big <= sen.pixel_pitch_um + 1e-9)
-    eff = efficiency(design, seed=seed, fresnel=fresnel, ghosts=g, area_scales=scales)
+    eff = efficiency(
+        design,
+        seed=seed,
+        fresnel=fresnel,
+        ghosts=g,
+        area_scales=custom_area_scales(design, work.area_scales),
+    )
     return {
         "lsf_own": lsf_own,  # the scans' computed RMTF folds it again (see _scans)
         "rmtf_result": res,
@@ -565,6 +567,22 @@ def _quality(
         "slit_result": design_slit_case(design),
         "budget": diffraction_budget(design),
     }
+
+
+def custom_area_scales(design: Design, scales) -> tuple[float, ...]:
+    """The sensitive-area scales (sides x k) a custom sensor could have for this design:
+    the paper's suggestion (§5, 4x the area) is a sensor whose used pixels are larger than
+    the design's sensor's pitch, as large as the used-pixel lattice leaves room for (the
+    row pitch along x; across y the distance to the other row, or the row pitch with one
+    row). A scale that does not fit is not studied."""
+    s = design.sensor
+    room_y = abs(s.row_b_offset_y_um) if s.rows == 2 else s.row_pitch_um
+    return tuple(
+        k
+        for k in scales
+        if k * s.sensitive_width_um <= s.row_pitch_um + 1e-9
+        and k * s.sensitive_height_um <= room_y + 1e-9
+    )
 
 
 def _scans(
@@ -697,8 +715,8 @@ def _scans(
     res["sfr"] = []
     for z in (0.5, 3.5):
         r = scan(edge, z_mm=z)
-        try:
-            measured = sfr_xy(r.image, r.dpi)
+        try:  # at the depth-of-field chart and half its frequency (200, 100 dpi at 300)
+            measured = sfr_xy(r.image, r.dpi, at_dpi=(chart_dpi / 2, chart_dpi))
         except ValueError as err:  # an edge too blurred (or ghost-ridden) to measure
             res["sfr"].append({"z_mm": z, "not_measurable": str(err)})
             continue
@@ -708,8 +726,7 @@ def _scans(
                     "z_mm": z,
                     "axis": axis,
                     "mtf50_cy_per_mm": v["mtf50_cy_per_mm"],
-                    "sfr100": v["sfr_at_dpi"]["100"],
-                    "sfr200": v["sfr_at_dpi"]["200"],
+                    "sfr_at_dpi": v["sfr_at_dpi"],
                 }
             )
     lines = line_chart(dpi, size_mm=12.0)
@@ -721,6 +738,7 @@ def _scans(
     res["profiles"] = [
         p | {"x_mm": p["x_mm"].tolist(), "profile": p["profile"].tolist()} for p in res["profiles"]
     ]
+    res["chart_dpi"] = float(chart_dpi)
     res["settings"] = (
         f"the design's sensor electronics, noise on, ghost light on, white surround, seed {seed}"
         + ("" if work.ocr else f"; {dpi:g}-dpi charts, no OCR (quick report)")

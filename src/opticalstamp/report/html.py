@@ -15,13 +15,14 @@ from .summary import PAPER
 
 
 def _scans_html(s: dict, pitch_um: float, ghost_span: str = "") -> str:
+    chart = s.get("chart_dpi", 200.0)
+    at = [f"{chart / 2:g}", f"{chart:g}"]
     sfr = [
-        [x["z_mm"], x["axis"], x["mtf50_cy_per_mm"], x["sfr100"], x["sfr200"]]
+        [x["z_mm"], x["axis"], x["mtf50_cy_per_mm"], *(x["sfr_at_dpi"][k] for k in at)]
         if "not_measurable" not in x
         else [x["z_mm"], "x, y", f"not measurable: {x['not_measurable']}", None, None]
         for x in s["sfr"]
     ]
-    chart = s.get("chart_dpi", 200.0)
     # OCR: a row per text (face, size), a column per Z
     texts = list(dict.fromkeys((o.get("face", "sans"), o.get("points", 8.0)) for o in s["ocr"]))
     zs = sorted({o["z_mm"] for o in s["ocr"]})
@@ -56,7 +57,7 @@ page gets a different veiling background than the infinite chart of the computed
 {table(prof, ["Z (mm)", "measured on the scan", "computed min", "computed max"])}
 <p>Slanted-edge SFR (ISO 12233) of the simulated scans of the slanted-square chart, along
 x (main scan) and y (sub-scan, which adds the motion smear of one line):</p>
-{table(sfr, ["Z (mm)", "axis", "MTF50 (cycles/mm)", "SFR at 100 dpi", "SFR at 200 dpi"])}
+{table(sfr, ["Z (mm)", "axis", "MTF50 (cycles/mm)", *(f"SFR at {k} dpi" for k in at)])}
 <img src="scan_lines.png"><img src="scan_tilt.png">
 """
 
@@ -846,12 +847,13 @@ def _area_html(area_rows: list) -> str:
     """The sensitive-area study, where it could be run (a larger area that fits the pitch)."""
     if len(area_rows) < 2:
         return (
-            "<p>Sensitive-area study: not run (a larger sensitive area would exceed the "
-            "pixel pitch of this design).</p>"
+            "<p>Sensitive-area study: not run (a sensitive area twice as wide would not fit "
+            "between this design's used pixels).</p>"
         )
     return (
-        "<p>Effect of the sensitive-area size (the paper expects 4x the light from 4x the "
-        "area, with a custom sensor):</p>"
+        "<p>Effect of the sensitive-area size: a custom sensor whose used pixels are larger "
+        "than this sensor's pitch allows, as large as the used-pixel lattice leaves room "
+        "for (the paper, §5, expects 4x the light from 4x the area):</p>"
         + table(
             area_rows, ["side (µm)", "area ratio", "own-path gain", "total gain", "ghost fraction"]
         )
