@@ -183,3 +183,19 @@ def test_text_crops_cut_no_letter():
     across = doc[:, int(cols.start * f) : int(cols.stop * f)]
     for r in (rows.start, rows.stop - 1):
         assert (across[int(r * f) : int((r + 1) * f)] >= 0.98).all()
+
+
+def test_no_yield_headline_from_a_doubtful_estimator():
+    from opticalstamp.report.summary import headline_figures
+
+    data = {
+        "ghosts": {"landing": {}},
+        "rmtf": {"dof_dpi": 200.0, "dof_mm": {"200": 2.0}},
+        "efficiency": {"ratio_own": 0.04, "working_f_number_own": 50.0},
+        "tolerance": {"spec": "dof>=2", "yield": 0.5, "meta": {"nominal_disagrees": []}},
+    }
+    assert headline_figures(data)["yield"] == 0.5
+    data["tolerance"]["meta"]["nominal_disagrees"] = ["dof_mm"]
+    assert headline_figures(data)["yield"] is None
+    data["tolerance"] = {"spec": "", "yield": None, "meta": {}}  # no spec: no yield
+    assert headline_figures(data)["yield"] is None

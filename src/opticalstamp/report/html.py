@@ -116,7 +116,21 @@ dpi falls with height; {ceiling}.</p>
 """
 
 
-def _search_html(s: dict | None, t: dict | None, quick: bool = False) -> str:
+def _headline_dof(rmtf: dict | None) -> str:
+    """The report's own depth of field beside a study's estimate of it."""
+    if rmtf is None:
+        return "fewer rays than the RMTF section"
+    return (
+        f"fewer rays than the RMTF section, whose figure of record is {html.escape(dof_text(rmtf))}"
+    )
+
+
+def _search_html(
+    s: dict | None, t: dict | None, quick: bool = False, rmtf: dict | None = None
+) -> str:
+    """The design search and the tolerance study; ``rmtf``: the RMTF section's result,
+    whose depth of field is this design's figure of record (the search's own estimate of
+    the base, with fewer rays, stands beside it)."""
     if s is None:
         why = "left out of this quick report" if quick else "needs square holes"
         return f"<h2>Design search and tolerancing</h2><p>({why})</p>"
@@ -180,12 +194,17 @@ def _search_html(s: dict | None, t: dict | None, quick: bool = False) -> str:
                     else "; the surrogate agrees within its accuracy."
                 )
             )
-        yld = "not computed" if t["yield"] is None else f"{t['yield']:.1%}"
+        yld = (
+            'No yield: no spec given (report --spec "dof>=2.2,light>=0.03" asks for one).'
+            if not t.get("spec")
+            else f"Yield for {html.escape(t['spec'])}: "
+            + ("not computed." if t["yield"] is None else f"{t['yield']:.1%}.")
+        )
         tol = f"""<h2>Tolerancing (paper §5)</h2>
 <p>{t["n_samples"]} Monte Carlo samples: misregistration {t["sigmas"]["misregistration_um"]:g}
 um, holes {t["sigmas"]["hole_um"]:g} um, plates and gaps {t["sigmas"]["thickness_um"]:g} um,
 tilt {t["sigmas"]["tilt_deg"]:g} deg (1 sigma), each evaluated by the
-{html.escape(t["meta"]["estimator"])}. Yield for {html.escape(t["spec"])}: {yld}.{nominal}
+{html.escape(t["meta"]["estimator"])}. {yld}{nominal}
 Errors are named from the object side: dx1 is layer 1's x misregistration, slab1 the
 thickness of the slab under layer 1.</p>
 {table(rm, ["Z (mm)", f"RMTF {t['dpi']:g} dpi 5 %", "median", "95 %", "nominal"])}
@@ -198,7 +217,8 @@ thickness of the slab under layer 1.</p>
 {s["meta"]["budget_mm"]:g} mm, diffraction spill below {s["meta"]["max_spill"]:g}; a compact
 run, `opticalstamp search` runs 480), ranked by the {html.escape(s["meta"]["estimator"])}.
 {note} This design: efficiency 1/{1 / ref["efficiency_ratio"]:.0f}, depth of field
-{ref["dof_mm"]:.2f} mm at {s["meta"]["dof_dpi"]:g} dpi, dominated by
+{ref["dof_mm"]:.2f} mm at {s["meta"]["dof_dpi"]:g} dpi by the search's exact check
+({_headline_dof(rmtf)}), dominated by
 {ref.get("dominated_by", 0)} of the designs found (the Fresnel setting of the report does
 not apply). Layers and slabs object side first.</p>
 {
@@ -381,7 +401,7 @@ lands inside the virtual detector (&plusmn;{
 {_quality_html(d, design)}
 {_scans_html(d["scans"], pitch_um, _ghost_span(g))}
 {_restoration_html(d.get("restoration"))}
-{_search_html(d["search"], d["tolerance"], d.get("quick", False))}
+{_search_html(d["search"], d["tolerance"], d.get("quick", False), d["rmtf"])}
 {rodlens_html(d.get("rodlens"), paper=d.get("paper_vs_model") is not None)}
 <p>Generated in {d["elapsed_s"]:.1f} s.</p>
 </body></html>
@@ -805,6 +825,7 @@ def _summary_html(s: dict | None) -> str:
         f"<div style='border:2px solid #444;padding:.5em 1em;margin:1em 0'>"
         f"<h2>Verdict</h2><p>{top}</p>"
         + table(body, head)
+        + (f"<p>{html.escape(s['yield_note'])}.</p>" if s.get("yield_note") else "")
         + f"<p>Ghost light ({s['ghost_fraction']:.3g} of all light) lands no nearer than "
         f"{html.escape(near)} from the pixel's axis: the design is ghost-free within that "
         "radius; own-path light is the signal.</p></div>"

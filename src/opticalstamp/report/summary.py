@@ -111,9 +111,22 @@ def headline_figures(data: dict) -> dict:
     if rod and len(rod["rows"]) > 1:
         values["vs_rod_lens"] = rod["rows"][0]["light_vs_f10"] / rod["rows"][1]["light_vs_f10"]
     tol = data.get("tolerance")
-    if tol and tol.get("spec"):
+    if tol and tol.get("spec") and not _yield_doubt(tol):
         values["yield"] = tol["yield"]
     return values
+
+
+def _yield_doubt(tol: dict) -> str | None:
+    """Why a tolerance yield is no headline: the study's estimator disagrees with the exact
+    tracer on the nominal design beyond its stated accuracy (None: no doubt)."""
+    off = (tol.get("meta") or {}).get("nominal_disagrees") or []
+    if not off:
+        return None
+    return (
+        f"the tolerance yield is left out: its estimator ({tol['meta'].get('estimator', '')}) "
+        f"is off beyond its stated accuracy on the nominal design in {', '.join(off)} "
+        "(tolerance --estimator trace gives one from the exact tracer)"
+    )
 
 
 def summary(data: dict, spec=(), paper: bool = False) -> dict:
@@ -156,6 +169,7 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
         "ghost_fraction": data["ghosts"]["ghost_fraction"],
         "dof_dpi": r["dof_dpi"],
         "tolerance_spec": tol.get("spec") if tol else None,
+        "yield_note": _yield_doubt(tol) if tol and tol.get("spec") else None,
         "spec": [f"{n}{op}{v:g}" for n, op, v in spec],
         "meets_spec": all(c["pass"] for c in checks.values()) if checks else None,
     }
