@@ -424,11 +424,11 @@ def tolerance(
     _check_estimator(estimator)
     _check_dask(dask)
     d = open_design(design)
-    try:
-        parse_spec(spec)
-    except ValueError as err:
-        fail(f"--spec: {err}")
     zs = float_list(z, "--z", 0.0, 10.0)
+    try:
+        parse_spec(spec, zs)
+    except ValueError as err:
+        fail(f"--spec: {str(err).removeprefix('spec: ')}")
     sig = {
         "misregistration_um": misregistration_um,
         "hole_um": hole_um,

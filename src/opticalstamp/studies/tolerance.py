@@ -84,21 +84,33 @@ def _evaluate_payload(payload: dict) -> dict:
     return evaluate_with(apply_errors(base, payload["errors"]), payload["options"])
 
 
-def parse_spec(text: str | None) -> list[tuple[str, str, float]]:
+def parse_spec(text: str | None, z_mm=None) -> list[tuple[str, str, float]]:
     """'dof>=2.2,ghost<=0.2,rmtf@2>=0.3,efficiency>=0.03,ghost_radius>=5' -> [(metric, op,
     value)]: depth of field (mm), ghost fraction, own light vs the F/10 lens, RMTF at Z mm,
-    nearest ghost light on the object plane (mm)."""
+    nearest ghost light on the object plane (mm). ``z_mm``: the distances of the RMTF; an
+    rmtf@Z at another distance is refused."""
     if not text:
         return []
     out = []
     for part in text.replace(" ", "").split(","):
         m = SPEC_RE.match(part)
-        if not m:
+        try:  # "rmtf@1.2.3" and "dof>=..." match the pattern but are no numbers
+            value = float(m.group(3)) if m else None
+            z = float(m.group(1).split("@")[1]) if m and "@" in m.group(1) else None
+        except ValueError:
+            value = None
+        if value is None:
             raise ValueError(
                 f"spec: cannot read {part!r} (use dof, ghost, ghost_radius, efficiency or "
                 "rmtf@Z with >= or <= and a number, comma-separated)"
             )
-        out.append((m.group(1), m.group(2), float(m.group(3))))
+        zs = None if z_mm is None else [f"{float(v):g}" for v in z_mm]
+        if z is not None and zs is not None and f"{z:g}" not in zs:
+            raise ValueError(
+                f"spec: {m.group(1)} asks for the RMTF at Z = {z:g} mm, not one of the "
+                f"distances of the RMTF ({', '.join(zs)} mm)"
+            )
+        out.append((m.group(1), m.group(2), value))
     return out
 
 
@@ -318,7 +330,7 @@ def tolerance(
         raise ValueError("sigmas must be >= 0")
     if samples < 1:
         raise ValueError("samples must be >= 1")
-    spec_l = parse_spec(spec)
+    spec_l = parse_spec(spec, z_mm)
     base = design.model_dump(mode="json", exclude_none=True)
     options = {
         "dpi": dpi,
