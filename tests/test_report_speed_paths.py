@@ -102,7 +102,8 @@ def test_one_trace_gives_the_own_path_and_all_light_lsfs(paper):
     periods = [2 * 25400 / d for d in dpis]
     z = [0.5, 2.0]
     _, lsf_own = traced_folded_lsf_pair(paper, z_mm=z, periods_um=periods, seed=7, n_rays=RAYS)
-    sep = rmtf(paper, dpi=dpis, z_mm=z, ghosts=False, seed=7, n_rays=RAYS)
+    # (on these samples alone: the refinement's extra heights are a separate trace)
+    sep = rmtf(paper, dpi=dpis, z_mm=z, ghosts=False, seed=7, n_rays=RAYS, refine=0)
     assert rmtf_from_lsf(lsf_own, paper, dpi=dpis, seed=7).to_dict() == sep.to_dict()
 
 

@@ -620,6 +620,13 @@ Z = {df["budget"]["z_mm"]:g} mm):</p>
 """
 
 
+def _percent(v: float) -> str:
+    """A percentage to two significant digits, never in exponent form (4.2, 17, 171)."""
+    if v == 0 or not math.isfinite(v):
+        return f"{v:g}"
+    return f"{v:.{max(0, 1 - math.floor(math.log10(abs(v))))}f}"
+
+
 def signal_html(s: dict | None, eff: dict | None = None) -> str:
     """The "Signal and noise" block: a used pixel's electrons and temporal SNR at white and
     18 % grey with the design's electronics, and the exposure and line rate for the target
@@ -647,7 +654,7 @@ def signal_html(s: dict | None, eff: dict | None = None) -> str:
         more = eff["etendue_um2sr"] / s["etendue_own_um2sr"]
         ghost = (
             f". The table counts the own path (the signal); a white page adds its ghost "
-            f"light, {100 * (more - 1):.0f} % more: {num(s['electrons_white'] * more)} e- at "
+            f"light, {_percent(100 * (more - 1))} % more: {num(s['electrons_white'] * more)} e- at "
             "white in all, the figure <code>opticalstamp scan</code> prints"
         )
     target = (
