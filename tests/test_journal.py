@@ -135,9 +135,12 @@ def test_the_lock_is_released_on_an_exception_and_a_caller_may_hold_it(tmp_path)
     j = tmp_path / "j.jsonl"
     with pytest.raises(RuntimeError), journal_lock(j):
         raise RuntimeError("boom")
+    assert not (tmp_path / "j.jsonl.lock").exists()  # removed on the way out
     with journal_lock(j):  # taken again: the first was released
+        assert (tmp_path / "j.jsonl.lock").read_text().startswith("PID ")
         out, _ = _run(j, lock=False)  # the caller holds it (search: across generations)
         with pytest.raises(JournalLocked):  # not re-entrant: a second taker is refused
             _run(j)
+        assert (tmp_path / "j.jsonl.lock").exists()  # a refused taker leaves the holder's
     assert len(out) == 4
-    assert (tmp_path / "j.jsonl.lock").read_text().startswith("PID ")
+    assert not (tmp_path / "j.jsonl.lock").exists()

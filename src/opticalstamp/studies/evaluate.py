@@ -11,7 +11,8 @@
 - Diffraction: the worst per-layer spill outside the holes' geometric shadows.
 
 Every quantity is a plain float in a dict (JSON-ready), so evaluations can run on any
-worker and be journalled.
+worker and be journalled; :func:`check_figures` states the rules those figures keep, by
+which a study's journal is read back (a record that breaks them is evaluated again).
 """
 
 from __future__ import annotations
@@ -28,8 +29,11 @@ from ..analysis.rmtf import DEFAULT_Z_MM, depth_of_field, period_of_dpi, rmtf_cu
 from ..defaults import WINDOW_UM
 from ..design import Design
 from ..raytrace.stack import output_pitch
+from ..validate import InputError, check_number
 
 GHOST_Z_MM = (0.0, 1.0, 2.0, 3.0, 4.0)
+#: the heights (mm) of an evaluation's ``rmtf_at`` unless its options name others
+RMTF_Z_MM = (1.0, 2.0, 3.0)
 #: the RMTF curve of an evaluation runs on past ``z_mm`` until it crosses the threshold,
 #: up to this height (mm): beyond it the depth of field is reported as open-ended
 Z_LIMIT_MM = 20.0
@@ -77,7 +81,7 @@ def evaluate_design(
     *,
     dpi: float = 200.0,
     z_mm=DEFAULT_Z_MM,
-    rmtf_z_mm=(1.0, 2.0, 3.0),
+    rmtf_z_mm=RMTF_Z_MM,
     dof_threshold: float = 0.3,
     near_mm: float = 1.0,
     ghost_rays: int = 1 << 17,
@@ -135,3 +139,100 @@ def evaluate_design(
         "diffraction_spill": spill,
         "stack_um": float(sum(sl.thickness_um for sl in design.slabs)),
     }
+
+
+#: figures of every evaluation: light, depth and thickness, finite and >= 0 (stack > 0)
+_AMOUNTS = (
+    "etendue_own_um2sr",
+    "etendue_ghost_um2sr",
+    "efficiency_ratio",
+    "efficiency_ratio_total",
+    "dof_mm",
+)
+#: how far a fraction may pass 1 by rounding
+_ROUNDING = 1e-9
+
+
+def _figure(res: dict, key: str, lo: float, hi: float | None = None, **kw) -> str | None:
+    """Why ``res[key]`` is not a finite number in [lo, hi] (None: it is)."""
+    if key not in res:
+        return f"{key}: missing"
+    try:
+        check_number(res[key], key, lo, hi, **kw)
+    except InputError as err:
+        return str(err)
+    return None
+
+
+def check_figures(payload: dict, result: dict) -> str | None:
+    """The rules an evaluation's figures keep, as the journal reads them back.
+
+    ``result`` is what :func:`evaluate_design`, :func:`~opticalstamp.studies.verify.
+    evaluate_exact` or (``payload["exact"]``) :func:`~opticalstamp.studies.verify.
+    exact_figures` returns, after JSON (infinities and NaN written as null). The rules:
+    etendues, efficiency ratios and the depth of field are finite numbers >= 0, the stack
+    > 0; the ghost fraction and each RMTF in [0, 1], with an RMTF at every height of
+    ``payload["options"]["rmtf_z_mm"]`` (default :data:`RMTF_Z_MM`); the nearest ghost
+    light >= 0 or null (none lands); ``near_ghost`` and ``dof_open_ended`` true or false;
+    an evaluation's (not ``exact``) diffraction spill >= 0 and its restored depth of
+    field null or >= 0, a number where the options asked for it (``restored``);
+    ``rmtf_se_max`` >= 0 where present. Booleans are not numbers.
+
+    Returns
+    -------
+    str or None
+        None where every rule holds, else the first rule broken, naming the figure and
+        the value (``"dof_mm: must be >= 0 (got -1.0)"``).
+    """
+    if not isinstance(result, dict):
+        return f"the result is not a JSON object (got {type(result).__name__})"
+    opts = payload.get("options") if isinstance(payload, dict) else None
+    opts = opts if isinstance(opts, dict) else {}
+    for key in _AMOUNTS:
+        why = _figure(result, key, 0.0)
+        if why:
+            return why
+    why = _figure(result, "stack_um", 0.0, lo_open=True) or _figure(
+        result, "ghost_fraction", 0.0, 1.0 + _ROUNDING
+    )
+    if why:
+        return why
+    for key in ("near_ghost", "dof_open_ended"):
+        if type(result.get(key)) is not bool:
+            return f"{key}: must be true or false (got {result.get(key, 'nothing')!r})"
+    if "nearest_ghost_mm" not in result:
+        return "nearest_ghost_mm: missing"
+    if result["nearest_ghost_mm"] is not None:  # null: no ghost light lands (infinity)
+        why = _figure(result, "nearest_ghost_mm", 0.0)
+        if why and result["nearest_ghost_mm"] != math.inf:
+            return why
+    rm = result.get("rmtf_at")
+    if not isinstance(rm, dict):
+        return f"rmtf_at: must be an object of RMTF by height (got {rm!r})"
+    heights = opts.get("rmtf_z_mm", RMTF_Z_MM)
+    try:
+        wanted = [f"{float(z):g}" for z in heights]
+    except (TypeError, ValueError):
+        return f"options.rmtf_z_mm: must be a list of heights (got {heights!r})"
+    for z in wanted:
+        if z not in rm:
+            return f"rmtf_at: no RMTF at Z = {z} mm"
+    for z in rm:
+        why = _figure(rm, z, 0.0, 1.0 + _ROUNDING)
+        if why:
+            return f"rmtf_at.{why}"
+    if "rmtf_se_max" in result:
+        why = _figure(result, "rmtf_se_max", 0.0)
+        if why:
+            return why
+    if isinstance(payload, dict) and payload.get("exact") is True:
+        # the exact tracer's figures (verify_front): no spill, no restoration
+        return None
+    why = _figure(result, "diffraction_spill", 0.0)
+    if why:
+        return why
+    if "restored_dof_mm" not in result:
+        return "restored_dof_mm: missing"
+    if result["restored_dof_mm"] is not None or opts.get("restored"):
+        return _figure(result, "restored_dof_mm", 0.0)
+    return None

@@ -4,14 +4,17 @@ A *task* is (key, payload): the key names the evaluation (a hash of what it eval
 and its seed), the payload is what the worker function needs (plain data). Results are
 appended to a JSON-lines journal as they arrive (flushed and synced), so a study that is
 interrupted resumes where it stopped: tasks whose key is already in the journal are not
-run again. Journal lines that are not records (a truncated last line, garbage) are
-skipped with one :class:`JournalWarning`, and a run holds a lock on its journal
-(``<journal>.lock``), so that a second run on the same output stops at once with
-:class:`JournalLocked`. An evaluation that raises is retried ``retries`` times and then
-journalled as failed with its error and payload; when a worker process dies, the tasks
-that were in flight with it are rerun one at a time in pools of their own, so that only
-the task that kills its worker is marked ("worker process died"). Seeds belong to tasks,
-not workers, so results are identical for any number of workers.
+run again. Journal lines that are not records (a truncated last line, garbage) and
+records whose results break the study's rules (``check``: NaN, negative or missing
+figures) are skipped with one :class:`JournalWarning` and evaluated again; a fresh result
+that breaks them is journalled as failed, so a journal reads back the same every time. A
+run holds a lock on its journal (``<journal>.lock``, removed when it ends), so that a
+second run on the same output stops at once with :class:`JournalLocked`. An evaluation
+that raises is retried ``retries`` times and then journalled as failed with its error
+and payload; when a worker process dies, the tasks that were in flight with it are rerun
+one at a time in pools of their own, so that only the task that kills its worker is
+marked ("worker process died"). Seeds belong to tasks, not workers, so results are
+identical for any number of workers.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from ..io.files import to_json
 from ..io.journal import append_record, journal_lock, read_journal
 
 
@@ -48,6 +52,7 @@ def run_tasks(
     progress: bool = False,
     desc: str = "evaluations",
     lock: bool = True,
+    check: Callable[[dict, dict], str | None] | None = None,
 ) -> dict[str, dict]:
     """Run ``fn(payload)`` for every task not yet journalled; return records by key.
 
@@ -72,6 +77,11 @@ def run_tasks(
     lock : bool
         Take the journal's lock for this call (False: the caller holds it, as
         :func:`opticalstamp.studies.search.search` does across its generations).
+    check : callable, optional
+        ``check(payload, result) -> None | str``: the rules of a result (None: kept; else
+        the rule broken). Journalled results that break them are skipped with a
+        :class:`JournalWarning` and evaluated again; a fresh result that breaks them is
+        journalled as failed (``"error": "ResultError: ..."``), not retried.
 
     Returns
     -------
@@ -82,10 +92,16 @@ def run_tasks(
     ------
     JournalLocked
         Before any work, when another process runs on the same journal.
+    InputError
+        Before any work, when the journal is a folder or not a regular file.
     """
     tasks = list(tasks)
+
+    def broken(rec: dict) -> str | None:
+        return None if check is None else check(rec["payload"], rec["result"])
+
     with journal_lock(journal if lock else None):  # before any work: one run at a time
-        done = read_journal(journal)
+        done = read_journal(journal, check=broken if check is not None else None)
         todo = [(k, p) for k, p in tasks if k not in done]
         bar = None
         if progress and todo:
@@ -94,6 +110,13 @@ def run_tasks(
             bar = tqdm(total=len(todo), desc=desc, unit="eval")
 
         def record(key, payload, ok, value, attempts):
+            why = None
+            if ok and not isinstance(value, dict):
+                why = f"the result is not a JSON object (got {type(value).__name__})"
+            elif ok and check is not None:  # the result as the journal will read it back
+                why = check(json.loads(to_json(payload)), json.loads(to_json(value)))
+            if why:  # what the journal would skip on resume is a failure now
+                ok, value = False, f"ResultError: {why}"
             rec = {"key": key, "payload": payload, "ok": ok, "attempts": attempts}
             rec["result" if ok else "error"] = value
             done[key] = rec

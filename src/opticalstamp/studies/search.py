@@ -42,7 +42,7 @@ from ..io.journal import journal_lock
 from ..raytrace.stack import output_pitch
 from ..units import pitch_of_dpi
 from ..validate import InputError, check_number, check_seed
-from .evaluate import SURROGATE
+from .evaluate import SURROGATE, check_figures
 from .runner import run_tasks, task_key
 from .verify import (
     ESTIMATORS,
@@ -288,7 +288,12 @@ def search(
         ref_payload = payload(base_params)
         ref_key = task_key(ref_payload)
         ref_rec = run_tasks(
-            _evaluate_payload, [(ref_key, ref_payload)], workers=1, journal=journal, lock=False
+            _evaluate_payload,
+            [(ref_key, ref_payload)],
+            workers=1,
+            journal=journal,
+            lock=False,
+            check=check_figures,
         )[ref_key]
         for gen in range(generations):
             trials = []
@@ -308,6 +313,7 @@ def search(
                 progress=progress,
                 desc=f"generation {gen + 1}/{generations}",
                 lock=False,
+                check=check_figures,
             )
             for t, params, key in trials:
                 rec = recs.get(key)
@@ -603,6 +609,7 @@ def verify_front(
         journal=journal,
         progress=progress,
         desc="exact re-verification",
+        check=check_figures,
     )
 
     def exact_of(i: int) -> dict | None:

@@ -28,6 +28,7 @@ from ..design import Design, design_from_dict, stack_params, with_stack
 from ..design.resolution import dof_chart_dpi
 from ..raytrace.stack import lattice_of
 from ..validate import check_seed
+from .evaluate import check_figures
 from .runner import run_tasks, task_key
 from .verify import ESTIMATORS, check_estimator, disagreements, evaluate_with, exact_figures
 
@@ -120,7 +121,8 @@ def _metric(res: dict, name: str) -> float:
     if name == "ghost":
         return res["ghost_fraction"]
     if name == "ghost_radius":  # mm; infinite where no ghost light lands at all
-        return res["nearest_ghost_mm"]
+        near = res["nearest_ghost_mm"]
+        return math.inf if near is None else near  # a journal writes infinity as null
     if name == "efficiency":
         return res["efficiency_ratio"]
     z = float(name.split("@")[1])
@@ -361,6 +363,7 @@ def tolerance(
         journal=journal,
         progress=progress,
         desc="tolerance",
+        check=check_figures,
     )
     if not recs[nominal_key]["ok"]:
         raise ValueError(f"the nominal design could not be evaluated: {recs[nominal_key]['error']}")
