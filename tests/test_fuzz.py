@@ -142,7 +142,7 @@ OPTION_CASES = [
     ("tolerance", "--z", FLOATS_BAD(0, 10)),
     ("chart", "--dpi", FLOATS_BAD(100, 4800)),
     ("scan", "--z", FLOATS_BAD(0, 10)),
-    ("scan", "--illuminance-lux", FLOATS_BAD(0, 1e7, lo_open=True)),
+    ("scan", "--illuminance-lux", FLOATS_BAD(1e-3, 1e7)),
     ("scan", "--exposure-ms", FLOATS_BAD(0, 1e4, lo_open=True)),
     ("scan", "--speed-error", FLOATS_BAD(-0.5, 0.5, lo_open=True, hi_open=True)),
     ("scan", "--surround", FLOATS_BAD(0, 1)),

@@ -71,11 +71,14 @@ def _cuda_ready() -> tuple[bool, str]:
 def device_name(name: str | None = None) -> str:
     """``auto``, ``cpu`` or ``cuda``: ``name`` (None: the environment's
     ``OPTICALSTAMP_DEVICE``, else ``auto``), checked but not looked for; InputError for
-    another name (naming OPTICALSTAMP_DEVICE where the name came from it)."""
+    another name, the empty one included (naming OPTICALSTAMP_DEVICE where the name came
+    from it; an empty OPTICALSTAMP_DEVICE is unset, as in a shell's ``VAR= cmd``)."""
     where = "device"
-    if name is None and os.environ.get(ENV):
-        where = ENV  # named where it came from: the environment
-    name = (name or os.environ.get(ENV) or "auto").strip().lower()
+    if name is None:
+        if os.environ.get(ENV):
+            where = ENV  # named where it came from: the environment
+        name = os.environ.get(ENV) or "auto"
+    name = name.strip().lower()
     if name not in DEVICES:
         raise InputError(f"{where}: must be one of {', '.join(DEVICES)} (got {name!r})")
     return name

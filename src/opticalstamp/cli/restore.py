@@ -23,17 +23,24 @@ MethodOpt = Annotated[
 ]
 
 
-def _sidecar(scan: Path) -> dict | None:
-    path = scan.with_suffix(".json")
-    if not path.exists():
-        return None
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as err:
-        fail(f"{path}: cannot read the scan's sidecar ({err})")
-    if not isinstance(data, dict):
-        fail(f"{path}: the scan's sidecar is not a JSON object")
-    return data
+def _sidecar(scan: Path) -> dict:
+    """The scan's sidecar, its fields checked (io/sidecar.py; {} where there is none),
+    with a warning naming both files where it records other images than ``scan``."""
+    from ..imaging.heightmap import Z_RANGE_MM
+    from ..io.sidecar import read_sidecar, sidecar_matches, sidecar_of
+
+    side = read_sidecar(scan, z_range_mm=Z_RANGE_MM)
+    if side is None:
+        return {}
+    if "restoration" not in side and sidecar_matches(scan, side) is False:
+        typer.echo(
+            f"warning: {sidecar_of(scan)} belongs to another image: it records "
+            f"{', '.join(side['files'])} and {scan} is none of them (SHA-256); what it "
+            "states (height, design, seed, settings) is used where the command line does "
+            "not say otherwise (--z, --height-map, --design)",
+            err=True,
+        )
+    return side
 
 
 def check_stamp(d, option: str) -> None:
@@ -64,8 +71,14 @@ def restore_and_write(
     """Restore ``img`` and write the set (PNG, 16-bit TIFF, JSON sidecar); its metadata."""
     from ..imaging.restore import restore_scan
     from ..io.files import encode_png, encode_tiff16, provenance, to_json, write_set
+    from ..io.sidecar import relative_to_sidecar
 
     png, tif, sidecar = image_set_paths(output)
+    extra = extra | {  # paths relative to the sidecar's folder
+        k: relative_to_sidecar(extra[k], sidecar)
+        for k in ("input", "design_source", "height_map_spec")
+        if k in extra
+    }
     try:
         r = restore_scan(img, d, z_mm=z, height_map=hm, method=method, settings=settings, seed=seed)
     except ValueError as err:
@@ -135,7 +148,7 @@ def restore(
     inputs = {scan.resolve(), scan.with_suffix(".json").resolve()}
     if any(p.resolve() in inputs for p in image_set_paths(output)):
         fail(f"-o: {output} would overwrite the scan {scan} or its sidecar; choose another name")
-    side = _sidecar(scan) or {}
+    side = _sidecar(scan)
     if "restoration" in side:
         side = {}  # a restoration's sidecar: it states no scan to restore (see below)
         restored_before = True
@@ -154,7 +167,7 @@ def restore(
             f"--design: {spec} is not the design the scan was made with (fingerprint "
             f"{side.get('design_fingerprint')}); give --design"
         )
-    seed = int(side.get("seed", 0) or 0)
+    seed = side.get("seed") or 0  # checked: an integer in [0, 2^63 - 1]
     try:
         st = ScanSettings.model_validate(side["settings"]) if "settings" in side else None
     except ValidationError as err:

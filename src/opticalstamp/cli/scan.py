@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
+from ..design.electronics import MIN_ILLUMINANCE_LUX
 from ..units import pitch_of_dpi, um_to_mm
 from ..validate import check_output_path
 from .common import (
@@ -61,15 +61,13 @@ def _height(spec: str | None, z: float | None, doc_shape, dpi: float, seed: int)
 
 
 def _illumination_profile(path: Path) -> tuple:
+    from ..io.files import read_illumination_profile
+    from ..validate import InputError
+
     try:
-        arr = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
-    except (OSError, ValueError) as err:
-        fail(f"--illumination: cannot read {path} as CSV of x_mm,relative ({err})")
-    if arr.shape[1] != 2 or arr.shape[0] < 2 or np.any(np.diff(arr[:, 0]) <= 0):
-        fail(f"--illumination: {path} needs two columns x_mm,relative with increasing x")
-    if np.any(arr[:, 1] < 0) or not np.all(np.isfinite(arr)):
-        fail(f"--illumination: {path} has negative or non-finite values")
-    return tuple((float(a), float(b)) for a, b in arr)
+        return read_illumination_profile(path)
+    except InputError as err:
+        fail(f"--illumination: {err}")
 
 
 def _settings(
@@ -91,7 +89,7 @@ def _settings(
 
     if kernel not in KERNELS:
         fail(f"--kernel: expected one of {', '.join(KERNELS)} (got {kernel!r})")
-    profile = None
+    profile, source = None, illumination
     if illumination not in ("uniform", "ripple"):
         profile = _illumination_profile(Path(illumination))
         illumination = "uniform"
@@ -111,6 +109,9 @@ def _settings(
         )
     except ValidationError as err:
         e = err.errors()[0]
+        if e["loc"] and e["loc"][0] == "illumination_profile":  # the file's values
+            msg = e["msg"].removeprefix("Value error, ")
+            fail(f"--illumination: illumination profile {source}: {msg}")
         name = {"illuminance_lux": "illuminance-lux", "exposure_ms": "exposure-ms"}.get(
             str(e["loc"][-1]), str(e["loc"][0]).replace("_", "-")
         )
@@ -162,9 +163,9 @@ def scan(
     illuminance_lux: Annotated[
         float | None,
         typer.Option(
-            help="illuminance on the page (lux), (0, 1e7]; overrides the design's "
+            help="illuminance on the page (lux), 0.001 to 1e7; overrides the design's "
             "[electronics] illuminance_lux (default 10000)",
-            callback=number(0, 1e7, lo_open=True),
+            callback=number(MIN_ILLUMINANCE_LUX, 1e7),
         ),
     ] = None,
     exposure_ms: Annotated[
@@ -207,6 +208,7 @@ def scan(
 
     from ..imaging.scan import simulate_scan
     from ..io.files import encode_png, encode_tiff16, provenance, to_json, write_set
+    from ..io.sidecar import relative_to_sidecar
 
     png, tif, sidecar = image_set_paths(output)
     if restore is not None:
@@ -252,12 +254,12 @@ def scan(
     except ValueError as err:
         fail(str(err))
     meta = provenance(d, seed) | {k: v for k, v in r.meta.items() if k != "settings"}
-    meta |= {
-        "input": str(image),
+    meta |= {  # paths relative to the sidecar's folder, where restore looks for them
+        "input": relative_to_sidecar(str(image), sidecar),
         "output_dpi": r.dpi,
         "settings": r.meta["settings"],
-        "height_map_spec": height_map,
-        "design_source": design,
+        "height_map_spec": relative_to_sidecar(height_map, sidecar),
+        "design_source": relative_to_sidecar(design, sidecar),
     }
     write_set(
         {

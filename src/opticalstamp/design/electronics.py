@@ -42,6 +42,9 @@ def _whole(value: object) -> object:
 
 
 Real = Annotated[float, BeforeValidator(_finite), Field(allow_inf_nan=False)]
+#: The least illuminance on the page (lux): starlight. Less makes no image and underflows
+#: the signal budget (the exposure for a target SNR grows past any float).
+MIN_ILLUMINANCE_LUX = 1e-3
 Whole = Annotated[int, BeforeValidator(_whole)]
 
 
@@ -50,7 +53,8 @@ class Electronics(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    illuminance_lux: Annotated[Real, Field(gt=0, le=1e7)] = 10_000.0
+    # lux; from starlight up: below 1e-3 lux the signal budget's figures underflow
+    illuminance_lux: Annotated[Real, Field(ge=MIN_ILLUMINANCE_LUX, le=1e7)] = 10_000.0
     exposure_ms: Annotated[Real, Field(gt=0, le=1e4)] = 1.0
     photons_per_lumen_s: Annotated[Real, Field(gt=0)] = 9.1e15
     quantum_efficiency: Annotated[Real, Field(gt=0, le=1)] = 0.5

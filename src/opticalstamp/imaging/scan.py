@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from typing import Literal, get_args
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 from scipy import ndimage, signal
 
 from ..defaults import RAYS_MAP
@@ -71,6 +71,30 @@ class ScanSettings(BaseModel):
     kernel: Kernel = "auto"
     kernel_rays: int = Field(RAYS_MAP, ge=1 << 14, le=1 << 30)
     fresnel: bool = False  # Fresnel transmission losses in the traced kernels
+
+    @field_validator("illumination_profile")
+    @classmethod
+    def _profile(cls, rows):
+        """A profile of light along x: two points or more, x increasing, every value
+        finite, the relative light >= 0 and positive somewhere (a lamp that lights
+        nothing gives no signal: its shading correction would divide by nothing)."""
+        if rows is None:
+            return rows
+        arr = np.asarray(rows, dtype=np.float64).reshape(-1, 2)
+        if arr.shape[0] < 2:
+            raise ValueError(f"needs two rows x_mm,relative or more (got {arr.shape[0]})")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError("every x_mm and relative value must be a finite number")
+        if np.any(np.diff(arr[:, 0]) <= 0):
+            raise ValueError("x_mm must increase from row to row")
+        if np.any(arr[:, 1] < 0):
+            raise ValueError(f"relative light must be >= 0 (got {arr[:, 1].min():g})")
+        if not np.any(arr[:, 1] > 0):
+            raise ValueError(
+                "relative light is 0 everywhere: a profile must be positive somewhere (a "
+                "lamp that lights nothing gives no image to correct)"
+            )
+        return rows
 
 
 @dataclass(frozen=True)

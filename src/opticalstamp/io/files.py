@@ -324,6 +324,54 @@ def read_image(
     return arr, use  # PNG stores pixels per metre: 600 dpi reads as 599.9988 (rounded)
 
 
+#: Largest illumination profile read (bytes): a CSV of x_mm,relative pairs, thousands of
+#: rows at most; a device, a folder or a stray huge file is refused before it is read.
+MAX_PROFILE_BYTES = 1 << 20
+
+
+def read_illumination_profile(path: str | Path) -> tuple[tuple[float, float], ...]:
+    """The (x_mm, relative) rows of an illumination profile CSV, read as numbers.
+
+    The file must be a regular file of at most :data:`MAX_PROFILE_BYTES`, UTF-8 text of
+    two comma-separated columns (``#`` starts a comment). The values' rules (increasing x,
+    finite, >= 0, positive somewhere) are
+    :class:`~opticalstamp.imaging.scan.ScanSettings`'s, checked where the settings are made.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the rule: not a regular file (a folder, ``/dev/zero``, a
+        pipe), too large, not text, or not two columns of numbers.
+    """
+    path = Path(path)
+    where = f"illumination profile {path}"
+    if not path.exists():
+        raise InputError(f"{where}: no such file (use uniform, ripple or a CSV of x_mm,relative)")
+    if not path.is_file():
+        raise InputError(f"{where}: not a regular file (a CSV of x_mm,relative)")
+    try:
+        if path.stat().st_size > MAX_PROFILE_BYTES:
+            raise InputError(
+                f"{where}: larger than {MAX_PROFILE_BYTES >> 10} KiB; a profile is a short "
+                "CSV of x_mm,relative"
+            )
+        lines = [
+            ln
+            for ln in path.read_text(encoding="utf-8-sig").splitlines()
+            if ln.split("#")[0].strip()
+        ]
+        if not lines:
+            raise InputError(f"{where}: no rows (a CSV of x_mm,relative, one point a row)")
+        arr = np.loadtxt(lines, delimiter=",", ndmin=2, comments="#")
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        if isinstance(err, InputError):
+            raise
+        raise InputError(f"{where}: cannot read it as a CSV of x_mm,relative ({err})") from None
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise InputError(f"{where}: needs two columns, x_mm,relative (got {arr.shape[-1]})")
+    return tuple((float(a), float(b)) for a, b in arr)
+
+
 def available_memory_bytes() -> int:
     """MemAvailable from /proc/meminfo (or 4 GiB where it cannot be read)."""
     try:
