@@ -202,7 +202,7 @@ def _search_html(
         )
         tol = f"""<h2>Tolerancing (paper §5)</h2>
 <p>{t["n_samples"]} Monte Carlo samples: misregistration {t["sigmas"]["misregistration_um"]:g}
-um, holes {t["sigmas"]["hole_um"]:g} um, plates and gaps {t["sigmas"]["thickness_um"]:g} um,
+um, holes {t["sigmas"]["hole_um"]:g} µm, plates and gaps {t["sigmas"]["thickness_um"]:g} µm,
 tilt {t["sigmas"]["tilt_deg"]:g} deg (1 sigma), each evaluated by the
 {html.escape(t["meta"]["estimator"])}. {yld}{nominal}
 Errors are named from the object side: dx1 is layer 1's x misregistration, slab1 the
@@ -225,8 +225,8 @@ not apply). Layers and slabs object side first.</p>
         table(
             front,
             [
-                "holes (um)",
-                "slabs (um)",
+                "holes (µm)",
+                "slabs (µm)",
                 "efficiency",
                 "DOF (mm)",
                 "DOF, surrogate",
@@ -330,8 +330,8 @@ pixel acceptance half-angle {design.sensor.acceptance_half_angle_deg:g} deg.
 Numbers: <a href="report.json">report.json</a>.</p>
 {_stack_html(d.get("stack"))}
 <h2>Ghost analysis (paper Figs. 2 and 4)</h2>
-<p>Own-path etendue {g["etendue_own_um2sr"]:.4g} &plusmn; {g["etendue_own_se"]:.2g} um&sup2;sr,
-ghost etendue {g["etendue_ghost_um2sr"]:.4g} &plusmn; {g["etendue_ghost_se"]:.2g} um&sup2;sr,
+<p>Own-path etendue {g["etendue_own_um2sr"]:.4g} &plusmn; {g["etendue_own_se"]:.2g} µm²·sr,
+ghost etendue {g["etendue_ghost_um2sr"]:.4g} &plusmn; {g["etendue_ghost_se"]:.2g} µm²·sr,
 ghost fraction {g["ghost_fraction"]:.4g} &plusmn; {g["ghost_fraction_se"]:.2g}
 ({g["n_rays"]:,} importance-sampled rays).</p>
 {
@@ -343,14 +343,14 @@ ghost fraction {g["ghost_fraction"]:.4g} &plusmn; {g["ghost_fraction_se"]:.2g}
                 "se",
                 "share of ghost",
                 "emission angle (deg)",
-                "nearest landing at Z=0 (um)",
+                "nearest landing at Z=0 (µm)",
             ],
         )
     }
 <p>Where ghost light meets the object plane (distance from the pixel's axis) and how much
 lands inside the virtual detector (&plusmn;{
-        g["landing"][next(iter(g["landing"]))]["detector_half_um"]:g} um):</p>
-{table(land_rows, ["Z (mm)", "nearest (um)", "median (um)", "inside detector (um2 sr)"])}
+        g["landing"][next(iter(g["landing"]))]["detector_half_um"]:g} µm):</p>
+{table(land_rows, ["Z (mm)", "nearest (µm)", "median (µm)", "inside detector (µm²·sr)"])}
 <img src="ghosts.png">
 {
         ""
@@ -363,7 +363,7 @@ lands inside the virtual detector (&plusmn;{
                 "own etendue",
                 "ghost etendue",
                 "ghost fraction",
-                "nearest ghost at Z=0 (um)",
+                "nearest ghost at Z=0 (µm)",
             ],
         )
     }
@@ -373,11 +373,11 @@ lands inside the virtual detector (&plusmn;{
             spot_rows,
             [
                 "Z (mm)",
-                "extent x (um)",
-                "extent y (um)",
-                "FWHM x (um)",
-                "FWHM y (um)",
-                f"fraction in centre {pitch_um:.1f} um cell",
+                "extent x (µm)",
+                "extent y (µm)",
+                "FWHM x (µm)",
+                "FWHM y (µm)",
+                f"fraction in centre {pitch_um:.1f} µm cell",
             ],
         )
     }
@@ -387,7 +387,7 @@ lands inside the virtual detector (&plusmn;{
         table(
             psf_rows,
             [
-                "X obj (um)",
+                "X obj (µm)",
                 "Z (mm)",
                 "own pixel",
                 "neighbour, own-path blur",
@@ -462,7 +462,7 @@ losses and glass index; consistent with the paper when the working F-number is w
             st_rows,
             [
                 "holes",
-                "sensitive (um)",
+                "sensitive (µm)",
                 "gap",
                 "Fresnel",
                 "glass n",
@@ -558,8 +558,8 @@ def _quality_html(d: dict, design: Design) -> str:
         else "raw (no shading correction)"
     )
     return f"""<h2>RMTF and depth of field (paper Eq. 1, Fig. 11)</h2>
-<p>Bar charts of {", ".join(f"{k} dpi" for k in keys)} over a {r["window_um"]:g} um window,
-shifted in {r["shift_step_um"]:g} um steps; RMTF is the maximum over shifts ({r["method"]},
+<p>Bar charts of {", ".join(f"{k} dpi" for k in keys)} over a {r["window_um"]:g} µm window,
+shifted in {r["shift_step_um"]:g} µm steps; RMTF is the maximum over shifts ({r["method"]},
 ghost light {"included" if r["ghosts"] else "left out"}, {r["n_rays"]:,} rays per pixel row).
 The merged line {merged}.
 Depth of field: first Z where RMTF on the {r["dof_dpi"]:g}-dpi chart{_chart_why(r, design)}
@@ -575,28 +575,28 @@ how far the paraxial limit is off; the ghost light's uniform background lowers c
 <h3>The {r["dof_dpi"]:g}-dpi chart as the merged line sees it (paper Fig. 12 c, d)</h3>
 <p>Signals of the pixels under the chart at the best shift; the RMTF measured back from
 this waveform as from an image agrees with the computed one.</p>
-{table(prof, ["Z (mm)", "chart shift (um)", "RMTF computed", "RMTF measured from waveform"])}
+{table(prof, ["Z (mm)", "chart shift (µm)", "RMTF computed", "RMTF measured from waveform"])}
 <img src="chart_profiles.png">
 <h2>Light efficiency (paper Fig. 13)</h2>
 <p>Reference: 1:1 lens, f = 10 mm, 2 mm pupil, 20 mm conjugates, a pixel of the
-design's output pitch ({e["meta"]["reference_lens"]["pixel_um"]:.1f} um; the paper's 84.6 um):
-{e["reference_etendue_um2sr"]:.4g} um&sup2;sr (working F {e["reference_f_number"]:g}).</p>
-{table(eff_rows, ["light", "etendue (um2 sr)", "ratio", "1/ratio", "working F"])}
+design's output pitch ({e["meta"]["reference_lens"]["pixel_um"]:.1f} µm; the paper's 84.6 µm):
+{e["reference_etendue_um2sr"]:.4g} µm²·sr (working F {e["reference_f_number"]:g}).</p>
+{table(eff_rows, ["light", "etendue (µm²·sr)", "ratio", "1/ratio", "working F"])}
 {_area_html(area_rows)}
 <img src="efficiency.png">
 {signal_html(d.get("signal"), e)}
 <h2>Diffraction (paper Fig. 6)</h2>
-<p>This design's object-side hole as a slit: {df["slit_um"]:g} um in
+<p>This design's object-side hole as a slit: {df["slit_um"]:g} µm in
 {html.escape(df["budget"]["layers"][0]["layer"])}, point source at Z = {df["z_mm"]:g} mm
-(R1 = {df["r1_um"]:.0f} um), observed at {html.escape(df["budget"]["layers"][0]["next"])}
-(R2 = {df["r2_um"]:.0f} um air-equivalent): geometric edge X =
-{df["geometric_edge_um"]:.2f} um.{
-        " (The paper's Fig. 6, for its 48 um slit at R1 2000 um and R2 658 um: an edge of "
-        "32 um and about 7 % of the light outside it.)"
+(R1 = {df["r1_um"]:.0f} µm), observed at {html.escape(df["budget"]["layers"][0]["next"])}
+(R2 = {df["r2_um"]:.0f} µm air-equivalent): geometric edge X =
+{df["geometric_edge_um"]:.2f} µm.{
+        " (The paper's Fig. 6, for its 48 µm slit at R1 2000 µm and R2 658 µm: an edge of "
+        "32 µm and about 7 % of the light outside it.)"
         if paper
         else ""
     }</p>
-{table(slit_rows, ["wavelength (um)", "Fresnel number", "fraction outside the edge"])}
+{table(slit_rows, ["wavelength (µm)", "Fresnel number", "fraction outside the edge"])}
 <img src="diffraction.png">
 <p>Per-layer budget of this design (2-D holes, point source on the axis at
 Z = {df["budget"]["z_mm"]:g} mm):</p>
@@ -606,8 +606,8 @@ Z = {df["budget"]["z_mm"]:g} mm):</p>
             [
                 "layer",
                 "next aperture",
-                "hole (um)",
-                "wavelength (um)",
+                "hole (µm)",
+                "wavelength (µm)",
                 "Fresnel number",
                 "outside own shadow",
                 "outside next (diffraction)",
@@ -775,14 +775,14 @@ def _stack_html(rows: list[dict] | None) -> str:
         m = r["mask"]
         hole = "reference gap" if r.get("reference_gap") else ""
         if m is not None:
-            hole = f"{m['shape']} {m['width_um']:g} x {m['height_um']:g} um"
+            hole = f"{m['shape']} {m['width_um']:g} x {m['height_um']:g} µm"
             if m["offset_x_um"] or m["offset_y_um"]:
-                hole += f", offset ({m['offset_x_um']:g}, {m['offset_y_um']:g}) um"
+                hole += f", offset ({m['offset_x_um']:g}, {m['offset_y_um']:g}) µm"
         body.append(
             ["" if r["layer"] is None else r["layer"], str(r["medium"]), r["index"],
              r["thickness_um"], r["z_top_um"], hole]
         )  # fmt: skip
-    head = ["layer", "medium", "index", "thickness (um)", "z of top (um)", "mask hole"]
+    head = ["layer", "medium", "index", "thickness (µm)", "z of top (µm)", "mask hole"]
     return (
         "<h2>The design as built</h2><p>Object side first; aperture layers numbered from the "
         "object side as the paper does (layer 1 faces the document).</p>"

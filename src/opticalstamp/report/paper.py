@@ -69,7 +69,7 @@ def paper_vs_model(data: dict) -> list[dict]:
     rows.append(
         _row(
             "§3, Fig. 6",
-            "geometric edge of the 48 um hole's shadow at Z = 1 mm",
+            "geometric edge of the 48 µm hole's shadow at Z = 1 mm",
             32.0,
             edge,
             "um",
@@ -78,7 +78,7 @@ def paper_vs_model(data: dict) -> list[dict]:
     )
     rows.append(
         _row(
-            "§3, Fig. 6", "light diffracted outside that edge (0.4 um)", 0.07, outside, "", "{:.3f}"
+            "§3, Fig. 6", "light diffracted outside that edge (0.4 µm)", 0.07, outside, "", "{:.3f}"
         )
     )
     sp = data.get("spots") or {}
@@ -112,10 +112,10 @@ def paper_vs_model(data: dict) -> list[dict]:
     rows.append(
         _row(
             "§3",
-            "no ghost light on the virtual detector (ghost etendue, um2 sr)",
+            "no ghost light on the virtual detector (ghost etendue, µm²·sr)",
             0.0,
             max(within) if within else None,
-            "um2 sr",
+            "µm²·sr",
             "{:.3g}",
             "the paper's detector size is unstated; ghost light lands further away",
         )

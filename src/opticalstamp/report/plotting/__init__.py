@@ -19,7 +19,7 @@ def _subplots(*args, figsize=None, layout=None, **kw):
 
 
 def plot_spots(res: SpotResult):
-    """Responsivity maps on the output pixel grid (84.6 um for the paper's prototype), one
+    """Responsivity maps on the output pixel grid (84.6 µm for the paper's prototype), one
     panel per Z (paper Fig. 5)."""
     cell = res.meta["cell_um"]
     n = len(res.spots)
@@ -42,14 +42,14 @@ def plot_spots(res: SpotResult):
         ax.set_xlim(-half, half)
         ax.set_ylim(-half, half)
         ax.set_title(
-            f"Z = {s.z_mm:g} mm\nFWHM {s.fwhm_x_um:.0f} um, edge {s.extent_x_um:.0f} um", fontsize=8
+            f"Z = {s.z_mm:g} mm\nFWHM {s.fwhm_x_um:.0f} µm, edge {s.extent_x_um:.0f} µm", fontsize=8
         )
-        ax.set_xlabel("x (um)", fontsize=8)
+        ax.set_xlabel("x (µm)", fontsize=8)
         ax.tick_params(labelsize=7)
-    axes[0][0].set_ylabel("y (um)", fontsize=8)
+    axes[0][0].set_ylabel("y (µm)", fontsize=8)
     fig.suptitle(
         f"{res.design}: spots of pixel {res.pixel['row']}{res.pixel['k']} on the "
-        f"object plane (grid {cell:.1f} um)",
+        f"object plane (grid {cell:.1f} µm)",
         fontsize=9,
     )
     return fig
@@ -60,8 +60,8 @@ def plot_psf(p: PSF):
 
     The frame is where the light lands (the nonzero part of the landing map, one pixel
     pitch around it, and the own pixel), not a fixed window: the prototype's ghost light
-    lands about 100 um off the axis, beyond the sensor's lines. The colour bar gives the
-    density in fraction of the point's emitted power per um^2 (log scale, four decades).
+    lands about 100 µm off the axis, beyond the sensor's lines. The colour bar gives the
+    density in fraction of the point's emitted power per µm² (log scale, four decades).
     """
     from matplotlib import colormaps
     from matplotlib.colors import LogNorm
@@ -154,17 +154,24 @@ def plot_ghosts(res: GhostResult, top: int = 12):
         if res.ghost_ratio_bound is None
         else f"no ghost light found: ghost/own < {res.ghost_ratio_bound:.2g} (95 % bound)"
     )
+    own = f"own {res.etendue_own_um2sr:.3f} µm² sr"
+    dark = res.own_etendue_bound is not None and res.etendue_ghost_um2sr == 0
+    if res.own_etendue_bound is not None:
+        own = f"no own-path light found: own < {res.own_etendue_bound:.2g} µm² sr (95 % bound)"
+    if dark:  # no light at all: one statement, not a row of zeros
+        own, found = own.replace("own-path light", "light") + " and the same bound on ghost", ""
     a1.set_title(
         f"ghost paths: hole offset per mask ({names}; o = other row)\n" * bool(paths)
-        + f"own {res.etendue_own_um2sr:.3f} µm² sr, {found}",
+        + ", ".join(t for t in (own, found) if t),
         fontsize=8,
     )
-    if res.ghost_ratio_bound is not None:
+    if res.ghost_ratio_bound is not None or dark:
         for ax in (a1, a2):
             ax.set_xticks([])
             ax.set_yticks([])
-            ax.text(0.5, 0.5, "no ghost light found", ha="center", va="center",
-                    transform=ax.transAxes, fontsize=9, color="0.4")  # fmt: skip
+            ax.text(0.5, 0.5, "no light found" if dark else "no ghost light found",
+                    ha="center", va="center", transform=ax.transAxes, fontsize=9,
+                    color="0.4")  # fmt: skip
     for i, (z, land) in enumerate(res.landing.items()):
         h = np.asarray(land["etendue_by_distance_um2sr"])  # the last bin: all farther light
         total = h.sum()
@@ -279,14 +286,14 @@ def plot_diffraction(res):
     """Slit diffraction at the next layer, per wavelength (paper Fig. 6b)."""
     fig, ax = _subplots(figsize=(6.4, 3.8))
     for i, (k, v) in enumerate(res.intensity.items()):
-        ax.plot(res.x_um, v, color=f"C{i}", label=f"{k} um: {res.fraction_outside[k]:.1%} outside")
+        ax.plot(res.x_um, v, color=f"C{i}", label=f"{k} µm: {res.fraction_outside[k]:.1%} outside")
     for s in (-1, 1):
         ax.axvline(s * res.geometric_edge_um, color="k", lw=0.7, ls="--")
-    ax.set_xlabel("X at the next layer (um)")
+    ax.set_xlabel("X at the next layer (µm)")
     ax.set_ylabel("I / I0")
     ax.set_title(
-        f"slit {res.slit_um:g} um, Z = {res.z_mm:g} mm (R1 {res.r1_um:.0f} um, "
-        f"R2 {res.r2_um:.0f} um); geometric edge {res.geometric_edge_um:.1f} um",
+        f"slit {res.slit_um:g} µm, Z = {res.z_mm:g} mm (R1 {res.r1_um:.0f} µm, "
+        f"R2 {res.r2_um:.0f} µm); geometric edge {res.geometric_edge_um:.1f} µm",
         fontsize=9,
     )
     ax.legend(fontsize=8)
@@ -667,7 +674,7 @@ def plot_compare_light(rows: list[dict]):
 def _ripple_axes(ax, positions_um, relative, ripple: float, noise: float, name: str = ""):
     """A rod-lens pixel's etendue / mean along one rod period, on ``ax``."""
     ax.plot(positions_um, relative, "o-", ms=3)
-    ax.set_xlabel("pixel centre from a rod axis (um), one rod period")
+    ax.set_xlabel("pixel centre from a rod axis (µm), one rod period")
     ax.set_ylabel("etendue / mean")
     ax.set_title(f"{name}ripple {ripple:.3f} (noise alone ~{noise:.3f})", fontsize=9)
 
@@ -692,8 +699,8 @@ def plot_rod_details(row: dict, psf: dict):
     for h in (0.0, 0.5, 1.0):
         i = int(np.argmin(np.abs(hs - h)))
         axes[1].plot(lsf["x_um"], lsf["per_um"][i], label=f"{hs[i]:g} mm")
-    axes[1].set_xlabel("x from the pixel centre (um)")
-    axes[1].set_ylabel("LSF (1/um, pixel included)")
+    axes[1].set_xlabel("x from the pixel centre (µm)")
+    axes[1].set_ylabel("LSF (1/µm, pixel included)")
     axes[1].legend(fontsize=7)
     m = row["mtf"]
     for key, vals in m["by_dpi"].items():
@@ -708,11 +715,11 @@ def plot_rod_details(row: dict, psf: dict):
         img = np.asarray(at["by_height"][k]["image"])
         ax.imshow(img, extent=ext, origin="lower", cmap="magma", interpolation="nearest")
         ax.set_title(
-            f"point {name} (x = {at['x_um']:.0f} um), {psf['heights_mm'][k]:g} mm: "
-            f"rms {at['by_height'][k]['rms_um']:.0f} um",
+            f"point {name} (x = {at['x_um']:.0f} µm), {psf['heights_mm'][k]:g} mm: "
+            f"rms {at['by_height'][k]['rms_um']:.0f} µm",
             fontsize=8,
         )
-        ax.set_xlabel("x (um)")
+        ax.set_xlabel("x (µm)")
         half = max(150.0, 4 * at["by_height"][k]["rms_um"])
         ax.set_xlim(-half, half)
         ax.set_ylim(-half, half)

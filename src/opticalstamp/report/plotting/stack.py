@@ -61,7 +61,7 @@ def plot_stack(design: Design):
                 if b > a:
                     ax.plot([max(a, -half), min(b, half)], [z, z], "k-", lw=2.5)
             ax.text(
-                half * 1.02, z, f"layer {r['layer']}: {m['width_um']:g} um", fontsize=7, va="center"
+                half * 1.02, z, f"layer {r['layer']}: {m['width_um']:g} µm", fontsize=7, va="center"
             )
         for c in bx + k * s.row_pitch_um:  # the used pixels' sensitive areas
             ax.plot(
@@ -75,8 +75,8 @@ def plot_stack(design: Design):
         ax.set_xlim(-half, half)
         ax.set_ylim(-0.03 * top, top * 1.08)
         ax.set_aspect("equal")
-        ax.set_xlabel("x along the sensor line (um)")
-        ax.set_title(f"section through {name} (y = {by:g} um)", fontsize=9)
-    axes[0][0].set_ylabel("z from the sensor (um)")
+        ax.set_xlabel("x along the sensor line (µm)")
+        ax.set_title(f"section through {name} (y = {by:g} µm)", fontsize=9)
+    axes[0][0].set_ylabel("z from the sensor (µm)")
     fig.suptitle(f"{design.name}: the stack to scale (green: used pixels)", fontsize=10)
     return fig
