@@ -806,6 +806,8 @@ def _summary_html(s: dict | None) -> str:
         shown = f"{'≥ ' if f['bound'] else ''}{one_in(v) if ratio else _fmt(float(v))}{unit}"
         shown = f.get("text") or shown
         c = f["check"]
+        if ratio and c is not None:  # the spec's unit too: a ratio, not 1/N
+            shown += f" (ratio {float(v):.4f})"
         verdict = (
             "-"
             if c is None
