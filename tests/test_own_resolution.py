@@ -199,3 +199,17 @@ def test_no_yield_headline_from_a_doubtful_estimator():
     assert headline_figures(data)["yield"] is None
     data["tolerance"] = {"spec": "", "yield": None, "meta": {}}  # no spec: no yield
     assert headline_figures(data)["yield"] is None
+
+
+def test_search_of_an_off_grid_600_dpi_design_keeps_it_and_warns_not(paper):
+    """A half-scale prototype (225-um gap, off the search's 50-um steps) is searched at its
+    own resolution, judged at 400 dpi, and its warm start joins the grid without an
+    optuna warning (warnings are errors in the tests)."""
+    from opticalstamp.studies.search import search_variants
+
+    half = with_stack(scale_to_dpi(paper, 600), thicknesses_um=(500, 200, 225), name="half")
+    (res,) = search_variants(
+        half, population=4, generations=1, ghost_rays=1 << 14, workers=1
+    ).values()
+    assert res.meta["dof_dpi"] == 400.0 and res.dpi == 600.0
+    assert res.reference["thicknesses_um"] == [500.0, 200.0, 225.0]

@@ -266,14 +266,18 @@ def search(
             save_dataset(
                 search_dataset(res, res.design, seed), variant_path(output, i, len(results))
             )
+    from ..design.resolution import nominal_dpi
+
     r = next(iter(results.values()))
     data = r.to_dict() | {"provenance": provenance(base, seed)}
     if len(results) > 1:
         data["pareto"] = merged_front(results)
         data["variants"] = {k: v.to_dict() for k, v in results.items()}
     lines = [
-        f"{base.name}: {sum(len(v.records) for v in results.values())} designs in "
-        f"{len(results)} variant(s); Pareto front (holes and slabs in µm, object side first)"
+        f"{base.name} ({nominal_dpi(base):g} dpi): "
+        f"{sum(len(v.records) for v in results.values())} designs in "
+        f"{len(results)} variant(s); depth of field on the {r.meta['dof_dpi']:g}-dpi chart "
+        "(RMTF ≥ 0.3); Pareto front (holes and slabs in µm, object side first)"
         + (
             "; every design traced exactly (--estimator trace):"
             if estimator == "trace"

@@ -90,6 +90,15 @@ def default_space(
     return SearchSpace((min_hole_um, float(math.floor(hole_max))), bounds, thickness_step_um)
 
 
+def _on_grid(dist, value: float):
+    """``value`` at the nearest point of an optuna distribution (int or stepped float)."""
+    lo, hi = dist.low, dist.high
+    step = getattr(dist, "step", None) or 1
+    v = min(max(value, lo), hi)
+    v = lo + round((v - lo) / step) * step
+    return int(round(v)) if isinstance(lo, int) else float(v)
+
+
 def _evaluate_payload(payload: dict) -> dict:
     """Worker entry: build the candidate from plain data and evaluate it with the
     payload's estimator (:func:`~opticalstamp.studies.verify.evaluate_with`)."""
@@ -276,12 +285,10 @@ def search(
     p0 = stack_params(design)
     base_params = {f"hole{j + 1}": v for j, v in enumerate(p0["holes_um"])}
     base_params |= {f"slab{j + 1}": v for j, v in enumerate(p0["thicknesses_um"])}
-    if warm_start:  # the base design joins the first generation (NSGA-II breeds from it)
-        start = {
-            k: int(round(v)) if k.startswith("hole") else float(v)
-            for k, v in base_params.items()
-            if k not in pins
-        }
+    if warm_start:  # the base design joins the first generation (NSGA-II breeds from it),
+        # at its nearest point of the search's grid (a base off the grid, a half-scale
+        # 225-um gap on the 50-um steps, is evaluated exactly for reference below)
+        start = {k: _on_grid(dists[k], v) for k, v in base_params.items() if k not in pins}
         study.enqueue_trial(start, skip_if_exists=True)
     with journal_lock(journal):  # one lock for every generation of this run
         # the base design itself, for reference on the front
