@@ -1,0 +1,405 @@
+"""Wave optics of the stack: a used pixel's responsivity by the angular spectrum method.
+
+Scalar waves, thin absorbing masks, incoherent light (DESIGN.md section 3, "Wave optics of
+the stack"; issue 23). The pixel's sensitive area is a set of mutually incoherent points,
+each with a flat angular spectrum over the band |s_x|, |s_y| < B, s = n sin(theta) the
+invariant transverse direction (wavevector k_t = 2 pi s / lambda, conserved at planar
+interfaces). Reverse tracing (paper Fig. 4): the field of each point is stepped up
+through the slabs and multiplied by each mask's transmission on the real staggered
+lattice (rows A and B, misregistration), then through the reference gap and the object
+medium to the object plane at height Z; the responsivity adds in intensity over the
+points.
+
+Normalisation. With the point source's spectrum equal to 1 over the band in spatial
+frequency f = s / lambda, a point field carries the power (2B)^2 / lambda^2, so
+
+    R(X, Y; Z) = lambda^2 integral_A |U(X, Y; x0, y0)|^2 dx0 dy0        (sr)
+
+integrates over the object plane to the pixel's etendue in um^2 sr (a uniform
+Lambertian object of unit radiance gives the pixel that power), the unit of the tracer's
+maps and of :func:`~opticalstamp.analysis.own_etendue.own_etendue`. With no mask the
+integral is A (2B)^2 at every Z; between two apertures the paraxial coupling tends, as B
+grows, to n w1 w2 / L per axis, the geometric etendue (exactly, without band limit).
+
+This module is the separable fast path: the paraxial propagator exp(-i pi lambda d f^2)
+over the reduced (air-equivalent) distance d = sum t / n is separable in x and y; a mask
+is a sum of two separable terms (row A: a comb of rects in x times a rect in y; row B
+the same, offset), the rows do not overlap in y, so the field of a source point is a sum
+of separable terms, one per sequence of rows through the masks (at most rows^masks,
+pruned where their power is negligible), and everything reduces to 1-D FFTs. The
+source integral is Gauss-Legendre over the sensitive width and height; after every mask
+the source points (or modes) of each axis are compressed to the coherent modes that
+carry all but ``mode_tol`` of the power (an SVD over every sequence at once, which keeps
+the cross terms). The full 2-D path (exact propagator, any hole shape) is in
+:mod:`.wave2d`; the sampling rules are in :func:`wave_sampling`.
+
+Fresnel transmission at index changes and multiple reflections are left out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy import fft as sfft
+
+from ..design import Design
+from ..raytrace.stack import lattice_of, output_pitch
+from ..validate import InputError
+from .wavebase import (
+    Plane,
+    WaveSampling,
+    band_integral,
+    fwhm_of,
+    gauss_legendre,
+    kernel,
+    mask_field,
+    object_grid,
+    point_sources,
+    propagate,
+    stack_axes,
+    stack_grid,
+    wave_sampling,
+)
+
+__all__ = ["WaveResponse", "WaveSampling", "wave_response", "wave_sampling"]
+
+
+# -- the separable engine ------------------------------------------------------------------
+@dataclass
+class _Axis:
+    """One axis of the run: grids, transfer functions and mask transmissions."""
+
+    plane: Plane
+    x: np.ndarray  # stack grid (um)
+    trans: list[list[np.ndarray]]  # [mask][row] low-passed transmission on x
+    lit: list[list[bool]]  # [mask][row] whether any hole of that row is within reach
+
+
+def _axis(plane: Plane, smp: WaveSampling) -> _Axis:
+    b = smp.band
+    x = stack_grid(plane.source, plane.heights[-1], smp)
+    trans, lit = [], []
+    for i, rows in enumerate(plane.holes):
+        r_i = plane.heights[i] * b + smp.margin_um  # light in the band stays inside
+        keep, on = [], []
+        for holes in rows:
+            near = (holes[:, 1] > plane.source[0] - r_i) & (holes[:, 0] < plane.source[1] + r_i)
+            keep.append(mask_field(x, holes[near], b, smp.wavelength_um))
+            on.append(bool(near.any()))
+        trans.append(keep)
+        lit.append(on)
+    return _Axis(plane, x, trans, lit)
+
+
+def _gram(fields: list[np.ndarray], step: float, weight: np.ndarray | None = None) -> np.ndarray:
+    """G[j, l] = step * sum_n sum_m u_j[n, m] conj(u_l[n, m]) (times weight[n])."""
+    j = len(fields)
+    g = np.zeros((j, j), dtype=np.complex128)
+    for a in range(j):
+        ua = fields[a] if weight is None else fields[a] * weight[:, None]
+        for b in range(a, j):
+            g[a, b] = np.vdot(fields[b], ua) * step
+            g[b, a] = np.conj(g[a, b])
+    return g
+
+
+def _compress(fields: list[np.ndarray], tol: float) -> list[np.ndarray]:
+    """The same Gram matrices X_jl = u_j u_l^H with fewer columns (modes): the
+    eigenvectors of the modes' Gram matrix over every field at once (the right singular
+    vectors of the stacked fields), keeping all but ``tol`` of the power."""
+    if not fields:
+        return fields
+    g = sum(f.conj().T @ f for f in fields)
+    p, v = np.linalg.eigh(g)
+    p, v = p[::-1], v[:, ::-1]
+    p = np.clip(p, 0.0, None)
+    keep = int(np.searchsorted(np.cumsum(p), (1 - tol) * p.sum())) + 1
+    v = v[:, : max(1, min(keep, p.size))]
+    return [f @ v for f in fields]
+
+
+@dataclass(frozen=True)
+class WaveResponse:
+    """A pixel's responsivity on the object plane by the wave engine.
+
+    Attributes
+    ----------
+    design, fingerprint : the design
+    pixel : {"row", "k", "x_um", "y_um"}
+    z_mm : (nz,) object distances above the reference plane (mm)
+    x_um, y_um : (nx,), (ny,) fine grids on the object plane from the pixel's axis (um)
+    lsf_x, lsf_y : (nz, nx), (nz, ny) marginals of R (um sr per um): the line-spread
+        functions of x (a chart varying along x) and of y
+    etendue_um2sr : (nz,) in-band light on the object plane (um^2 sr)
+    center_cell_fraction : (nz,) share of it within the central output cell
+    budget : per mask: ``incoming``, ``transmitted``, ``in_band`` (um^2 sr) and
+        ``sequences`` (row sequences kept) and ``modes`` ((x, y) coherent modes)
+    sampling : the :class:`WaveSampling` used
+    meta : what else describes the run (propagator, timings)
+    """
+
+    design: str
+    fingerprint: str
+    pixel: dict
+    z_mm: np.ndarray
+    x_um: np.ndarray
+    y_um: np.ndarray
+    lsf_x: np.ndarray
+    lsf_y: np.ndarray
+    etendue_um2sr: np.ndarray
+    center_cell_fraction: np.ndarray
+    budget: list[dict]
+    sampling: WaveSampling
+    terms: tuple = field(default=(), repr=False)
+    meta: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """Summary as plain data (no fine arrays)."""
+        return {
+            "design": self.design,
+            "fingerprint": self.fingerprint,
+            "pixel": self.pixel,
+            "z_mm": self.z_mm.tolist(),
+            "etendue_um2sr": self.etendue_um2sr.tolist(),
+            "center_cell_fraction": self.center_cell_fraction.tolist(),
+            "fwhm_x_um": [fwhm_of(self.x_um, p) for p in self.lsf_x],
+            "fwhm_y_um": [fwhm_of(self.y_um, p) for p in self.lsf_y],
+            "budget": self.budget,
+            "sampling": asdict(self.sampling),
+            "meta": self.meta,
+        }
+
+    def spot(self, iz: int, bin_um: float = 2.0, half_um: float | None = None):
+        """The responsivity map at ``z_mm[iz]`` on square bins (sr): (edges, map[y, x]),
+        edges from the pixel's axis, ``half_um`` half width (default: where the
+        marginals hold all but 1e-4 of the light)."""
+        (x, gx), (y, gy) = self.terms[iz]
+        if half_um is None:
+            half_um = max(
+                _half_width(self.x_um, self.lsf_x[iz]), _half_width(self.y_um, self.lsf_y[iz])
+            )
+        n = int(math.ceil(half_um / bin_um))
+        edges = np.arange(-n, n + 1) * bin_um
+        bx = _bin(x, gx, edges)  # (J, J, nb)
+        by = _bin(y, gy, edges)
+        m = np.einsum("jlx,jly->yx", bx, by).real / (bin_um * bin_um)
+        return edges, m
+
+
+def _half_width(x: np.ndarray, p: np.ndarray, tail: float = 1e-4) -> float:
+    c = np.cumsum(p)
+    c = c / c[-1]
+    lo = x[np.searchsorted(c, tail / 2)]
+    hi = x[min(np.searchsorted(c, 1 - tail / 2), x.size - 1)]
+    return float(max(abs(lo), abs(hi)))
+
+
+def _bin(x: np.ndarray, terms: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Integrals of terms (J, J, n) over the bins ``edges`` (cumulative trapezoid)."""
+    dx = x[1] - x[0]
+    c = (
+        np.concatenate(
+            [
+                np.zeros(terms.shape[:2] + (1,)),
+                np.cumsum((terms[..., 1:] + terms[..., :-1]) / 2, -1),
+            ],
+            axis=-1,
+        )
+        * dx
+    )
+    pos = np.interp(edges, x, np.arange(x.size))
+    i0 = np.clip(np.floor(pos).astype(int), 0, x.size - 2)
+    t = pos - i0
+    ce = c[..., i0] * (1 - t) + c[..., i0 + 1] * t
+    return np.diff(ce, axis=-1)
+
+
+def wave_response(
+    design: Design,
+    z_mm=(0.0, 1.0, 2.0, 3.0),
+    *,
+    pixel: tuple[int, int] = (0, 0),
+    sampling: WaveSampling | None = None,
+    cell_um: float | None = None,
+) -> WaveResponse:
+    """Responsivity of a used pixel on the object plane at each Z: separable paraxial path.
+
+    Parameters
+    ----------
+    design : Design with rectangular (or square) holes
+    z_mm : object distances above the reference plane (mm), each >= 0
+    pixel : (row, k) of the used pixel (0 = A, 1 = B; k = 0 mid-array)
+    sampling : :class:`WaveSampling` (default: :func:`wave_sampling` of the design)
+    cell_um : side of the central cell (default: the output pitch, 84.6 um for the paper)
+
+    Returns
+    -------
+    WaveResponse
+        Marginals on the fine object-plane grids, the in-band light (um^2 sr), the share
+        in the central cell, the power budget mask by mask.
+    """
+    smp = wave_sampling(design) if sampling is None else sampling
+    zs = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
+    if zs.size == 0 or not np.all(np.isfinite(zs)) or zs.min() < 0:
+        raise InputError("z_mm: object distances must be finite and >= 0")
+    lam, b, step = smp.wavelength_um, smp.band, smp.step_um
+    if step > lam / (6 * b) * (1 + 1e-9):
+        raise InputError(
+            f"sampling: step {step:g} um is coarser than lambda / (6 band) = {lam / (6 * b):g} um"
+        )
+    reach = 2 * lattice_of(design).pitch + 4 * (smp.margin_um + design.reference_plane_um * b)
+    planes = stack_axes(design, pixel, reach_um=reach)
+    axes = [_axis(p, smp) for p in planes]
+    n_rows = design.sensor.rows
+    # source points through the first slab(s) to the first mask
+    fields = []
+    for ax, npts in zip(axes, smp.source_points, strict=True):
+        x0, w = gauss_legendre(*ax.plane.source, npts)
+        fields.append(point_sources(ax.x, x0, lam * w, lam, ax.plane.heights[0], b))
+    terms = {(): (fields[0], fields[1])}
+    budget = []
+    heights = planes[0].heights
+    for i in range(heights.size):
+        if i > 0:
+            terms = _step_terms(terms, axes, smp, heights[i] - heights[i - 1])
+        rec = {"mask": i, "incoming": _power(terms, step)}
+        new = {}
+        for hist, (ux, uy) in terms.items():
+            for r in range(n_rows):
+                if not (axes[0].lit[i][r] and axes[1].lit[i][r]):
+                    continue
+                tx, ty = axes[0].trans[i][r], axes[1].trans[i][r]
+                new[hist + (r,)] = (ux * tx[:, None], uy * ty[:, None])
+        rec["transmitted"] = _transmitted(terms, axes, i, n_rows, step)
+        new = _prune(new, step, smp.prune_tol)
+        keys = list(new)
+        cx = _compress([new[k][0] for k in keys], smp.mode_tol)
+        cy = _compress([new[k][1] for k in keys], smp.mode_tol)
+        terms = {k: (cx[j], cy[j]) for j, k in enumerate(keys)}
+        rec["in_band"] = _power(_band_only(terms, axes, smp), step)
+        rec["sequences"] = ["".join("AB"[r] for r in k) for k in keys]
+        rec["modes"] = (int(cx[0].shape[1]), int(cy[0].shape[1])) if keys else (0, 0)
+        budget.append(rec)
+    return _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um)
+
+
+def _step_terms(terms: dict, axes: list[_Axis], smp: WaveSampling, d: float) -> dict:
+    hs = [kernel(ax.x.size, smp.step_um, smp.wavelength_um, d, smp.band) for ax in axes]
+    return {k: (propagate(ux, hs[0]), propagate(uy, hs[1])) for k, (ux, uy) in terms.items()}
+
+
+def _band_only(terms: dict, axes: list[_Axis], smp: WaveSampling) -> dict:
+    return _step_terms(terms, axes, smp, 0.0)
+
+
+def _power(terms: dict, step: float) -> float:
+    """2-D power of a sum of separable terms: sum_jl Gx_jl Gy_jl (um^2 sr)."""
+    if not terms:
+        return 0.0
+    gx = _gram([t[0] for t in terms.values()], step)
+    gy = _gram([t[1] for t in terms.values()], step)
+    return float(np.sum(gx * gy).real)
+
+
+def _transmitted(terms: dict, axes: list[_Axis], i: int, n_rows: int, step: float) -> float:
+    """Power through mask i, midpoint rule with the cells' transmission (|M|^2 = M)."""
+    if not terms:
+        return 0.0
+    ux = [t[0] for t in terms.values()]
+    uy = [t[1] for t in terms.values()]
+    tot = 0.0
+    for r in range(n_rows):
+        gx = _gram(ux, step, axes[0].trans[i][r])
+        gy = _gram(uy, step, axes[1].trans[i][r])
+        tot += float(np.sum(gx * gy).real)
+    return tot
+
+
+def _prune(new: dict, step: float, tol: float) -> dict:
+    pw = {k: np.vdot(u, u).real * np.vdot(v, v).real * step * step for k, (u, v) in new.items()}
+    total = sum(pw.values())
+    return {k: v for k, v in new.items() if total > 0 and pw[k] >= tol * total}
+
+
+def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveResponse:
+    """From the object-side mask through the reference gap and object medium to every Z."""
+    lam, b, step = smp.wavelength_um, smp.band, smp.step_um
+    cell = output_pitch(design) if cell_um is None else float(cell_um)
+    keys = list(terms)
+    grids, spectra = [], []
+    for a, ax in enumerate(axes):
+        d_max = ax.plane.reduced(float(zs.max())) - ax.plane.heights[-1]
+        xf, off = object_grid(ax.x, d_max, smp)
+        spec = []
+        for k in keys:
+            u = np.zeros((xf.size, terms[k][a].shape[1]), dtype=np.complex128)
+            u[off : off + ax.x.size] = terms[k][a]
+            spec.append(sfft.fft(u, axis=0, workers=-1))
+        grids.append(xf)
+        spectra.append(spec)
+    n_z = zs.size
+    lsf = [np.zeros((n_z, g.size)) for g in grids]
+    etendue, cells, kept = np.zeros(n_z), np.zeros(n_z), []
+    for iz, z in enumerate(zs):
+        xy = []
+        for a, ax in enumerate(axes):
+            d = ax.plane.reduced(float(z)) - ax.plane.heights[-1]
+            h = kernel(grids[a].size, step, lam, d, b)[:, None]
+            xy.append(_cross([sfft.ifft(s * h, axis=0, workers=-1) for s in spectra[a]]))
+        gx, gy = xy  # (J, J, n): X_jl and Y_jl
+        tx, ty = gx.sum(-1) * step, gy.sum(-1) * step
+        lsf[0][iz] = np.einsum("jlx,jl->x", gx, ty).real
+        lsf[1][iz] = np.einsum("jly,jl->y", gy, tx).real
+        etendue[iz] = float(np.sum(tx * ty).real)
+        inside = np.sum(
+            band_integral(grids[0], gx, -cell / 2, cell / 2)
+            * band_integral(grids[1], gy, -cell / 2, cell / 2)
+        )
+        cells[iz] = float(inside.real) / etendue[iz] if etendue[iz] > 0 else 0.0
+        kept.append((_crop(grids[0], gx), _crop(grids[1], gy)))
+    lat = lattice_of(design)
+    px, py = (float(v) for v in lat.centers(*pixel))
+    for rec in budget:
+        rec["lost_to_band"] = rec["transmitted"] - rec["in_band"]
+    return WaveResponse(
+        design.name,
+        design.fingerprint(),
+        {"row": "AB"[pixel[0]], "k": pixel[1], "x_um": px, "y_um": py},
+        zs,
+        grids[0],
+        grids[1],
+        lsf[0],
+        lsf[1],
+        etendue,
+        cells,
+        budget,
+        smp,
+        tuple(kept),
+        {
+            "propagator": "paraxial",
+            "path": "separable",
+            "cell_um": cell,
+            "sequences": ["".join("AB"[r] for r in k) for k in keys],
+        },
+    )
+
+
+def _crop(x: np.ndarray, g: np.ndarray, tail: float = 1e-7) -> tuple[np.ndarray, np.ndarray]:
+    """(x, g) cut to where the diagonal terms hold all but ``tail`` of their sum (the
+    cross terms are bounded by them: |X_jl|^2 <= X_jj X_ll)."""
+    env = np.einsum("jjx->x", g).real
+    c = np.cumsum(env)
+    if c[-1] <= 0:
+        return x[:2], g[..., :2]
+    c /= c[-1]
+    i0 = max(int(np.searchsorted(c, tail)) - 1, 0)
+    i1 = min(int(np.searchsorted(c, 1 - tail)) + 2, x.size)
+    return x[i0:i1], g[..., i0:i1]
+
+
+def _cross(u: list[np.ndarray]) -> np.ndarray:
+    """X[j, l, n] = sum_m u_j[n, m] conj(u_l[n, m]), shape (J, J, n)."""
+    a = np.stack(u)  # (J, n, m)
+    return np.einsum("jnm,lnm->jln", a, a.conj(), optimize=True)

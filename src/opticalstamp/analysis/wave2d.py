@@ -1,0 +1,425 @@
+"""The full 2-D path of the wave engine: any hole shape, the exact angular spectrum.
+
+The same physics and normalisation as :mod:`.wave` (read its docstring), on a 2-D grid:
+each slab multiplies the spectrum by exp(2 pi i t sqrt((n / lambda)^2 - |f|^2)) (the
+exact, non-paraxial angular spectrum, Matsushima & Shimobaba 2009, band-limited by the
+domain; ``propagator="paraxial"`` gives exp(-i pi lambda t |f|^2 / n) instead), each
+mask multiplies the field by its transmission on the real lattice, rectangles or
+circles, low-passed exactly to twice the band from its analytic Fourier transform (a
+rectangle's sinc product, a disk's jinc), so no edge is snapped to the grid.
+
+The pixel's incoherent light is carried by coherent modes: the operator A from the
+source points (Gauss-Legendre nodes over the sensitive area) to the field after the
+object-side mask is sampled with random source vectors (a randomized range finder,
+Halko, Martinsson & Tropp 2011) until a fresh block of vectors finds less than ``tol`` of
+its power outside the range found; the range's coherent modes (eigenvectors of
+Q A A^H Q^H) carry the light up to the object plane. The missing power is the estimator
+itself: for Gaussian vectors w, E |(I - Q Q^H) A w|^2 = |(I - Q Q^H) A|_F^2.
+
+The source fields at the first mask are the separable closed forms of
+:func:`.wave.point_sources` (a square band), corrected by the exact-over-paraxial phase
+of the slabs below the first mask (a smooth factor, so the DFT does not see the band's
+hard edge).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import fft as sfft
+from scipy import special
+
+from ..design import Design
+from ..raytrace.stack import lattice_of, output_pitch
+from ..validate import InputError
+from .wavebase import (
+    WaveSampling,
+    band_integral,
+    fwhm_of,
+    gauss_legendre,
+    in_band,
+    object_grid,
+    point_sources,
+    stack_grid,
+    wave_sampling,
+)
+
+PROPAGATORS = ("exact", "paraxial")
+#: Relative power the randomized range finder may leave out, and its block of vectors.
+RANGE_TOL = 1e-6
+BLOCK = 16
+
+
+@dataclass(frozen=True)
+class Hole:
+    """One hole: shape ("rect" or "circle"), centre (um, from the pixel's axis), half
+    width and half height (radius for a circle)."""
+
+    shape: str
+    cx: float
+    cy: float
+    hw: float
+    hh: float
+
+
+@dataclass(frozen=True)
+class Layer:
+    """A mask and the slabs below it (down to the previous mask or the sensor).
+
+    ``slabs``: ((thickness um, index), ...); ``holes``: the holes within reach;
+    ``reduced``: the mask's reduced height above the sensor (sum t / n, um).
+    """
+
+    slabs: tuple[tuple[float, float], ...]
+    holes: tuple[Hole, ...]
+    reduced: float
+
+
+def layers_of(design: Design, pixel: tuple[int, int], reach_um: float) -> list[Layer]:
+    """The masks from the sensor up, each with the slabs below it and its holes whose
+    centre lies within ``reach_um`` of the pixel's axis (both rows of the lattice)."""
+    lat = lattice_of(design)
+    row, k = pixel
+    if not (0 <= row < lat.n_rows and lat.k_lo <= k <= lat.k_hi):
+        raise InputError(f"pixel: no used pixel ({row}, {k})")
+    px, py = (float(v) for v in lat.centers(row, k))
+    out, below, red = [], [], 0.0
+    for sl in design.slabs:
+        n = design.index(sl.medium)
+        below.append((sl.thickness_um, n))
+        red += sl.thickness_um / n
+        m = sl.mask_top
+        if m is None:
+            continue
+        holes = []
+        for r in range(lat.n_rows):
+            cx = lat.row_x[r] + m.offset_x_um - px
+            ks = np.arange(lat.k_lo, lat.k_hi + 1)
+            ks = ks[np.abs(cx + ks * lat.pitch) <= reach_um + lat.pitch]
+            cy = float(lat.row_y[r] + m.offset_y_um - py)
+            shape = "circle" if m.shape == "circle" else "rect"
+            for c in cx + ks * lat.pitch:
+                holes.append(Hole(shape, float(c), cy, m.hole_width_um / 2, m.hole_height_um / 2))
+        out.append(Layer(tuple(below), tuple(holes), red))
+        below = []
+    return out
+
+
+def mask_field_2d(
+    x: np.ndarray, y: np.ndarray, holes, band: float, wavelength_um: float
+) -> np.ndarray:
+    """A mask's transmission on the grid (y, x), low-passed exactly to |lambda nu_x|,
+    |lambda nu_y| <= 2 band from the holes' Fourier transforms (the 2-D counterpart of
+    :func:`.wave.mask_field`): shape (y.size, x.size), real."""
+    dx, dy = x[1] - x[0], y[1] - y[0]
+    nx, ny = sfft.fftfreq(x.size, dx), sfft.fftfreq(y.size, dy)
+    kx = np.abs(wavelength_um * nx) <= 2 * band
+    ky = np.abs(wavelength_um * ny) <= 2 * band
+    fx, fy = nx[kx], ny[ky]
+    a = np.zeros((fy.size, fx.size), dtype=np.complex128)
+    jinc = {}
+    for h in holes:
+        ex = np.exp(-2j * np.pi * fx * (h.cx - x[0]))
+        ey = np.exp(-2j * np.pi * fy * (h.cy - y[0]))
+        if h.shape == "circle":
+            if h.hw not in jinc:
+                rho = np.hypot(fy[:, None], fx[None, :])
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    j = h.hw * special.j1(2 * np.pi * h.hw * rho) / rho
+                jinc[h.hw] = np.where(rho == 0, np.pi * h.hw * h.hw, j)
+            a += jinc[h.hw] * ey[:, None] * ex[None, :]
+        else:
+            sx = 2 * h.hw * np.sinc(2 * h.hw * fx) * ex
+            sy = 2 * h.hh * np.sinc(2 * h.hh * fy) * ey
+            a += sy[:, None] * sx[None, :]
+    full = np.zeros((y.size, x.size), dtype=np.complex128)
+    full[np.ix_(ky, kx)] = a
+    return sfft.ifft2(full, workers=-1).real / (dx * dy)
+
+
+def transfer(
+    x: np.ndarray,
+    y: np.ndarray,
+    slabs,
+    wavelength_um: float,
+    band: float,
+    propagator: str,
+    *,
+    relative: bool = False,
+) -> np.ndarray:
+    """Transfer function through ``slabs`` ((t, n), ...) on the FFT frequencies of the
+    grid, band |lambda f_x|, |lambda f_y| < band (0 outside): shape (y.size, x.size).
+
+    exact: prod exp(2 pi i t (sqrt((n / lambda)^2 - f^2) - n / lambda)); paraxial:
+    prod exp(-i pi lambda t f^2 / n). ``relative``: exact over paraxial (no band).
+    """
+    lam = wavelength_um
+    fx = sfft.fftfreq(x.size, x[1] - x[0])[None, :]
+    fy = sfft.fftfreq(y.size, y[1] - y[0])[:, None]
+    f2 = fx * fx + fy * fy
+    phase = np.zeros_like(f2)
+    for t, n in slabs:
+        par = -np.pi * lam * t * f2 / n
+        if propagator == "paraxial" and not relative:
+            phase += par
+            continue
+        k = n / lam
+        ex = 2 * np.pi * t * (np.sqrt(np.maximum(k * k - f2, 0.0)) - k)
+        phase += ex - par if relative else ex
+    h = np.exp(1j * phase)
+    if relative:
+        return h
+    inside = in_band(fx, lam, band) & in_band(fy, lam, band)
+    return np.where(inside, h, 0.0)
+
+
+@dataclass
+class _Stack:
+    """What the operator A needs: grids, source fields, transfer functions, masks."""
+
+    x: np.ndarray
+    y: np.ndarray
+    ux: np.ndarray  # (nx, n0x) source fields at the first mask, x
+    uy: np.ndarray  # (ny, n0y)
+    first: np.ndarray | None  # exact-over-paraxial factor below the first mask
+    masks: list[np.ndarray]
+    steps: list[np.ndarray]  # transfer to mask i from mask i - 1 (i >= 1)
+
+    def forward(self, w: np.ndarray) -> np.ndarray:
+        """Source amplitudes w (k, n0y, n0x) -> fields after the top mask (k, ny, nx)."""
+        f = np.einsum("ya,kab,xb->kyx", self.uy, w, self.ux, optimize=True)
+        if self.first is not None:
+            f = sfft.ifft2(sfft.fft2(f, workers=-1) * self.first, workers=-1)
+        f *= self.masks[0]
+        for m, h in zip(self.masks[1:], self.steps, strict=True):
+            f = sfft.ifft2(sfft.fft2(f, workers=-1) * h, workers=-1)
+            f *= m
+        return f
+
+    def adjoint(self, g: np.ndarray) -> np.ndarray:
+        """Fields after the top mask (k, ny, nx) -> source amplitudes (k, n0y, n0x)."""
+        g = g * self.masks[-1]
+        for m, h in zip(self.masks[-2::-1], self.steps[::-1], strict=True):
+            g = sfft.ifft2(sfft.fft2(g, workers=-1) * h.conj(), workers=-1)
+            g *= m
+        if self.first is not None:
+            g = sfft.ifft2(sfft.fft2(g, workers=-1) * self.first.conj(), workers=-1)
+        return np.einsum("ya,kyx,xb->kab", self.uy.conj(), g, self.ux.conj(), optimize=True)
+
+
+def _stack(design, pixel, smp: WaveSampling, propagator: str) -> tuple[_Stack, list[Layer]]:
+    lam, b = smp.wavelength_um, smp.band
+    reach = 2 * lattice_of(design).pitch + 4 * (smp.margin_um + design.reference_plane_um * b)
+    layers = layers_of(design, pixel, reach)
+    s = design.sensor
+    src = [(-s.sensitive_width_um / 2, s.sensitive_width_um / 2)]
+    src.append((-s.sensitive_height_um / 2, s.sensitive_height_um / 2))
+    top = layers[-1].reduced
+    x, y = stack_grid(src[0], top, smp), stack_grid(src[1], top, smp)
+    fields = []
+    for g, (lo, hi), npts in zip((x, y), src, smp.source_points, strict=True):
+        x0, w = gauss_legendre(lo, hi, npts)
+        fields.append(point_sources(g, x0, lam * w, lam, layers[0].reduced, b))
+    first = None
+    if propagator == "exact":
+        first = transfer(x, y, layers[0].slabs, lam, b, propagator, relative=True)
+    masks = []
+    for lay in layers:
+        r_i = lay.reduced * b + smp.margin_um + max(max(h.hw, h.hh) for h in lay.holes)
+        near = [
+            h
+            for h in lay.holes
+            if src[0][0] - r_i < h.cx < src[0][1] + r_i and src[1][0] - r_i < h.cy < src[1][1] + r_i
+        ]
+        masks.append(mask_field_2d(x, y, near, b, lam))
+    steps = [transfer(x, y, lay.slabs, lam, b, propagator) for lay in layers[1:]]
+    return _Stack(x, y, fields[0], fields[1], first, masks, steps), layers
+
+
+def coherent_modes(
+    st: _Stack, *, tol: float = RANGE_TOL, block: int = BLOCK, seed: int = 0, max_modes=4096
+) -> tuple[np.ndarray, dict]:
+    """Coherent modes of the light after the top mask: (r, ny, nx) fields whose summed
+    intensities are the pixel's (um^2 sr per um^2), and what the range finder did.
+
+    Blocks of complex Gaussian source vectors are pushed through A until a fresh block
+    finds, on average, less than ``tol`` of the mean power of A w outside the range kept
+    (an unbiased estimate of the relative Frobenius power left out); then B = Q A by the
+    adjoint and the eigenvectors of B B^H give the modes, the weakest dropped while
+    their power stays below ``tol``.
+    """
+    rng = np.random.default_rng(seed)
+    n0y, n0x = st.uy.shape[1], st.ux.shape[1]
+    basis: list[np.ndarray] = []
+    total, missing, tries = 0.0, np.inf, 0
+    while missing > tol * total and len(basis) < max_modes:
+        w = rng.standard_normal((block, n0y, n0x)) + 1j * rng.standard_normal((block, n0y, n0x))
+        y = st.forward(w / np.sqrt(2)).reshape(block, -1)
+        tries += 1
+        total += (np.vdot(y, y).real / block - total) / tries  # running mean of |A w|^2
+        if basis:
+            q = np.array(basis)
+            for _ in range(2):
+                y = y - (y @ q.conj().T) @ q
+        missing = np.vdot(y, y).real / block
+        qy, rr = np.linalg.qr(y.T)
+        good = np.abs(np.diag(rr)) > 1e-12 * max(1.0, np.abs(np.diag(rr)).max(initial=0))
+        basis.extend(qy.T[good])
+    q = np.array(basis)
+    b = st.adjoint(q.reshape(len(basis), st.y.size, st.x.size))  # rows: A^H e_i
+    bm = b.reshape(len(basis), -1).conj()  # B = E^H A, (r, n_src)
+    p, v = np.linalg.eigh(bm @ bm.conj().T)
+    p, v = np.clip(p[::-1], 0, None), v[:, ::-1]
+    keep = int(np.searchsorted(np.cumsum(p), (1 - tol) * p.sum())) + 1
+    keep = max(1, min(keep, p.size))
+    modes = (v[:, :keep] * np.sqrt(p[:keep])).T @ q
+    info = {
+        "range": len(basis),
+        "modes": keep,
+        "blocks": tries,
+        "missing_estimate": missing / total,
+    }
+    return modes.reshape(keep, st.y.size, st.x.size), info
+
+
+@dataclass(frozen=True)
+class WaveMaps:
+    """A pixel's responsivity on the object plane by the 2-D path (cf.
+    :class:`.wave.WaveResponse`): marginals on the fine grids, the in-band light, the
+    central-cell share, binned maps ``maps`` (nz, nb, nb) in sr on ``edges_um``."""
+
+    design: str
+    fingerprint: str
+    pixel: dict
+    z_mm: np.ndarray
+    x_um: np.ndarray
+    y_um: np.ndarray
+    lsf_x: np.ndarray
+    lsf_y: np.ndarray
+    etendue_um2sr: np.ndarray
+    center_cell_fraction: np.ndarray
+    edges_um: np.ndarray
+    maps: np.ndarray
+    sampling: WaveSampling
+    meta: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {
+            "design": self.design,
+            "fingerprint": self.fingerprint,
+            "pixel": self.pixel,
+            "z_mm": self.z_mm.tolist(),
+            "etendue_um2sr": self.etendue_um2sr.tolist(),
+            "center_cell_fraction": self.center_cell_fraction.tolist(),
+            "fwhm_x_um": [fwhm_of(self.x_um, p) for p in self.lsf_x],
+            "fwhm_y_um": [fwhm_of(self.y_um, p) for p in self.lsf_y],
+            "meta": self.meta,
+        }
+
+
+def wave_response_2d(
+    design: Design,
+    z_mm=(0.0, 1.0),
+    *,
+    pixel: tuple[int, int] = (0, 0),
+    sampling: WaveSampling | None = None,
+    propagator: str = "exact",
+    tol: float = RANGE_TOL,
+    seed: int = 0,
+    cell_um: float | None = None,
+    bin_um: float = 2.0,
+    map_half_um: float = 200.0,
+) -> WaveMaps:
+    """Responsivity of a used pixel on the object plane at each Z: full 2-D path.
+
+    Parameters
+    ----------
+    design : Design (square, rectangular or circular holes)
+    z_mm : object distances above the reference plane (mm)
+    pixel : (row, k) of the used pixel
+    sampling : :class:`~opticalstamp.analysis.wave.WaveSampling` (default: the design's)
+    propagator : "exact" (angular spectrum, per slab) or "paraxial" (the separable
+        path's propagator, for checks)
+    tol : relative power the coherent modes may leave out (:func:`coherent_modes`)
+    seed : seed of the range finder's random vectors
+    cell_um : side of the central cell (default: the output pitch)
+    bin_um, map_half_um : bins and half width (um) of the maps
+    """
+    if propagator not in PROPAGATORS:
+        raise InputError(f"propagator: one of {', '.join(PROPAGATORS)} (got {propagator!r})")
+    smp = wave_sampling(design) if sampling is None else sampling
+    zs = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
+    if zs.size == 0 or not np.all(np.isfinite(zs)) or zs.min() < 0:
+        raise InputError("z_mm: object distances must be finite and >= 0")
+    lam, b, step = smp.wavelength_um, smp.band, smp.step_um
+    if step > lam / (6 * b) * (1 + 1e-9):
+        raise InputError(f"sampling: step {step:g} um is coarser than lambda / (6 band)")
+    st, layers = _stack(design, pixel, smp, propagator)
+    modes, info = coherent_modes(st, tol=tol, seed=seed)
+    gap = design.reference_gap
+    n_obj = design.index(design.object_medium)
+    top_red = gap.thickness_um / design.index(gap.medium)
+    d_max = top_red + float(zs.max()) * 1000.0 / n_obj
+    xf, ox = object_grid(st.x, d_max, smp)
+    yf, oy = object_grid(st.y, d_max, smp)
+    cell = output_pitch(design) if cell_um is None else float(cell_um)
+    nb = int(math.ceil(map_half_um / bin_um))
+    edges = np.arange(-nb, nb + 1) * bin_um
+    n_z = zs.size
+    lsf_x, lsf_y = np.zeros((n_z, xf.size)), np.zeros((n_z, yf.size))
+    etendue, cells = np.zeros(n_z), np.zeros(n_z)
+    maps = np.zeros((n_z, edges.size - 1, edges.size - 1))
+    spec = []
+    for m in modes:
+        u = np.zeros((yf.size, xf.size), dtype=np.complex128)
+        u[oy : oy + st.y.size, ox : ox + st.x.size] = m
+        spec.append(sfft.fft2(u, workers=-1))
+    for iz, z in enumerate(zs):
+        slabs = [(gap.thickness_um, design.index(gap.medium)), (z * 1000.0, n_obj)]
+        h = transfer(xf, yf, slabs, lam, b, propagator)
+        inten = np.zeros((yf.size, xf.size))
+        for s in spec:
+            inten += np.abs(sfft.ifft2(s * h, workers=-1)) ** 2
+        lsf_x[iz] = inten.sum(axis=0) * step
+        lsf_y[iz] = inten.sum(axis=1) * step
+        etendue[iz] = inten.sum() * step * step
+        in_x = band_integral(xf, inten, -cell / 2, cell / 2)  # (ny,)
+        cells[iz] = float(band_integral(yf, in_x.real, -cell / 2, cell / 2).real) / etendue[iz]
+        maps[iz] = _binned(xf, yf, inten, edges) / (bin_um * bin_um)
+    lat = lattice_of(design)
+    px, py = (float(v) for v in lat.centers(*pixel))
+    return WaveMaps(
+        design.name,
+        design.fingerprint(),
+        {"row": "AB"[pixel[0]], "k": pixel[1], "x_um": px, "y_um": py},
+        zs,
+        xf,
+        yf,
+        lsf_x,
+        lsf_y,
+        etendue,
+        cells,
+        edges,
+        maps,
+        smp,
+        {"propagator": propagator, "path": "2d", "cell_um": cell, "grid": (st.y.size, st.x.size)}
+        | info,
+    )
+
+
+def _binned(x: np.ndarray, y: np.ndarray, inten: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Integrals of the intensity (y, x) over the square bins ``edges`` x ``edges``
+    (cumulative trapezoid along each axis, interpolated at the edges)."""
+    return _axis_bins(y, _axis_bins(x, inten, edges).T, edges).T
+
+
+def _axis_bins(v: np.ndarray, g: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Integrals over the bins ``edges`` along the last axis of ``g`` (grid ``v``)."""
+    c = np.cumsum((g[..., 1:] + g[..., :-1]) / 2, axis=-1) * (v[1] - v[0])
+    c = np.concatenate([np.zeros(g.shape[:-1] + (1,)), c], axis=-1)
+    pos = np.interp(edges, v, np.arange(v.size))
+    i0 = np.clip(np.floor(pos).astype(int), 0, v.size - 2)
+    t = pos - i0
+    return np.diff(c[..., i0] * (1 - t) + c[..., i0 + 1] * t, axis=-1)

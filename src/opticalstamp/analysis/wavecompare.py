@@ -1,0 +1,284 @@
+"""Ray against wave: one design's light, spot and RMTF by the tracer and the wave engine.
+
+The wave engine (:mod:`.wave`, separable paraxial path) carries the light whose
+invariant direction lies in its band, |s_x|, |s_y| < B: the own path and the near
+crosstalk through neighbouring holes. The ray figures compared with it are the tracer's
+rays in the same band (own path and near ghosts; s is conserved through the stack, so
+the band is the same test at every plane), and the own path's exact etendue
+(:func:`~opticalstamp.analysis.own_etendue.own_etendue`) for reference. Both sides give,
+at each Z: the light (um^2 sr), the FWHM of the x line-spread function, the share of the
+light in the central output cell, and the RMTF on the design's depth-of-field chart
+(:func:`~opticalstamp.design.resolution.dof_chart_dpi`) from the LSFs of rows A and B
+folded onto its period (:func:`~opticalstamp.analysis.rmtf.rmtf_curves`, shading
+corrected, max over chart shifts).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..defaults import RAYS_LSF
+from ..design import Design
+from ..design.resolution import dof_chart_dpi
+from ..raytrace.pixel import PixelTracer, Sampling
+from ..raytrace.stack import lattice_of, output_pitch
+from ..units import period_of_dpi
+from .lsf import FOLD_BIN_UM, FoldedLSF
+from .own_etendue import own_etendue, rectangular_holes
+from .rmtf import rmtf_curves
+from .wave import WaveResponse, wave_response
+from .wavebase import WaveSampling, fresnel_numbers, fwhm_of, wave_sampling
+
+#: bin of the traced line-spread functions (um)
+RAY_BIN_UM = 1.0
+
+
+def fold(x_um: np.ndarray, lsf: np.ndarray, period_um: float, n_bins: int) -> np.ndarray:
+    """LSF samples (um sr per um) on the uniform grid ``x_um`` (from the pixel's axis)
+    folded modulo ``period_um`` into ``n_bins`` equal bins of phase: (n_bins,) um^2 sr.
+    Each bin's integral is exact for the piecewise-linear interpolant (cumulative
+    trapezoid at the bin edges), so no sample is snapped to a bin."""
+    dx = x_um[1] - x_um[0]
+    c = np.concatenate([[0.0], np.cumsum((lsf[1:] + lsf[:-1]) / 2) * dx])
+    step = period_um / n_bins
+    k0 = int(np.floor(x_um[0] / step))
+    k1 = int(np.ceil(x_um[-1] / step))
+    edges = np.arange(k0, k1 + 1) * step
+    pos = np.clip((edges - x_um[0]) / dx, 0, x_um.size - 1)
+    i0 = np.clip(np.floor(pos).astype(int), 0, x_um.size - 2)
+    t = pos - i0
+    ce = c[i0] * (1 - t) + c[i0 + 1] * t
+    out = np.zeros(n_bins)
+    np.add.at(out, np.arange(k0, k1) % n_bins, np.diff(ce))
+    return out
+
+
+def _n_bins(period_um: float) -> int:
+    return max(8, int(round(period_um / FOLD_BIN_UM)))
+
+
+@dataclass(frozen=True)
+class RayInBand:
+    """The tracer's light in the band, one pixel: light (um^2 sr) own / near ghost / all
+    traced, and per Z the x line-spread function on ``x_um`` bins, the centre-cell
+    share and the LSF folded onto ``period_um``."""
+
+    band: float
+    own_um2sr: float
+    near_um2sr: float
+    traced_um2sr: float
+    x_um: np.ndarray
+    lsf_x: np.ndarray  # (nz, nx) um sr per um
+    center_cell_fraction: np.ndarray
+    folded: np.ndarray  # (nz, n_bins)
+
+
+def ray_in_band(
+    design: Design,
+    z_mm,
+    band: float,
+    *,
+    pixel: tuple[int, int] = (0, 0),
+    period_um: float,
+    n_rays: int = RAYS_LSF,
+    seed: int = 0,
+    cell_um: float | None = None,
+    tracer: PixelTracer | None = None,
+) -> RayInBand:
+    """Tally a pixel's traced rays whose |s_x|, |s_y| < ``band`` at each object distance.
+
+    Parameters
+    ----------
+    design, z_mm, pixel : as :func:`~opticalstamp.analysis.spots.spots`
+    band : the wave engine's band
+    period_um : chart period the LSF is folded onto
+    n_rays, seed : the tracer's sampling (importance sampled, exact 3-D refraction)
+    cell_um : side of the central cell (default: the output pitch)
+    """
+    zs = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
+    tr = tracer if tracer is not None else PixelTracer(design, Sampling(n_rays, seed))
+    cell = output_pitch(design) if cell_um is None else float(cell_um)
+    reach = (design.reference_plane_um + zs.max() * 1000.0) * band / np.sqrt(1 - band**2)
+    half = np.ceil((reach + lattice_of(design).pitch) / RAY_BIN_UM) * RAY_BIN_UM
+    edges = np.arange(-half, half + RAY_BIN_UM / 2, RAY_BIN_UM)
+    nb = _n_bins(period_um)
+    lsf = np.zeros((zs.size, edges.size - 1))
+    folded = np.zeros((zs.size, nb))
+    inside = np.zeros(zs.size)
+    own = near = traced = 0.0
+    for pb in tr.trace(pixel, n_rays):
+        b = pb.rays
+        ok = (np.abs(b.sx) < band) & (np.abs(b.sy) < band)
+        w = pb.w
+        traced += w.sum()
+        own += w[ok & pb.own].sum()
+        near += w[ok & ~pb.own].sum()
+        w = w[ok]
+        for iz, z in enumerate(zs):
+            dx, dy = pb.offsets(z * 1000.0)
+            dx, dy = dx[ok], dy[ok]
+            lsf[iz] += np.histogram(dx, edges, weights=w)[0]
+            folded[iz] += np.histogram(np.mod(dx, period_um), nb, (0.0, period_um), weights=w)[0]
+            inside[iz] += w[(np.abs(dx) <= cell / 2) & (np.abs(dy) <= cell / 2)].sum()
+    total = own + near
+    return RayInBand(
+        band,
+        own / n_rays,
+        near / n_rays,
+        traced / n_rays,
+        0.5 * (edges[1:] + edges[:-1]),
+        lsf / (n_rays * RAY_BIN_UM),
+        inside / total if total > 0 else np.zeros(zs.size),
+        folded / n_rays,
+    )
+
+
+@dataclass(frozen=True)
+class WaveRayComparison:
+    """Ray and wave figures of one design at each Z (see the module's docstring)."""
+
+    design: str
+    fingerprint: str
+    z_mm: list[float]
+    fresnel: list[dict]
+    sampling: dict
+    dof_dpi: float
+    period_um: float
+    own_exact_um2sr: float | None
+    ray: dict
+    wave: dict
+    difference: dict
+    budget: list[dict]
+    meta: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _rmtf(design: Design, zs, per: float, folded_rows: list[np.ndarray], method: str) -> list:
+    lat = lattice_of(design)
+    rows = [(float(lat.row_x[r]), float(lat.row_y[r])) for r in range(design.sensor.rows)]
+    h = np.stack(folded_rows)[:, None]  # (rows, 1, nz, nb)
+    lsf = FoldedLSF(np.asarray(zs, float), np.array([per]), rows, [h], method, 0, False, False)
+    return rmtf_curves(lsf, design)["max"][0].tolist()
+
+
+def compare_wave_ray(
+    design: Design,
+    z_mm=(0.0, 1.0, 2.0, 3.0),
+    *,
+    sampling: WaveSampling | None = None,
+    n_rays: int = RAYS_LSF,
+    seed: int = 0,
+    dof_dpi: float | None = None,
+) -> WaveRayComparison:
+    """Ray against wave for ``design`` at the object distances ``z_mm`` (mm).
+
+    The wave figures come from :func:`~opticalstamp.analysis.wave.wave_response` for the
+    pixel of each row (rectangular holes), the ray figures from :func:`ray_in_band`
+    with ``n_rays`` per row. Differences are wave / ray - 1 for the light and the FWHM,
+    wave - ray for the centre-cell share and the RMTF.
+    """
+    smp = wave_sampling(design) if sampling is None else sampling
+    zs = [float(z) for z in z_mm]
+    dpi = float(dof_chart_dpi(design) if dof_dpi is None else dof_dpi)
+    per = period_of_dpi(dpi)
+    nb = _n_bins(per)
+    rows = range(design.sensor.rows)
+    t0 = time.perf_counter()
+    waves: list[WaveResponse] = [
+        wave_response(design, zs, pixel=(r, 0), sampling=smp) for r in rows
+    ]
+    t_wave = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    tr = PixelTracer(design, Sampling(n_rays, seed))
+    rays = [
+        ray_in_band(design, zs, smp.band, pixel=(r, 0), period_um=per, n_rays=n_rays, tracer=tr)
+        for r in rows
+    ]
+    t_ray = time.perf_counter() - t0
+    wa, ra = waves[0], rays[0]
+    w_fold = [np.array([fold(w.x_um, p, per, nb) for p in w.lsf_x]) for w in waves]
+    wave = {
+        "light_um2sr": float(wa.etendue_um2sr[0]),
+        "fwhm_x_um": [fwhm_of(wa.x_um, p) for p in wa.lsf_x],
+        "center_cell_fraction": wa.center_cell_fraction.tolist(),
+        "rmtf": _rmtf(design, zs, per, w_fold, "wave"),
+        "lost_to_band_top_um2sr": wa.budget[-1]["lost_to_band"],
+    }
+    ray = {
+        "light_um2sr": ra.own_um2sr + ra.near_um2sr,
+        "own_in_band_um2sr": ra.own_um2sr,
+        "near_um2sr": ra.near_um2sr,
+        "traced_um2sr": ra.traced_um2sr,
+        "fwhm_x_um": [fwhm_of(ra.x_um, p) for p in ra.lsf_x],
+        "center_cell_fraction": ra.center_cell_fraction.tolist(),
+        "rmtf": _rmtf(design, zs, per, [r.folded for r in rays], "trace"),
+        "n_rays": n_rays,
+        "seed": seed,
+    }
+    own = own_etendue(design) if rectangular_holes(design) else None
+    diff = {
+        "light": wave["light_um2sr"] / ray["light_um2sr"] - 1,
+        "light_vs_own_exact": None if own is None else wave["light_um2sr"] / own - 1,
+        "fwhm_x": [w / r - 1 for w, r in zip(wave["fwhm_x_um"], ray["fwhm_x_um"], strict=True)],
+        "center_cell_fraction": [
+            w - r
+            for w, r in zip(wave["center_cell_fraction"], ray["center_cell_fraction"], strict=True)
+        ],
+        "rmtf": [w - r for w, r in zip(wave["rmtf"], ray["rmtf"], strict=True)],
+    }
+    return WaveRayComparison(
+        design.name,
+        design.fingerprint(),
+        zs,
+        fresnel_numbers(design, smp.wavelength_um),
+        asdict(smp),
+        dpi,
+        per,
+        own,
+        ray,
+        wave,
+        diff,
+        wa.budget,
+        {"seconds_wave": t_wave, "seconds_ray": t_ray, "rows": len(rows)},
+    )
+
+
+def comparison_lines(c: WaveRayComparison) -> list[str]:
+    """The comparison as lines of text for the terminal."""
+    s = c.sampling
+    out = [
+        f"{c.design}: ray vs wave at {s['wavelength_um']:g} µm, band |s_x|, |s_y| < "
+        f"{s['band']:.3f} (grid {s['step_um']:.3f} µm, {s['source_points'][0]}×"
+        f"{s['source_points'][1]} source points)",
+        "Fresnel numbers a²/(λd): "
+        + ", ".join(f"{f['layer']}→{f['towards']} {f['fresnel_number']:.2f}" for f in c.fresnel),
+    ]
+    r, w, d = c.ray, c.wave, c.difference
+    own = "" if c.own_exact_um2sr is None else f"; own path exact {c.own_exact_um2sr:.4f}"
+    out.append(
+        f"light in band: wave {w['light_um2sr']:.4f} µm²·sr, ray {r['light_um2sr']:.4f} "
+        f"(own {r['own_in_band_um2sr']:.4f} + near {r['near_um2sr']:.4f}){own}: "
+        f"wave/ray {d['light']:+.1%}"
+    )
+    out.append(
+        f"wave light diffracted beyond the band by the object-side mask: "
+        f"{w['lost_to_band_top_um2sr']:.4f} µm²·sr"
+    )
+    out.append(f"RMTF on the {c.dof_dpi:g}-dpi chart (period {c.period_um:.1f} µm)")
+    out.append("  Z (mm)  FWHM x wave/ray (µm)   central cell wave/ray   RMTF wave/ray")
+    for i, z in enumerate(c.z_mm):
+        out.append(
+            f"  {z:6.2f}  {w['fwhm_x_um'][i]:7.1f} / {r['fwhm_x_um'][i]:7.1f}"
+            f"      {w['center_cell_fraction'][i]:.3f} / {r['center_cell_fraction'][i]:.3f}"
+            f"          {w['rmtf'][i]:.3f} / {r['rmtf'][i]:.3f}"
+        )
+    m = c.meta
+    out.append(
+        f"time: wave {m['seconds_wave']:.1f} s, ray {m['seconds_ray']:.1f} s ({m['rows']} rows)"
+    )
+    return out
