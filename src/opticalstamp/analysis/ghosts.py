@@ -70,6 +70,11 @@ class GhostResult:
     #: where no ray carried ghost light: a 95 % upper bound on ghost / own-path etendue
     #: (:func:`ghost_ratio_bound`); None where ghost light was found
     ghost_ratio_bound: float | None = None
+    #: where no ray carried own-path light: a 95 % upper bound on the own-path etendue
+    #: (um^2 sr, :func:`etendue_bound`; 0 where no ray the pixel accepts can reach any
+    #: hole), which bounds the ghost etendue too where none was found either; None where
+    #: own-path light was found
+    own_etendue_bound: float | None = None
     meta: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
@@ -226,6 +231,8 @@ class GhostResult:
             attrs["estimator"] = self.meta["estimator"]
         if self.ghost_ratio_bound is not None:
             attrs["ghost_ratio_bound"] = self.ghost_ratio_bound
+        if self.own_etendue_bound is not None:
+            attrs["own_etendue_bound_um2sr"] = self.own_etendue_bound
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
@@ -290,7 +297,10 @@ def analyse_ghosts(
     -------
     GhostResult
         With ``ghost_ratio_bound`` set where no ray carried ghost light (the ghost
-        etendue and fraction are then 0 and only the bound says how small they are).
+        etendue and fraction are then 0 and only the bound says how small they are), and
+        ``own_etendue_bound`` where none carried own-path light (no light reaches the
+        pixel through its own holes, as far as ``n_rays`` can tell; the run stops at
+        once where no accepted ray can reach any hole: the etendue is then exactly 0).
     """
     if sampling is None:
         sampling = Sampling(n_rays, seed, fresnel, chunk, rse_own, rse_ghost, max_rays)
@@ -313,7 +323,9 @@ def analyse_ghosts(
     ledger = np.zeros((tr.path.slabs.shape[0], 4), np.int64)
     w_max = weight_bound(tr.path, src, tr.hole_weights(pixel), tr.s2_max)
     done = 0
-    for end in _schedule(sampling.n_rays, sampling.max_rays):
+    # no ray the pixel accepts reaches any hole: no light at all, nothing to trace for
+    schedule = [FIRST_CHECK] if w_max == 0 and sampling.n_rays is None else None
+    for end in schedule or _schedule(sampling.n_rays, sampling.max_rays):
         for pb in tr.trace(pixel, end - done, first_id=done, progress=progress):
             b = pb.rays
             ledger += b.ledger
@@ -366,9 +378,11 @@ def analyse_ghosts(
     n = done
     e_own = _path_estimate(sums, own, n)
     e_gh = _ghost_estimate(sums, own, n)
-    bound = None
+    bound = own_bound = None
     if e_gh.value == 0 and e_own.value > 0:
         bound = ghost_ratio_bound(w_max, n, e_own.value)
+    if e_own.value == 0:
+        own_bound = etendue_bound(w_max, n)
     frac = ratio_estimate(e_own, e_gh, n)
     names = list(tr.path.mask_names)
     paths = []
@@ -430,6 +444,7 @@ def analyse_ghosts(
         landing=landing,
         ledger=led,
         ghost_ratio_bound=bound,
+        own_etendue_bound=own_bound,
     )
 
 
@@ -462,8 +477,23 @@ def ghost_ratio_bound(
     """
     if n_rays <= 0 or etendue_own <= 0:
         return float("inf")
-    p = -np.expm1(np.log1p(-confidence) / n_rays)
-    return float(w_max * p / etendue_own)
+    return etendue_bound(w_max, n_rays, confidence) / etendue_own
+
+
+def etendue_bound(w_max: float, n_rays: int, confidence: float = BOUND_CONFIDENCE) -> float:
+    """Upper bound (um^2 sr) on the etendue of light that none of ``n_rays`` carried.
+
+    The rule of three of :func:`ghost_ratio_bound` without the ratio: a ray carries such
+    light with probability p < 1 - (1 - confidence)^(1/n), and at most ``w_max``
+    (:func:`~opticalstamp.raytrace.sampling.weight_bound`) of it, so the etendue is below
+    ``w_max`` p; exactly 0 where ``w_max`` is 0 (no ray can carry any), inf where no ray
+    was traced.
+    """
+    if w_max == 0:
+        return 0.0
+    if n_rays <= 0:
+        return float("inf")
+    return float(w_max * -np.expm1(np.log1p(-confidence) / n_rays))
 
 
 def _grown(nearest: np.ndarray, n_slots: int) -> np.ndarray:

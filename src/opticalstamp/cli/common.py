@@ -298,18 +298,38 @@ def ghosts(
         progress=not as_json,
     )
     data = r.to_dict() | {"provenance": provenance(d, seed)}
-    lines = [
-        f"design {d.name}: pixel {row}0, {r.n_rays:,} rays",
-        f"own-path etendue   {r.etendue_own_um2sr:.5g} ± {r.etendue_own_se:.2g} µm²·sr",
-    ]
-    if r.ghost_ratio_bound is not None:  # no ray carried ghost light: a bound, no rows of 0
+    lines = [f"design {d.name}: pixel {row}0, {r.n_rays:,} rays"]
+    dark = r.own_etendue_bound is not None and r.etendue_ghost_um2sr == 0
+    if r.own_etendue_bound == 0:  # no accepted ray reaches a hole: exactly no light
+        lines.append(
+            "no light reaches this pixel: no ray inside its acceptance cone "
+            f"(±{d.sensor.acceptance_half_angle_deg:g}°) reaches a hole of the mask nearest "
+            "the sensor (own-path and ghost etendue 0)"
+        )
+    elif dark:  # no ray carried light: a bound, not a row of zeros
+        lines.append(
+            "no light found reaching this pixel: own-path and ghost etendue each < "
+            f"{r.own_etendue_bound:.2g} µm²·sr (95 % bound)"
+        )
+    elif r.own_etendue_bound is not None:
+        lines.append(
+            f"no own-path light found: own-path etendue < {r.own_etendue_bound:.2g} µm²·sr "
+            "(95 % bound); the light found is ghost light"
+        )
+    else:
+        lines.append(
+            f"own-path etendue   {r.etendue_own_um2sr:.5g} ± {r.etendue_own_se:.2g} µm²·sr"
+        )
+    if dark:
+        pass
+    elif r.ghost_ratio_bound is not None:  # no ray carried ghost light: a bound, no rows of 0
         lines.append(f"no ghost light found: ghost/own < {r.ghost_ratio_bound:.2g} (95 % bound)")
     else:
         lines += [
             f"ghost etendue      {r.etendue_ghost_um2sr:.5g} ± {r.etendue_ghost_se:.2g} µm²·sr",
             f"ghost fraction     {r.ghost_fraction:.4g} ± {r.ghost_fraction_se:.2g}",
         ]
-    for zk, v in r.landing.items() if r.ghost_ratio_bound is None else ():
+    for zk, v in r.landing.items() if r.ghost_ratio_bound is None and not dark else ():
         lines.append(
             f"Z = {zk} mm: nearest ghost light "
             + ("none" if v["nearest_um"] is None else f"{v['nearest_um'] / 1000:.2f} mm")
