@@ -7,15 +7,32 @@ import numpy as np
 
 from ...analysis.ghosts import GhostResult
 from ...analysis.spots import PSF, SpotResult
+from .axes import REPORT_WIDTH_IN, subplots
+from .rodlens import plot_compare_contrast, plot_compare_light, plot_rod_details, plot_rod_ripple
+from .studies import plot_pareto, plot_pareto_variants, plot_study, plot_tolerance
 
-
-def _subplots(*args, figsize=None, layout=None, **kw):
-    """A new Figure and its axes, like ``pyplot.subplots`` but without pyplot: no backend
-    switch, no global figure registry (a figure is freed when it is no longer used)."""
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=figsize, layout=layout)
-    return fig, fig.subplots(*args, **kw)
+__all__ = [
+    "REPORT_WIDTH_IN",
+    "plot_chart_profiles",
+    "plot_compare_contrast",
+    "plot_compare_light",
+    "plot_diffraction",
+    "plot_efficiency",
+    "plot_ghosts",
+    "plot_pareto",
+    "plot_pareto_variants",
+    "plot_psf",
+    "plot_restoration",
+    "plot_rmtf",
+    "plot_rod_details",
+    "plot_rod_ripple",
+    "plot_scan_panels",
+    "plot_scan_profiles",
+    "plot_sfr",
+    "plot_spots",
+    "plot_study",
+    "plot_tolerance",
+]
 
 
 def plot_spots(res: SpotResult):
@@ -23,7 +40,7 @@ def plot_spots(res: SpotResult):
     panel per Z (paper Fig. 5)."""
     cell = res.meta["cell_um"]
     n = len(res.spots)
-    fig, axes = _subplots(1, n, figsize=(2.6 * n, 3.0), squeeze=False)
+    fig, axes = subplots(1, n, figsize=(2.6 * n, 3.0), squeeze=False)
     half = max(s.x_edges_um[-1] for s in res.spots)
     for ax, s in zip(axes[0], res.spots, strict=True):
         e = s.x_edges_um
@@ -80,7 +97,7 @@ def plot_psf(p: PSF):
     x0, x1 = max(min(x0, ox - sw), ex[0]), min(max(x1, ox + sw), ex[-1])
     y0, y1 = max(min(y0, oy - sh), ey[0]), min(max(y1, oy + sh), ey[-1])
     width, plot_w = 7.5, 5.6  # inches: the figure, and the frame (the rest: bar, labels)
-    fig, ax = _subplots(
+    fig, ax = subplots(
         figsize=(width, min(max(plot_w * (y1 - y0) / (x1 - x0), 1.6), 6.0) + 1.1),
         layout="constrained",
     )
@@ -133,7 +150,7 @@ def plot_psf(p: PSF):
 
 def plot_ghosts(res: GhostResult, top: int = 12):
     """Etendue of the strongest ghost paths and where ghost light lands (per Z)."""
-    fig, (a1, a2) = _subplots(1, 2, figsize=(11, 3.4))
+    fig, (a1, a2) = subplots(1, 2, figsize=(11, 3.4))
     paths = res.paths[:top]
     labels = [
         " / ".join(f"{'o' if h['row'] == 'other' else ''}{h['dk']:+d}" for h in p.holes)
@@ -207,7 +224,7 @@ def plot_rmtf(res, paper_points: dict | None = None):
     """
     from ...analysis.rmtf import merged_samples
 
-    fig, ax = _subplots(figsize=(6.4, 4.2))
+    fig, ax = subplots(figsize=(6.4, 4.2))
     z = np.asarray(res.z_mm)
     fine = set(res.meta.get("refined", {}).get("z_mm", []))
     for i, (key, vals) in enumerate(res.rmtf_max.items()):
@@ -247,7 +264,7 @@ def plot_efficiency(res):
     ``working_f_number_own``), then those with the ghost light. The etendue axis starts
     at 0, so that the few per cent between the curves look as small as they are.
     """
-    fig, (a1, a2) = _subplots(1, 2, figsize=(9.6, 3.8), layout="constrained")
+    fig, (a1, a2) = subplots(1, 2, figsize=(9.6, 3.8), layout="constrained")
     zs = sorted(res.by_object_radius, key=float)
     radii = list(res.by_object_radius[zs[0]])
     top = 0.0
@@ -284,7 +301,7 @@ def plot_efficiency(res):
 
 def plot_diffraction(res):
     """Slit diffraction at the next layer, per wavelength (paper Fig. 6b)."""
-    fig, ax = _subplots(figsize=(6.4, 3.8))
+    fig, ax = subplots(figsize=(6.4, 3.8))
     for i, (k, v) in enumerate(res.intensity.items()):
         ax.plot(res.x_um, v, color=f"C{i}", label=f"{k} µm: {res.fraction_outside[k]:.1%} outside")
     for s in (-1, 1):
@@ -300,39 +317,10 @@ def plot_diffraction(res):
     return fig
 
 
-def plot_study(res):
-    """Parameter study: working F-number against depth of field, per combination."""
-    fig, ax = _subplots(figsize=(7.5, 4.6))
-    marks = {"square": "s", "circle": "o"}
-    for r in res.rows:
-        col = "C0" if r["gap_medium"] == "air" else "C1"
-        face = col if r["fresnel"] else "none"
-        size = 60 if r["sensitive_um"] == max(x["sensitive_um"] for x in res.rows) else 25
-        ax.scatter(
-            r["dof_mm"],
-            r["working_f_number"],
-            marker=marks.get(r["hole_shape"], "^"),
-            edgecolors=col,
-            facecolors=face,
-            s=size,
-        )
-    ax.axhline(res.paper["working_f_number"], color="k", lw=0.7, ls=":")
-    ax.axvline(res.paper["dof_mm"], color="k", lw=0.7, ls="--")
-    ax.text(res.paper["dof_mm"], ax.get_ylim()[1], " paper: DOF 3.5 mm, F 60", fontsize=8, va="top")
-    ax.set_xlabel("depth of field at 200 dpi, RMTF >= 0.3 (mm)")
-    ax.set_ylabel("equivalent working F-number")
-    ax.set_title(
-        "square/circle: hole shape; blue: air gap, orange: light guide n=1.49; "
-        "filled: Fresnel losses; large: bigger sensitive area",
-        fontsize=8,
-    )
-    return fig
-
-
 def plot_sfr(res: dict, title: str = "", extra: dict | None = None):
     """SFR curve of a slanted edge with MTF50 and the 100/200-dpi values (``extra``: a
     second curve, e.g. along y)."""
-    fig, ax = _subplots(figsize=(6, 3.6))
+    fig, ax = subplots(figsize=(6, 3.6))
     ax.plot(res["freq_cy_per_mm"], res["sfr"], "-", label=f"along {res['direction']}")
     if extra is not None:
         ax.plot(
@@ -360,7 +348,7 @@ def plot_sfr(res: dict, title: str = "", extra: dict | None = None):
 
 def plot_chart_profiles(profiles: list[dict]):
     """Merged-line signals across a bar chart at two distances (paper Fig. 12 c, d)."""
-    fig, axes = _subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
+    fig, axes = subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
     for ax, p in zip(axes[0], profiles, strict=True):
         x = np.asarray(p["x_um"]) / 1000
         ax.step(x, p["signal"], where="mid")
@@ -386,7 +374,7 @@ def plot_scan_panels(
 
     rows = int(np.ceil(len(panels) / cols))
     h, w = panels[0][1].shape[:2]
-    fig, axes = _subplots(
+    fig, axes = subplots(
         rows,
         cols,
         figsize=(min(12, 3 + 9 * w / max(w, h)), 0.6 + rows * max(1.2, 9 * h / w / cols)),
@@ -409,7 +397,7 @@ def plot_restoration(res: dict):
     ideal's) raw and per method with the restored-DOF threshold, contrast to noise with its
     floor, and the own path's transfer at the chart's frequency (the ceiling)."""
     z = np.asarray(res["z_mm"])
-    fig, axes = _subplots(1, 3, figsize=(13, 3.6))
+    fig, axes = subplots(1, 3, figsize=(13, 3.6))
     for name, s in res["series"].items():
         dof = res["dof"][name]
         label = f"{name}: DOF {'>= ' if dof['open_ended'] else ''}{dof['dof_mm']:.2f} mm"
@@ -439,7 +427,7 @@ def plot_restoration(res: dict):
 
 def plot_scan_profiles(profiles: list[dict]):
     """Profiles across the simulated 200-dpi chart scans (paper Fig. 12 c, d)."""
-    fig, axes = _subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
+    fig, axes = subplots(1, len(profiles), figsize=(5 * len(profiles), 3), squeeze=False)
     for ax, p in zip(axes[0], profiles, strict=True):
         x = np.asarray(p["x_mm"])
         ax.plot(x, p["profile"], "-", lw=1)
@@ -451,277 +439,4 @@ def plot_scan_profiles(profiles: list[dict]):
             f"{p['rmtf_computed_min']:.2f}-{p['rmtf_computed_max']:.2f}",
             fontsize=9,
         )
-    return fig
-
-
-def plot_pareto(res, title: str = ""):
-    """Search: every feasible design, the Pareto front, and the base design."""
-    fig, ax = _subplots(figsize=(7, 4.5))
-    key = res.meta.get("objective", "dof_mm")  # the search's depth objective
-    feas = [r for r in res.records if r["feasible"]]
-    bad = [r for r in res.records if r["ok"] and not r["feasible"]]
-    if bad:
-        ax.scatter(
-            [r[key] for r in bad],
-            [r["efficiency_ratio"] for r in bad],
-            s=6,
-            c="0.8",
-            label="infeasible (near ghosts, budget, diffraction)",
-        )
-    if feas:
-        ax.scatter(
-            [r[key] for r in feas],
-            [r["efficiency_ratio"] for r in feas],
-            s=10,
-            c="C0",
-            alpha=0.6,
-            label="feasible",
-        )
-    if res.pareto:
-        # the front as the surrogate ranked it; where it was re-verified, each point's exact
-        # figures too, joined to it (the exact ones are the figures of record)
-        sur = [r.get("surrogate") or r for r in res.pareto]
-        order = sorted(range(len(sur)), key=lambda i: sur[i][key])
-        ax.plot(
-            [sur[i][key] for i in order],
-            [sur[i]["efficiency_ratio"] for i in order],
-            "o-",
-            c="C3",
-            ms=4,
-            label="Pareto front (surrogate)",
-        )
-        ex = [(s, r) for s, r in zip(sur, res.pareto, strict=True) if r.get("exact")]
-        if ex:
-            for s, r in ex:
-                ax.plot([s[key], r[key]], [s["efficiency_ratio"], r["efficiency_ratio"]],
-                        c="C3", lw=0.6, ls=":")  # fmt: skip
-            ax.plot(
-                [r[key] for _, r in ex],
-                [r["efficiency_ratio"] for _, r in ex],
-                "D",
-                mfc="none",
-                c="C3",
-                ms=6,
-                ls="none",
-                label="the same points, exact tracer",
-            )
-    if res.reference:
-        ax.plot(
-            res.reference[key],
-            res.reference["efficiency_ratio"],
-            "*",
-            c="k",
-            ms=14,
-            label=f"base design ({res.base})",
-        )
-    what = "restored depth of field" if key == "restored_dof_mm" else "depth of field"
-    ax.set_xlabel(f"{what} at {res.meta['dof_dpi']:g} dpi (mm)")
-    ax.set_ylabel("light efficiency, own path (ratio to F10 lens)")
-    ax.set_yscale("log")
-    ax.legend(fontsize=7)
-    ax.set_title(
-        title or f"design search for {res.dpi:g} dpi ({len(res.records)} designs)", fontsize=9
-    )
-    return fig
-
-
-#: Width (inches) of a figure the report shows at its natural size: the page's 1,100 px
-#: column less its padding, at the 110 dpi figures are saved at (io.files.figure_png).
-REPORT_WIDTH_IN = 9.6
-
-
-def plot_tolerance(res):
-    """Tolerance study: histograms of RMTF, DOF and ghost fraction; sensitivity bars.
-
-    Two by two, :data:`REPORT_WIDTH_IN` wide, every text at least 8 pt: the report shows
-    it at its natural size, where 8 pt reads as about 9 pt.
-    """
-    ok = [s for s in res.samples if s is not None]
-    fig, axes = _subplots(2, 2, figsize=(REPORT_WIDTH_IN, 6.6), layout="constrained")
-    axes = axes.ravel()
-    z_show = [z for z in res.z_mm if z in (1.0, 2.0, 3.0)] or res.z_mm[:3]
-    for i, z in enumerate(z_show):
-        v = [s["rmtf_at"][f"{z:g}"] for s in ok]
-        axes[0].hist(v, bins=30, alpha=0.6, color=f"C{i}", label=f"Z = {z:g} mm")
-        axes[0].axvline(res.nominal["rmtf_at"][f"{z:g}"], color=f"C{i}", ls="--")
-    axes[0].set_xlabel(f"RMTF at {res.dpi:g} dpi (dashed: nominal)", fontsize=9)
-    axes[0].legend(fontsize=8)
-    for ax, k, lab in (
-        (axes[1], "dof_mm", "depth of field (mm; dashed: nominal)"),
-        (axes[2], "ghost_fraction", "ghost fraction (dashed: nominal)"),
-    ):
-        ax.hist([s[k] for s in ok], bins=30, color="C0")
-        ax.axvline(res.nominal[k], color="k", ls="--")
-        ax.set_xlabel(lab, fontsize=9)
-    for ax in axes[:3]:
-        ax.set_ylabel("samples", fontsize=9)
-        ax.yaxis.get_major_locator().set_params(integer=True)
-    rows = res.sensitivity[:10][::-1]
-    axes[3].barh([r["error"] for r in rows], [r["d_dof_mm"] for r in rows], color="C3")
-    axes[3].set_xlabel("mean |change in DOF| at ±1 σ (mm)", fontsize=9)
-    axes[3].set_title("the ten errors the DOF is most sensitive to", fontsize=9)
-    for ax in axes:
-        ax.tick_params(labelsize=8)
-    s = res.sigmas
-    fig.suptitle(
-        f"{res.design}: {len(res.samples)} samples; 1 σ: misregistration "
-        f"{s['misregistration_um']:g} µm, holes {s['hole_um']:g} µm, thickness "
-        f"{s['thickness_um']:g} µm, tilt {s['tilt_deg']:g}°"
-        + (
-            f"\nyield {res.yield_fraction:.1%} for {res.spec}"
-            if res.yield_fraction is not None
-            else ""
-        ),
-        fontsize=9,
-    )
-    return fig
-
-
-def plot_pareto_variants(results: dict):
-    """Pareto fronts of searches over structural variants (layers, stagger), one colour
-    each, with the base design."""
-    fig, ax = _subplots(figsize=(7, 4.5))
-    for i, (name, res) in enumerate(results.items()):
-        f = sorted(res.pareto, key=lambda r: r["dof_mm"])
-        if f:
-            ax.plot(
-                [r["dof_mm"] for r in f],
-                [r["efficiency_ratio"] for r in f],
-                "o-",
-                c=f"C{i}",
-                ms=4,
-                label=name,
-            )
-        if res.reference:
-            ax.plot(
-                res.reference["dof_mm"], res.reference["efficiency_ratio"], "*", c=f"C{i}", ms=12
-            )
-    first = next(iter(results.values()))
-    ax.set_xlabel(f"depth of field at {first.meta['dof_dpi']:g} dpi (mm)")
-    ax.set_ylabel("light efficiency, own path (ratio to F10 lens)")
-    ax.set_yscale("log")
-    ax.legend(fontsize=7)
-    ax.set_title("Pareto fronts by structure (stars: the base of each)", fontsize=9)
-    return fig
-
-
-def plot_compare_contrast(rows: list[dict], dof_dpi: float | None = None, threshold: float = 0.3):
-    """Contrast vs object height from the document reference, every design on one axis.
-
-    One panel per chart resolution; stamps solid, rod-lens arrays dashed. ``dof_dpi``:
-    the depth-of-field chart (default: the rows' own, ``dof_dpi`` of the first).
-    """
-    dof_dpi = rows[0].get("dof_dpi", 200.0) if dof_dpi is None else dof_dpi
-    keys = [
-        k for k in rows[0]["contrast"]["by_dpi"] if all(k in r["contrast"]["by_dpi"] for r in rows)
-    ]
-    fig, axes = _subplots(1, len(keys), figsize=(4.0 * len(keys), 3.6), sharey=True)
-    axes = np.atleast_1d(axes)
-    for ax, key in zip(axes, keys, strict=True):
-        for i, r in enumerate(rows):
-            ls = "--" if r["kind"] == "rod-lens-array" else "-"
-            c = r["contrast"]
-            ax.plot(c["heights_mm"], c["by_dpi"][key], ls, color=f"C{i}", label=r["name"])
-        ax.axhline(threshold, color="k", lw=0.6, ls=":")
-        ax.axvline(0.0, color="0.5", lw=0.6)
-        ax.set_title(f"{key} dpi", fontsize=9)
-        ax.set_ylim(0, 1.02)
-    fig.supxlabel("object height from the document reference (mm)", fontsize=9)
-    axes[0].set_ylabel("contrast (RMTF, max over chart shift)")
-    axes[0].legend(fontsize=7, loc="upper right")
-    fig.suptitle(
-        f"contrast vs height (dashed: rod-lens arrays; dotted: {threshold:g} = DOF at "
-        f"{dof_dpi:g} dpi)",
-        fontsize=10,
-    )
-    return fig
-
-
-def plot_compare_light(rows: list[dict]):
-    """Light relative to the paper's F/10 reference, as points on a log axis (a bar's
-    length means nothing on a log axis), with its working F-number; and the thickness
-    (bars: a linear axis)."""
-    fig, (a1, a2) = _subplots(
-        1, 2, figsize=(9.6, 0.9 + 0.45 * len(rows)), layout="constrained", sharey=True
-    )
-    names = [r["name"] for r in rows]
-    y = np.arange(len(rows))
-    light = np.array([r["light_vs_f10"] for r in rows])
-    se = np.array([r.get("light_vs_f10_se", 0.0) or 0.0 for r in rows])
-    colours = [f"C{i}" for i in range(len(rows))]
-    for yi, v, e, c in zip(y, light, se, colours, strict=True):
-        a1.errorbar(v, yi, xerr=e if e > 0 else None, fmt="o", color=c, ms=7, capsize=3)
-    a1.set_xscale("log")
-    a1.axvline(1.0, color="k", lw=0.6, ls=":")
-    for yi, r in zip(y, rows, strict=True):
-        f = r.get("working_f_number")
-        tag = f"{r['light_vs_f10']:.3g}" + (f" (F {f:.1f})" if f else "")
-        a1.annotate(tag, (r["light_vs_f10"], yi), xytext=(7, 5), textcoords="offset points",
-                    fontsize=8, va="bottom")  # fmt: skip
-    lo, hi = light[light > 0].min(initial=1.0), light.max(initial=1.0)
-    a1.set_xlim(min(lo, 1.0) / 3, max(hi, 1.0) * 6)
-    a1.set_ylim(len(rows) - 0.4, -0.6)
-    a1.set_yticks(y, names, fontsize=8)
-    a1.grid(axis="x", which="major", lw=0.4, alpha=0.5)
-    a1.set_xlabel("light vs F/10 1:1 lens (own path; log axis; dotted: equal)")
-    a2.barh(y, [r["thickness_mm"] for r in rows], color=colours, height=0.5)
-    a2.set_xlabel("sensor to document reference (mm)")
-    a2.tick_params(labelleft=False)
-    fig.suptitle("light and thickness", fontsize=10)
-    return fig
-
-
-def _ripple_axes(ax, positions_um, relative, ripple: float, noise: float, name: str = ""):
-    """A rod-lens pixel's etendue / mean along one rod period, on ``ax``."""
-    ax.plot(positions_um, relative, "o-", ms=3)
-    ax.set_xlabel("pixel centre from a rod axis (µm), one rod period")
-    ax.set_ylabel("etendue / mean")
-    ax.set_title(f"{name}ripple {ripple:.3f} (noise alone ~{noise:.3f})", fontsize=9)
-
-
-def plot_rod_ripple(eff):
-    """A rod-lens pixel's etendue along one rod period (efficiency ripple)."""
-    fig, ax = _subplots(figsize=(6.0, 3.2))
-    g = np.asarray(eff.etendue_by_position_um2sr)
-    _ripple_axes(
-        ax, eff.positions_um, g / g.mean(), eff.ripple, eff.ripple_noise, f"{eff.design}: "
-    )
-    return fig
-
-
-def plot_rod_details(row: dict, psf: dict):
-    """A rod-lens array: ripple along one rod period, LSF and MTF vs height, point PSFs."""
-    fig, axes = _subplots(1, 5, figsize=(17, 3.3), layout="constrained")
-    rp = row["ripple_profile"]
-    _ripple_axes(axes[0], rp["positions_um"], rp["relative"], row["ripple"], row["ripple_noise"])
-    lsf = row["lsf"]
-    hs = np.asarray(lsf["heights_mm"])
-    for h in (0.0, 0.5, 1.0):
-        i = int(np.argmin(np.abs(hs - h)))
-        axes[1].plot(lsf["x_um"], lsf["per_um"][i], label=f"{hs[i]:g} mm")
-    axes[1].set_xlabel("x from the pixel centre (µm)")
-    axes[1].set_ylabel("LSF (1/µm, pixel included)")
-    axes[1].legend(fontsize=7)
-    m = row["mtf"]
-    for key, vals in m["by_dpi"].items():
-        axes[2].plot(m["heights_mm"], vals, label=f"{key} dpi")
-    axes[2].set_xlabel("height from focus (mm)")
-    axes[2].set_ylabel("MTF at the chart fundamental")
-    axes[2].legend(fontsize=7)
-    edges = np.asarray(psf["x_edges_um"])
-    ext = [edges[0], edges[-1], edges[0], edges[-1]]
-    k = len(psf["heights_mm"]) - 1
-    for ax, (name, at) in zip(axes[3:], psf["at"].items(), strict=False):
-        img = np.asarray(at["by_height"][k]["image"])
-        ax.imshow(img, extent=ext, origin="lower", cmap="magma", interpolation="nearest")
-        ax.set_title(
-            f"point {name} (x = {at['x_um']:.0f} µm), {psf['heights_mm'][k]:g} mm: "
-            f"rms {at['by_height'][k]['rms_um']:.0f} µm",
-            fontsize=8,
-        )
-        ax.set_xlabel("x (µm)")
-        half = max(150.0, 4 * at["by_height"][k]["rms_um"])
-        ax.set_xlim(-half, half)
-        ax.set_ylim(-half, half)
-    fig.suptitle(f"{row['name']}: rod-lens array details", fontsize=10)
     return fig

@@ -6,7 +6,7 @@ import numpy as np
 
 from ...design import Design
 from ...design.describe import stack_rows
-from . import _subplots
+from .axes import subplots
 
 #: Half width of the drawn window, in hole pitches.
 WINDOW_PITCHES = 3.5
@@ -24,7 +24,7 @@ def plot_stack(design: Design):
         rows.append(("row B", s.row_b_offset_x_um, s.row_b_offset_y_um))
     half = WINDOW_PITCHES * s.row_pitch_um
     top = design.reference_plane_um
-    fig, axes = _subplots(
+    fig, axes = subplots(
         1,
         len(rows),
         figsize=(4.2 * len(rows), 0.6 + 3.3 * top / (2 * half)),
