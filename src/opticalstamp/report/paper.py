@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from .section import section
 from .summary import PAPER, headline_figures
 
 
@@ -60,10 +61,11 @@ def _text(fmt: str, v: float) -> str:
 
 def paper_vs_model(data: dict) -> list[dict]:
     """One row per statement of the paper that the report's numbers test (report.json's
-    ``paper_vs_model``); a row whose figure the report did not compute says so."""
+    ``paper_vs_model``); a row whose figure the report did not compute (or whose section
+    was not measurable) says so."""
     rows = []
     fig = headline_figures(data)
-    diff = data.get("diffraction") or {}
+    diff = section(data, "diffraction") or {}
     edge = diff.get("geometric_edge_um")
     outside = (diff.get("fraction_outside") or {}).get("0.4")
     rows.append(
@@ -81,7 +83,7 @@ def paper_vs_model(data: dict) -> list[dict]:
             "§3, Fig. 6", "light diffracted outside that edge (0.4 µm)", 0.07, outside, "", "{:.3f}"
         )
     )
-    sp = data.get("spots") or {}
+    sp = section(data, "spots") or {}
     zs, fwhm, ext = sp.get("z_mm", []), sp.get("fwhm_x_um", []), sp.get("extent_x_um", [])
     cell = (sp.get("meta") or {}).get("cell_um")
     at0 = _interp(zs, fwhm, 0.0)
@@ -107,7 +109,7 @@ def paper_vs_model(data: dict) -> list[dict]:
             "the model's edge is the exact support, faint penumbra included",
         )
     )
-    land = (data.get("ghosts") or {}).get("landing") or {}
+    land = (section(data, "ghosts") or {}).get("landing") or {}
     within = [v["within_detector_um2sr"] for v in land.values()]
     rows.append(
         _row(
@@ -120,7 +122,7 @@ def paper_vs_model(data: dict) -> list[dict]:
             "the paper's detector size is unstated; ghost light lands further away",
         )
     )
-    key = f"{data['rmtf']['dof_dpi']:g}"
+    key = f"{(section(data, 'rmtf') or {}).get('dof_dpi', 200.0):g}"
     rows.append(
         _row(
             "§5, Fig. 11",
@@ -132,7 +134,7 @@ def paper_vs_model(data: dict) -> list[dict]:
             "unstated: hole shape and the light-guide gap (docs/metrics.md)",
         )
     )
-    eff = data["efficiency"]
+    eff = section(data, "efficiency") or {}
     rows.append(
         _row(
             "§5, Fig. 13",
@@ -154,7 +156,8 @@ def paper_vs_model(data: dict) -> list[dict]:
             "{:.0f}",
         )
     )
-    gains = [a["gain_own_vs_design"] for a in eff["sensitive_area"] if a["area_scale"] == 4.0]
+    area = eff.get("sensitive_area") or []
+    gains = [a["gain_own_vs_design"] for a in area if a["area_scale"] == 4.0]
     rows.append(
         _row(
             "§5",
@@ -166,7 +169,7 @@ def paper_vs_model(data: dict) -> list[dict]:
             "the holes, not the pixel, limit the beam",
         )
     )
-    rod_rows = (data.get("rodlens") or {}).get("rows") or []
+    rod_rows = (section(data, "rodlens") or {}).get("rows") or []
     rows.append(
         _row(
             "§4",
@@ -200,7 +203,7 @@ def paper_vs_model(data: dict) -> list[dict]:
             "the model: sensor to document reference, without a housing",
         )
     )
-    ocr = (data.get("scans") or {}).get("ocr") or []
+    ocr = (section(data, "scans") or {}).get("ocr") or []
     cer = max((o["cer"] for o in ocr if o.get("points", 8.0) == 8.0), default=None)
     rows.append(
         _row(

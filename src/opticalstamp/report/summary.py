@@ -17,6 +17,7 @@ from types import MappingProxyType
 
 from ..analysis.dof import dof_text
 from ..validate import InputError
+from .section import section
 
 #: Figures a spec may name: key -> (what, unit).
 FIGURES = MappingProxyType(
@@ -81,36 +82,39 @@ def parse_report_spec(text: str | None) -> list[tuple[str, str, float]]:
 
 
 def _nearest_mm(data: dict) -> dict:
-    """The nearest ghost light on the object plane (mm) at each Z where any lands."""
-    land = data["ghosts"]["landing"]
+    """The nearest ghost light on the object plane (mm) at each Z where any lands (none
+    where the ghost analysis is not measurable)."""
+    land = (section(data, "ghosts") or {}).get("landing") or {}
     return {z: v["nearest_um"] / 1000 for z, v in land.items() if v["nearest_um"] is not None}
 
 
 def headline_figures(data: dict) -> dict:
-    """The figures of :data:`FIGURES` from report.json's numbers (None: not computed)."""
+    """The figures of :data:`FIGURES` from report.json's numbers (None: not computed, or
+    its section not measurable)."""
     nearest = _nearest_mm(data)
-    r = data["rmtf"]
-    key = f"{r['dof_dpi']:g}"
-    eff = data["efficiency"]
+    r = section(data, "rmtf")
+    eff = section(data, "efficiency")
     values = {
-        "ghost_radius": min(nearest.values()) if nearest else math.inf,
-        "dof": r["dof_mm"][key],
-        "light": eff["ratio_own"],
-        "f_number": eff["working_f_number_own"],
+        "ghost_radius": (min(nearest.values()) if nearest else math.inf)
+        if section(data, "ghosts")
+        else None,
+        "dof": r["dof_mm"][f"{r['dof_dpi']:g}"] if r else None,
+        "light": eff["ratio_own"] if eff else None,
+        "f_number": eff["working_f_number_own"] if eff else None,
         "thickness": data["stack"][0]["z_top_um"] / 1000 if data.get("stack") else None,
         "vs_rod_lens": None,
         "yield": None,
         "raw_dof": None,
         "restored_dof": None,
     }
-    rest = data.get("restoration")
+    rest = section(data, "restoration")
     if rest and "wiener" in rest["study"]["dof"]:
         values["raw_dof"] = rest["study"]["dof"]["raw"]["dof_mm"]
         values["restored_dof"] = rest["study"]["dof"]["wiener"]["dof_mm"]
-    rod = data.get("rodlens")
+    rod = section(data, "rodlens")
     if rod and len(rod["rows"]) > 1:
         values["vs_rod_lens"] = rod["rows"][0]["light_vs_f10"] / rod["rows"][1]["light_vs_f10"]
-    tol = data.get("tolerance")
+    tol = section(data, "tolerance")
     if tol and tol.get("spec") and not _yield_doubt(tol):
         values["yield"] = tol["yield"]
     return values
@@ -134,10 +138,12 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
     ``paper``: show the paper's figures (the design is the paper's prototype)."""
     values = headline_figures(data)
     nearest = _nearest_mm(data)
-    within = {z: v["within_detector_um2sr"] for z, v in data["ghosts"]["landing"].items()}
-    r = data["rmtf"]
-    key = f"{r['dof_dpi']:g}"
-    tol = data.get("tolerance")
+    g = section(data, "ghosts")
+    within = {z: v["within_detector_um2sr"] for z, v in (g["landing"] if g else {}).items()}
+    r = section(data, "rmtf")
+    key = f"{r['dof_dpi']:g}" if r else None
+    tol = section(data, "tolerance")
+    rest = section(data, "restoration")
     checks = {}
     for name, op, v in spec:
         got = values.get(name)
@@ -151,23 +157,23 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
                 "what": what,
                 "value": values[name],
                 "unit": unit,
-                "bound": (name == "dof" and bool(r.get("dof_open_ended", {}).get(key)))
+                "bound": (name == "dof" and bool(r and r.get("dof_open_ended", {}).get(key)))
                 or (
                     name in _RESTORED
-                    and bool(data.get("restoration"))
-                    and bool(data["restoration"]["study"]["dof"][_RESTORED[name]]["open_ended"])
+                    and bool(rest)
+                    and bool(rest["study"]["dof"][_RESTORED[name]]["open_ended"])
                 ),
                 "check": checks.get(name),
                 "paper": PAPER.get(name) if paper else None,
-                "text": dof_text(r) if name == "dof" else None,
+                "text": dof_text(r) if name == "dof" and r else None,
             }
         )
     return {
         "figures": rows,
         "ghost_nearest_mm_by_z": nearest,
         "ghost_within_detector_um2sr_by_z": within,
-        "ghost_fraction": data["ghosts"]["ghost_fraction"],
-        "dof_dpi": r["dof_dpi"],
+        "ghost_fraction": g["ghost_fraction"] if g else None,
+        "dof_dpi": r["dof_dpi"] if r else None,
         "tolerance_spec": tol.get("spec") if tol else None,
         "yield_note": _yield_doubt(tol) if tol and tol.get("spec") else None,
         "spec": [f"{n}{op}{v:g}" for n, op, v in spec],

@@ -1,0 +1,167 @@
+"""The report's studies, run in background processes (:mod:`.background`) while its
+sections run here: the study of the paper's unstated parameters (in parts), the rod-lens
+presets' comparison rows, the compact design search and the tolerance study, each with
+the budget of the report's :class:`~opticalstamp.report.work.StudyBudget`."""
+
+from __future__ import annotations
+
+from types import MappingProxyType
+
+from ..design import Design, load_design
+from ..raytrace.stack import output_pitch
+from ..units import dpi_of_pitch
+from .section import NotMeasurable, needs
+from .work import StudyBudget, Work
+
+#: parts the parameter study is run in (each a background task): the study is the
+#: smallest job, and in two parts it fills two processes beside the search and the
+#: tolerance study (one each), so the processes end together
+STUDY_PARTS = 2
+#: The report's rod-lens contrast curves: the report's chart resolutions that `compare`
+#: draws, every 0.25 mm (`compare`: 100/200/300 dpi every 0.125 mm); the same rays, so
+#: light and depth of field are `compare`'s (the DOF to 1e-3 mm: bisection from another
+#: bracket).
+REPORT_ROD_CURVES = MappingProxyType(
+    {"dpi": (100.0, 200.0), "heights_mm": tuple(0.25 * i - 1.5 for i in range(13))}
+)
+#: report --spec figures that the tolerance study evaluates -> its name for them
+_TOLERANCE_FIGURES = MappingProxyType(
+    {"dof": "dof", "light": "efficiency", "ghost_radius": "ghost_radius"}
+)
+
+
+def tolerance_spec(spec: list[tuple[str, str, float]]) -> str | None:
+    """The tolerance study's yield spec from a report spec (:func:`parse_report_spec`): its
+    bounds on the depth of field, the light and the ghost-free radius; None (no yield:
+    no hidden specification) when it bounds none of them."""
+    parts = [f"{_TOLERANCE_FIGURES[n]}{op}{v:g}" for n, op, v in spec if n in _TOLERANCE_FIGURES]
+    return ",".join(parts) or None
+
+
+def study_jobs(
+    design: Design,
+    seed: int,
+    fresnel: bool,
+    work: Work,
+    dpi: float,
+    tol_spec: str | None = None,
+) -> dict:
+    """The report's studies as background jobs: name -> list of (function, arguments),
+    the tasks whose results make the job (:func:`join_job`). The parameter study of the
+    paper's unstated parameters only with the paper's sections (``work.paper``); the
+    search and the tolerance study evaluate in closed form, which needs square holes."""
+    if not work.studies:
+        return {}
+    jobs = {}
+    if work.paper:
+        parts = [(i, STUDY_PARTS) for i in range(STUDY_PARTS)]
+        jobs["parameter_study"] = [(run_study, (design, seed, fresnel, p)) for p in parts]
+    jobs["rodlens"] = [(run_rodlens, (seed, fresnel, dpi))]
+    if all(m.shape != "circle" for m in design.masks):
+        jobs["search"] = [(run_search, (design, seed, dpi, work.budget))]
+        jobs["tolerance"] = [(run_tolerance, (design, seed, dpi, tol_spec, work.budget))]
+    return jobs
+
+
+def join_job(name: str, results: list):
+    """The result of job ``name`` from the results of its tasks."""
+    if name == "parameter_study":
+        from ..analysis.paper_study import join_parts
+
+        return join_parts(results)
+    (result,) = results
+    return result
+
+
+def run_study(
+    design: Design, seed: int, fresnel: bool, part: tuple[int, int]
+):  # pragma: no cover - a background process
+    """Part ``part`` of the study of the paper's unstated parameters (background). The row
+    of the design itself is left to :func:`~opticalstamp.analysis.paper_study.with_headline`
+    (the report's own analyses of the design, computed meanwhile)."""
+    from ..analysis.paper_study import parameter_study
+
+    deferred = {(design.fingerprint(), fresnel)}
+    return parameter_study(design, seed=seed, deferred=deferred, part=part)
+
+
+def run_rodlens(seed: int, fresnel: bool, dof_dpi: float):  # pragma: no cover - background
+    """The rod-lens presets' comparison rows (the report's "stamp against a rod-lens
+    array" section): each preset evaluated as `compare` does, its depth of field on the
+    report's chart ``dof_dpi``."""
+    from ..studies.compare import RODLENS_PRESETS, evaluate_rodlens, labelled
+
+    rows = []
+    for name in RODLENS_PRESETS:
+        d = load_design(name)
+        curves = REPORT_ROD_CURVES | {"dpi": tuple(sorted({*REPORT_ROD_CURVES["dpi"], dof_dpi}))}
+        row = evaluate_rodlens(d, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi, **curves)
+        rows.append(labelled(d, row, seed, fresnel))
+    return rows
+
+
+def run_search(
+    design: Design, seed: int, dof_dpi: float, budget: StudyBudget
+):  # pragma: no cover - background
+    """The compact design search of a report (the CLI's `search` runs the full budget),
+    its front re-verified by the exact tracer."""
+    from ..studies.search import search, verify_front
+
+    dpi = dpi_of_pitch(output_pitch(design))
+    res = search(
+        design,
+        dpi=dpi,
+        dof_dpi=dof_dpi,
+        population=budget.search_population,
+        generations=budget.search_generations,
+        seed=seed,
+        ghost_rays=budget.search_ghost_rays,
+        workers=1,
+    )
+    return verify_front(
+        res, ghost_rays=budget.verify_ghost_rays, lsf_rays=budget.verify_lsf_rays, workers=1
+    )
+
+
+def run_tolerance(
+    design: Design, seed: int, dpi: float, spec: str | None, budget: StudyBudget
+):  # pragma: no cover - a background process
+    """The report's tolerance study (the CLI's `tolerance` runs more samples)."""
+    from ..studies.tolerance import tolerance
+
+    return tolerance(
+        design, samples=budget.tolerance_samples, seed=seed, dpi=dpi, spec=spec, workers=1
+    )
+
+
+def headline_study(study, design: Design, ghosts, rmtf, fresnel: bool):
+    """The parameter study with the row that is this design rebuilt from the report's own
+    ghost analysis and RMTF (:func:`~opticalstamp.analysis.paper_study.with_headline`);
+    not measurable where either is not."""
+    from ..analysis.paper_study import with_headline
+
+    missing = needs(ghost=ghosts, RMTF=rmtf)
+    if missing is not None:
+        return missing
+    return with_headline(study, design, ghosts, rmtf.result, fresnel)
+
+
+def rodlens_section(design: Design, eff, rmtf, rod_rows: list | None, seed: int, fresnel: bool):
+    """The report's rod-lens section: the design's row (from the report's own efficiency
+    ``eff`` and RMTF section ``rmtf``) before the presets' rows; None where the presets
+    were not evaluated."""
+    if rod_rows is None:
+        return None
+    if isinstance(rod_rows, NotMeasurable):
+        return rod_rows
+    missing = needs(efficiency=eff, RMTF=rmtf)
+    if missing is not None:
+        return missing
+    from ..studies.compare import labelled, relative_to_first, stamp_row
+
+    row = stamp_row(design, eff, rmtf.result)
+    gains = [a["gain_own_vs_design"] for a in eff.sensitive_area if a["area_scale"] == 4.0]
+    return {
+        "rows": relative_to_first([labelled(design, row, seed, fresnel), *rod_rows]),
+        "area_gain": gains[0] if gains else None,
+    }
