@@ -95,14 +95,10 @@ def _axis(plane: Plane, smp: WaveSampling) -> _Axis:
 
 def _gram(fields: list[np.ndarray], step: float, weight: np.ndarray | None = None) -> np.ndarray:
     """G[j, l] = step * sum_n sum_m u_j[n, m] conj(u_l[n, m]) (times weight[n])."""
-    j = len(fields)
-    g = np.zeros((j, j), dtype=np.complex128)
-    for a in range(j):
-        ua = fields[a] if weight is None else fields[a] * weight[:, None]
-        for b in range(a, j):
-            g[a, b] = np.vdot(fields[b], ua) * step
-            g[b, a] = np.conj(g[a, b])
-    return g
+    f = np.stack(fields)  # (J, n, m)
+    fw = f if weight is None else f * weight[None, :, None]
+    a = fw.reshape(len(fields), -1)
+    return (a @ f.reshape(len(fields), -1).conj().T) * step
 
 
 def _compress(fields: list[np.ndarray], tol: float) -> list[np.ndarray]:
@@ -111,7 +107,8 @@ def _compress(fields: list[np.ndarray], tol: float) -> list[np.ndarray]:
     vectors of the stacked fields), keeping all but ``tol`` of the power."""
     if not fields:
         return fields
-    g = sum(f.conj().T @ f for f in fields)
+    a = np.concatenate(fields, axis=0)  # (J n, m)
+    g = a.conj().T @ a
     p, v = np.linalg.eigh(g)
     p, v = p[::-1], v[:, ::-1]
     p = np.clip(p, 0.0, None)
@@ -329,6 +326,7 @@ def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveRe
     cell = output_pitch(design) if cell_um is None else float(cell_um)
     keys = list(terms)
     grids, spectra = [], []
+    terms = _band_only(terms, axes, smp)  # the in-band light leaving the stack grid
     for a, ax in enumerate(axes):
         d_max = ax.plane.reduced(float(zs.max())) - ax.plane.heights[-1]
         xf, off = object_grid(ax.x, d_max, smp)

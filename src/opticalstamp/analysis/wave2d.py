@@ -177,7 +177,11 @@ def transfer(
 
 @dataclass
 class _Stack:
-    """What the operator A needs: grids, source fields, transfer functions, masks."""
+    """What the operator A needs: grids, source fields, transfer functions, masks.
+
+    A maps source amplitudes (k, n0y, n0x) to the in-band spectrum of the field after
+    the object-side mask, (k, nb) over the ``band_idx`` bins, scaled so that its squared
+    norm is the field's in-band power over dx dy (Parseval)."""
 
     x: np.ndarray
     y: np.ndarray
@@ -186,9 +190,10 @@ class _Stack:
     first: np.ndarray | None  # exact-over-paraxial factor below the first mask
     masks: list[np.ndarray]
     steps: list[np.ndarray]  # transfer to mask i from mask i - 1 (i >= 1)
+    band_idx: tuple[np.ndarray, np.ndarray]  # (iy, ix) of the in-band bins
 
     def forward(self, w: np.ndarray) -> np.ndarray:
-        """Source amplitudes w (k, n0y, n0x) -> fields after the top mask (k, ny, nx)."""
+        """Source amplitudes w (k, n0y, n0x) -> in-band spectra after the top mask."""
         f = np.einsum("ya,kab,xb->kyx", self.uy, w, self.ux, optimize=True)
         if self.first is not None:
             f = sfft.ifft2(sfft.fft2(f, workers=-1) * self.first, workers=-1)
@@ -196,17 +201,27 @@ class _Stack:
         for m, h in zip(self.masks[1:], self.steps, strict=True):
             f = sfft.ifft2(sfft.fft2(f, workers=-1) * h, workers=-1)
             f *= m
-        return f
+        iy, ix = self.band_idx
+        return sfft.fft2(f, workers=-1, norm="ortho")[:, iy, ix]
 
-    def adjoint(self, g: np.ndarray) -> np.ndarray:
-        """Fields after the top mask (k, ny, nx) -> source amplitudes (k, n0y, n0x)."""
-        g = g * self.masks[-1]
+    def adjoint(self, o: np.ndarray) -> np.ndarray:
+        """In-band spectra (k, nb) -> source amplitudes (k, n0y, n0x)."""
+        iy, ix = self.band_idx
+        g = np.zeros((o.shape[0], self.y.size, self.x.size), dtype=np.complex128)
+        g[:, iy, ix] = o
+        g = sfft.ifft2(g, workers=-1, norm="ortho") * self.masks[-1]
         for m, h in zip(self.masks[-2::-1], self.steps[::-1], strict=True):
             g = sfft.ifft2(sfft.fft2(g, workers=-1) * h.conj(), workers=-1)
             g *= m
         if self.first is not None:
             g = sfft.ifft2(sfft.fft2(g, workers=-1) * self.first.conj(), workers=-1)
         return np.einsum("ya,kyx,xb->kab", self.uy.conj(), g, self.ux.conj(), optimize=True)
+
+    def field(self, o: np.ndarray) -> np.ndarray:
+        """The band-limited field (ny, nx) on the stack grid of an in-band spectrum."""
+        g = np.zeros((self.y.size, self.x.size), dtype=np.complex128)
+        g[self.band_idx] = o
+        return sfft.ifft2(g, workers=-1, norm="ortho")
 
 
 def _stack(design, pixel, smp: WaveSampling, propagator: str) -> tuple[_Stack, list[Layer]]:
@@ -235,53 +250,55 @@ def _stack(design, pixel, smp: WaveSampling, propagator: str) -> tuple[_Stack, l
         ]
         masks.append(mask_field_2d(x, y, near, b, lam))
     steps = [transfer(x, y, lay.slabs, lam, b, propagator) for lay in layers[1:]]
-    return _Stack(x, y, fields[0], fields[1], first, masks, steps), layers
+    ky = np.flatnonzero(in_band(sfft.fftfreq(y.size, y[1] - y[0]), lam, b))
+    kx = np.flatnonzero(in_band(sfft.fftfreq(x.size, x[1] - x[0]), lam, b))
+    idx = tuple(np.ix_(ky, kx)[i] * np.ones((ky.size, kx.size), int) for i in (0, 1))
+    st = _Stack(x, y, fields[0], fields[1], first, masks, steps, (idx[0].ravel(), idx[1].ravel()))
+    return st, layers
 
 
 def coherent_modes(
     st: _Stack, *, tol: float = RANGE_TOL, block: int = BLOCK, seed: int = 0, max_modes=4096
 ) -> tuple[np.ndarray, dict]:
-    """Coherent modes of the light after the top mask: (r, ny, nx) fields whose summed
-    intensities are the pixel's (um^2 sr per um^2), and what the range finder did.
+    """Coherent modes of the in-band light after the top mask: (r, nb) in-band spectra
+    (:class:`_Stack`) whose fields' intensities add up to the pixel's responsivity
+    (um^2 sr per um^2), and what the range finder did.
 
     Blocks of complex Gaussian source vectors are pushed through A until a fresh block
     finds, on average, less than ``tol`` of the mean power of A w outside the range kept
-    (an unbiased estimate of the relative Frobenius power left out); then B = Q A by the
-    adjoint and the eigenvectors of B B^H give the modes, the weakest dropped while
+    (an unbiased estimate of the relative Frobenius power left out); then B = E^H A by
+    the adjoint, and the eigenvectors of B B^H give the modes, the weakest dropped while
     their power stays below ``tol``.
     """
     rng = np.random.default_rng(seed)
     n0y, n0x = st.uy.shape[1], st.ux.shape[1]
-    basis: list[np.ndarray] = []
+    q = np.zeros((0, st.band_idx[0].size), dtype=np.complex128)  # orthonormal rows
     total, missing, tries = 0.0, np.inf, 0
-    while missing > tol * total and len(basis) < max_modes:
+    while missing > tol * total and q.shape[0] < max_modes:
         w = rng.standard_normal((block, n0y, n0x)) + 1j * rng.standard_normal((block, n0y, n0x))
-        y = st.forward(w / np.sqrt(2)).reshape(block, -1)
+        y = st.forward(w / np.sqrt(2))
         tries += 1
         total += (np.vdot(y, y).real / block - total) / tries  # running mean of |A w|^2
-        if basis:
-            q = np.array(basis)
-            for _ in range(2):
-                y = y - (y @ q.conj().T) @ q
+        for _ in range(2):  # project out the range found (twice: stable)
+            y = y - (y @ q.conj().T) @ q
         missing = np.vdot(y, y).real / block
-        qy, rr = np.linalg.qr(y.T)
-        good = np.abs(np.diag(rr)) > 1e-12 * max(1.0, np.abs(np.diag(rr)).max(initial=0))
-        basis.extend(qy.T[good])
-    q = np.array(basis)
-    b = st.adjoint(q.reshape(len(basis), st.y.size, st.x.size))  # rows: A^H e_i
-    bm = b.reshape(len(basis), -1).conj()  # B = E^H A, (r, n_src)
+        p, v = np.linalg.eigh(y @ y.conj().T)  # orthonormalise the block (Gram)
+        good = p > 1e-24 * max(p.max(initial=0.0), 1e-300)
+        q = np.concatenate([q, (v[:, good] / np.sqrt(p[good])).conj().T @ y])
+    b = np.concatenate([st.adjoint(q[i : i + block]) for i in range(0, q.shape[0], block)])
+    bm = b.reshape(q.shape[0], -1).conj()  # B = E^H A, (r, n_src)
     p, v = np.linalg.eigh(bm @ bm.conj().T)
     p, v = np.clip(p[::-1], 0, None), v[:, ::-1]
     keep = int(np.searchsorted(np.cumsum(p), (1 - tol) * p.sum())) + 1
     keep = max(1, min(keep, p.size))
     modes = (v[:, :keep] * np.sqrt(p[:keep])).T @ q
     info = {
-        "range": len(basis),
+        "range": int(q.shape[0]),
         "modes": keep,
         "blocks": tries,
         "missing_estimate": missing / total,
     }
-    return modes.reshape(keep, st.y.size, st.x.size), info
+    return modes, info
 
 
 @dataclass(frozen=True)
@@ -371,23 +388,32 @@ def wave_response_2d(
     lsf_x, lsf_y = np.zeros((n_z, xf.size)), np.zeros((n_z, yf.size))
     etendue, cells = np.zeros(n_z), np.zeros(n_z)
     maps = np.zeros((n_z, edges.size - 1, edges.size - 1))
-    spec = []
-    for m in modes:
-        u = np.zeros((yf.size, xf.size), dtype=np.complex128)
-        u[oy : oy + st.y.size, ox : ox + st.x.size] = m
-        spec.append(sfft.fft2(u, workers=-1))
-    for iz, z in enumerate(zs):
-        slabs = [(gap.thickness_um, design.index(gap.medium)), (z * 1000.0, n_obj)]
-        h = transfer(xf, yf, slabs, lam, b, propagator)
-        inten = np.zeros((yf.size, xf.size))
-        for s in spec:
-            inten += np.abs(sfft.ifft2(s * h, workers=-1)) ** 2
-        lsf_x[iz] = inten.sum(axis=0) * step
-        lsf_y[iz] = inten.sum(axis=1) * step
-        etendue[iz] = inten.sum() * step * step
-        in_x = band_integral(xf, inten, -cell / 2, cell / 2)  # (ny,)
+    hs = [
+        transfer(
+            xf,
+            yf,
+            [(gap.thickness_um, design.index(gap.medium)), (z * 1e3, n_obj)],
+            lam,
+            b,
+            propagator,
+        )
+        for z in zs
+    ]
+    inten = np.zeros((n_z, yf.size, xf.size))
+    u = np.zeros((yf.size, xf.size), dtype=np.complex128)
+    for m in modes:  # one mode at a time: the object grid can be large
+        u[oy : oy + st.y.size, ox : ox + st.x.size] = st.field(m)
+        s = sfft.fft2(u, workers=-1)
+        for iz in range(n_z):
+            inten[iz] += np.abs(sfft.ifft2(s * hs[iz], workers=-1)) ** 2
+    for iz in range(n_z):
+        inten_z = inten[iz]
+        lsf_x[iz] = inten_z.sum(axis=0) * step
+        lsf_y[iz] = inten_z.sum(axis=1) * step
+        etendue[iz] = inten_z.sum() * step * step
+        in_x = band_integral(xf, inten_z, -cell / 2, cell / 2)  # (ny,)
         cells[iz] = float(band_integral(yf, in_x.real, -cell / 2, cell / 2).real) / etendue[iz]
-        maps[iz] = _binned(xf, yf, inten, edges) / (bin_um * bin_um)
+        maps[iz] = _binned(xf, yf, inten_z, edges) / (bin_um * bin_um)
     lat = lattice_of(design)
     px, py = (float(v) for v in lat.centers(*pixel))
     return WaveMaps(

@@ -27,6 +27,9 @@ BAND_CAP = 0.35
 #: Grid steps per Nyquist step of the band (dx = lambda / (2 OVERSAMPLE B)); 3 or more:
 #: a field of band B times a mask low-passed to 2B has band 3B (see :func:`mask_field`).
 OVERSAMPLE = 3.0
+#: Domain margin beyond the band's reach, in units of lambda / B (the tails of
+#: band-limited fields).
+MARGIN = 32.0
 #: Gauss-Legendre nodes per oscillation of the source integrand, and extra nodes.
 SOURCE_DENSITY = 1.0
 SOURCE_EXTRA = 8
@@ -231,7 +234,7 @@ def wave_sampling(
     orders of the smallest hole, and the near crosstalk through neighbouring holes that
     lies in it; light outside it is counted as lost to the band (``WaveResponse.budget``).
     Step: lambda / (2 ``oversample`` B), so the intensity is sampled above its Nyquist
-    rate. Margin: 16 lambda / B (the tails of band-limited fields) plus the largest hole.
+    rate. Margin: MARGIN lambda / B (the tails of band-limited fields).
     Source points: Gauss-Legendre nodes, SOURCE_DENSITY per oscillation 2 B w / lambda
     of the integrand across the sensitive width w, plus SOURCE_EXTRA.
     """
@@ -249,10 +252,7 @@ def wave_sampling(
         int(math.ceil(SOURCE_DENSITY * 2 * band * w / lam)) + SOURCE_EXTRA
         for w in (s.sensitive_width_um, s.sensitive_height_um)
     )
-    hole = max(max(m.hole_width_um, m.hole_height_um) for m in design.masks)
-    return WaveSampling(
-        lam, float(band), lam / (2 * oversample * band), 16 * lam / band + hole, pts
-    )
+    return WaveSampling(lam, float(band), lam / (2 * oversample * band), MARGIN * lam / band, pts)
 
 
 # -- 1-D building blocks -------------------------------------------------------------------
@@ -260,22 +260,26 @@ def mask_field(x_um: np.ndarray, holes: np.ndarray, band: float, wavelength_um: 
     """A mask's transmission low-passed exactly to |lambda nu| <= 2 band, on the grid
     ``x_um`` (uniform, periodic): shape of ``x_um``.
 
-    The Fourier coefficients of the periodic mask (holes ``holes`` (k, 2), intervals in
-    one period) are w sinc(w nu) exp(-2 pi i nu c) summed over the holes. A field u of
-    band B times the mask has, inside the band, exactly the spectrum of u times this
-    low-passed mask (mask frequencies beyond 2B cannot reach the band), and the product
-    has band 3B, which a grid step <= lambda / (6B) holds without aliasing: the in-band
-    result does not depend on where the edges fall on the grid. sum |u|^2 M dx is then
-    the exact power through the mask (its integrand has band 4B < 1 / dx).
+    The Fourier coefficients of the periodic mask (holes ``holes`` (k, 2), disjoint
+    intervals, cut to the grid's period) are w sinc(w nu) exp(-2 pi i nu c) summed over
+    the holes. A field u of band B times the mask has, inside the band, exactly the
+    spectrum of u times this low-passed mask (mask frequencies beyond 2B cannot reach
+    the band), and the product has band 3B, which a grid step <= lambda / (6B) holds
+    without aliasing: the in-band result does not depend on where the edges fall on the
+    grid. sum |u|^2 M dx is then the exact power through the mask (its integrand has
+    band 4B < 1 / dx).
     """
     n = x_um.size
     dx = x_um[1] - x_um[0]
     nu = sfft.fftfreq(n, dx)
     keep = np.abs(wavelength_um * nu) <= 2 * band
     a = np.zeros(n, dtype=np.complex128)
-    if holes.size:
-        w = holes[:, 1] - holes[:, 0]
-        c = 0.5 * (holes[:, 1] + holes[:, 0]) - x_um[0]
+    lo = x_um[0] - dx / 2  # one period [lo, lo + n dx): a hole beyond it is cut there
+    h = np.clip(np.asarray(holes, dtype=np.float64).reshape(-1, 2), lo, lo + n * dx)
+    h = h[h[:, 1] > h[:, 0]]
+    if h.size:
+        w = h[:, 1] - h[:, 0]
+        c = 0.5 * (h[:, 1] + h[:, 0]) - x_um[0]
         nk = nu[keep][:, None]
         a[keep] = (w * np.sinc(w * nk) * np.exp(-2j * np.pi * nk * c)).sum(axis=1)
     return sfft.ifft(a, workers=-1).real / dx
