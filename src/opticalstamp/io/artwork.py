@@ -27,6 +27,11 @@ that both formats hold the same geometry.
 Layers: GDS layer n (datatype 0) is the mask counted from the object side, as the
 paper numbers them (layer 1 faces the document); its holes are array references of one
 hole cell, one per row of used pixels, so a file for an A4 line stays a few kilobytes.
+GDSII stores an array's column count in 16 bits: a row of more than ``MAX_ARRAY``
+(32,767) holes is drawn as several references end to end (DXF's MINSERT count is 16
+bits too and is split the same way). Its coordinates are 32-bit whole database units:
+an artwork reaching beyond ``MAX_EXTENT_UM`` (+-2.147 m) from the line's centre cannot
+be written and is refused (:class:`ArtworkError`, naming the sensor's fields).
 Datatype 1 of every layer holds the alignment marks (crosses at both ends of the line,
 at the same nominal place on every layer, no misregistration); a text label on each
 layer names the design, its fingerprint and the mask. DXF: one layer per mask named
@@ -61,10 +66,21 @@ USER_UNIT_UM = 1.0
 #: How far (in database units) a length may sit from the grid and count as on it: the
 #: rounding of a decimal number like 84.6 um in binary floating point.
 GRID_SLACK_DBU = 1e-6
+#: Most columns (or rows) of one GDSII array reference (AREF's COLROW: 16-bit signed) and
+#: of one DXF MINSERT (group codes 70/71: 16-bit): longer rows are split.
+MAX_ARRAY = 32_767
+#: Farthest any point of the artwork may lie from the origin (um): GDSII coordinates are
+#: 32-bit signed whole database units (2^31 - 1 nm, 2.147 m).
+MAX_EXTENT_UM = (2**31 - 1) * DBU_UM
 
 
 class OffGridError(DesignError):
     """A design whose artwork would not sit on the database grid (1 nm)."""
+
+
+class ArtworkError(DesignError):
+    """A design whose artwork the file formats cannot hold (a line longer than GDSII's
+    coordinates reach)."""
 
 
 @dataclass(frozen=True)
@@ -162,6 +178,37 @@ def check_on_grid(design: Design) -> None:
         )
 
 
+def check_extent(design: Design) -> None:
+    """Raise :class:`ArtworkError` where the artwork reaches beyond ``MAX_EXTENT_UM``.
+
+    The line of ``sensor.pixels_per_row`` holes at ``sensor.row_pitch_um``, centred on 0,
+    with its alignment marks and labels, must lie within GDSII's 32-bit coordinates at
+    the 1-nm database unit (+-2.147 m); DXF is held to the same rule so that both formats
+    hold the same geometry.
+    """
+    s = design.sensor
+    xs = [x for (x0, _), (x1, _) in mark_rectangles(design) for x in (x0, x1)]
+    margin = MARK_GAP_UM + MARK_ARM_UM + (abs(s.row_b_offset_x_um) if s.rows == 2 else 0.0)
+    margin += max(abs(m.offset_x_um) for m in design.masks)  # the holes beyond the marks
+    reach = max(abs(x) for x in xs) + margin - MARK_GAP_UM - MARK_ARM_UM
+    if reach <= MAX_EXTENT_UM:  # y: a few mm at most (offsets <= 10 mm)
+        return
+    n, p = s.n_per_row, s.row_pitch_um
+    most = int(2 * (MAX_EXTENT_UM - margin) // p)
+    raise ArtworkError(
+        f"masks: design {design.name!r}: sensor.pixels_per_row = {n:,} holes at "
+        f"sensor.row_pitch_um = {p:g} µm make a line {n * p / 1e6:.3g} m long, and its "
+        f"artwork would reach {reach / 1e6:.3g} m from the centre; GDSII coordinates (32-bit, "
+        f"1-nm database unit) reach {MAX_EXTENT_UM / 1e6:.4g} m: at most {max(most, 0):,} "
+        "holes per row at this pitch (no photomask is that long either)"
+    )
+
+
+def _runs(m: MaskLayout) -> list[tuple[int, int]]:
+    """(first hole, count) of each array reference of one row: at most MAX_ARRAY each."""
+    return [(j, min(MAX_ARRAY, m.count - j)) for j in range(0, m.count, MAX_ARRAY)]
+
+
 def mask_layouts(design: Design) -> list[MaskLayout]:
     """Every mask's holes, the object-side mask first (GDS layer 1)."""
     s = design.sensor
@@ -234,10 +281,13 @@ def gds_bytes(design: Design) -> bytes:
     ------
     OffGridError
         A length the artwork draws is not on the 1-nm grid (:func:`grid_problems`).
+    ArtworkError
+        The line is longer than GDSII's coordinates reach (:func:`check_extent`).
     """
     import gdstk
 
     check_on_grid(design)
+    check_extent(design)
     lib = gdstk.Library(
         f"opticalstamp-{file_stem(design.name)}", unit=USER_UNIT_UM * 1e-6, precision=DBU_UM * 1e-6
     )
@@ -252,7 +302,9 @@ def gds_bytes(design: Design) -> bytes:
             w, h = m.width_um / 2, m.height_um / 2
             hole.add(gdstk.rectangle((-w, -h), (w, h), layer=m.layer))
         for x, y in m.rows:
-            top.add(gdstk.Reference(hole, (x, y), columns=m.count, rows=1, spacing=(m.pitch_um, 0)))
+            for j, cols in _runs(m):  # GDSII: at most MAX_ARRAY columns a reference
+                at = (_on_grid(x + j * m.pitch_um), y)
+                top.add(gdstk.Reference(hole, at, columns=cols, rows=1, spacing=(m.pitch_um, 0)))
         for p, q in mark_rectangles(design):
             top.add(gdstk.rectangle(p, q, layer=m.layer, datatype=1))
         x, y = mark_positions(design)[0]
@@ -271,6 +323,7 @@ def dxf_bytes(design: Design) -> bytes:
     import ezdxf
 
     check_on_grid(design)
+    check_extent(design)
 
     doc = ezdxf.new("R2010")
     doc.units = DXF_MICRONS
@@ -287,8 +340,10 @@ def dxf_bytes(design: Design) -> bytes:
             pts = [(-w, -h), (w, -h), (w, h), (-w, h)]
             block.add_lwpolyline(pts, close=True, dxfattribs={"layer": layer})
         for x, y in m.rows:
-            ref = msp.add_blockref(block.name, (x, y), dxfattribs={"layer": layer})
-            ref.grid(size=(1, m.count), spacing=(0, m.pitch_um))
+            for j, cols in _runs(m):  # MINSERT: at most MAX_ARRAY columns
+                at = (_on_grid(x + j * m.pitch_um), y)
+                ref = msp.add_blockref(block.name, at, dxfattribs={"layer": layer})
+                ref.grid(size=(1, cols), spacing=(0, m.pitch_um))
         for (x0, y0), (x1, y1) in mark_rectangles(design):
             msp.add_lwpolyline(
                 [(x0, y0), (x1, y0), (x1, y1), (x0, y1)],
@@ -313,6 +368,8 @@ def write_masks(design: Design, path: str | Path, fmt: str | None = None) -> Pat
         An unknown format.
     OffGridError
         The design's lengths are not on the artwork's 1-nm grid (nothing is written).
+    ArtworkError
+        The line is longer than GDSII's coordinates reach (nothing is written).
     """
     path = Path(path)
     fmt = (fmt or path.suffix.lstrip(".")).lower()
