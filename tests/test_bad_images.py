@@ -298,9 +298,10 @@ def test_sfr_refuses_regions_with_more_than_one_edge(tmp_path):
         (["--roi", "0,0,200,472"], ("side to side",)),  # a whole side and two corners
     ):
         _refused(_run("sfr", e, *args), "e.png", *words)
-    stripe = np.full((120, 120), 0.9)  # a slanted dark bar: two opposite edges in a row
+    # a slanted dark bar: two opposite edges in a row (grey at its edges: an image of two
+    # grey levels is refused before its edges are counted)
     yy, xx = np.mgrid[0:120, 0:120]
-    stripe[np.abs(xx - 60 - 0.09 * (yy - 60)) < 12] = 0.1
+    stripe = 0.9 - 0.8 * np.clip(12.5 - np.abs(xx - 60 - 0.09 * (yy - 60)), 0, 1)
     p = tmp_path / "bar.png"
     Image.fromarray((stripe * 255).astype(np.uint8)).save(p, dpi=(600, 600))
     _refused(_run("sfr", p), "bar.png", "more than one edge")

@@ -369,6 +369,16 @@ def measure_rmtf(
     emit(data, as_json, lines)
 
 
+def _mtf50(r: dict) -> str:
+    """MTF50 as a line says it: the frequency, or that the SFR never fell to 0.5."""
+    if r["mtf50_reached"]:
+        return f"MTF50 {r['mtf50_cy_per_mm']:.3f} cycles/mm"
+    return (
+        "MTF50 not reached: the SFR stays above 0.5 up to the sampling frequency, "
+        f"{r['freq_cy_per_mm'][-1]:.3g} cycles/mm (an edge sharper than the pixels resolve)"
+    )
+
+
 @command(traces=False)
 def sfr(
     image: ImageArg,
@@ -406,7 +416,7 @@ def sfr(
         lines = [f"{image} at {use:g} dpi, slanted square:"]
         for axis, r in both.items():
             lines.append(
-                f"  along {axis}: MTF50 {r['mtf50_cy_per_mm']:.3f} cycles/mm; SFR at 100 dpi "
+                f"  along {axis}: {_mtf50(r)}; SFR at 100 dpi "
                 f"{r['sfr_at_dpi']['100']:.3f}, at 200 dpi {r['sfr_at_dpi']['200']:.3f}"
             )
         emit(data, as_json, lines)
@@ -424,7 +434,7 @@ def sfr(
     data = {"image": str(image), "dpi": use} | r
     lines = [
         f"{image} at {use:g} dpi: edge along {r['direction']}, angle {r['edge_angle_deg']:.2f}°",
-        f"MTF50 {r['mtf50_cy_per_mm']:.3f} cycles/mm; SFR at 100 dpi {r['sfr_at_dpi']['100']:.3f}"
+        f"{_mtf50(r)}; SFR at 100 dpi {r['sfr_at_dpi']['100']:.3f}"
         f", at 200 dpi {r['sfr_at_dpi']['200']:.3f}",
     ]
     if "roi" in r:

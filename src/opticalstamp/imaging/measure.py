@@ -186,6 +186,22 @@ def _transitions(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return out[0], out[1]
 
 
+def _check_grey_levels(img: np.ndarray) -> None:
+    """Refuse an image of two grey levels (1-bit, or thresholded): no SFR in it.
+
+    A slanted edge sampled at two levels is a staircase set by the threshold, not by the
+    blur: its oversampled ESF is a step wherever the threshold falls, and its "SFR" is
+    that of the binarisation (about 1 everywhere; no MTF50). ISO 12233 needs grey levels.
+    """
+    lo, hi = img.min(), img.max()
+    if lo < hi and not ((img > lo) & (img < hi)).any():
+        raise ValueError(
+            "the image holds only two grey levels (a 1-bit or thresholded image): its edge "
+            "is a staircase set by the threshold, not by the blur, and has no SFR; measure "
+            "a greyscale (8- or 16-bit) image"
+        )
+
+
 def sfr(
     image: np.ndarray,
     dpi: float,
@@ -210,14 +226,17 @@ def sfr(
 
     Returns freq_cy_per_mm, sfr, mtf50_cy_per_mm, sfr_at_dpi ({"100": ., "200": .} for
     the default ``at_dpi``, at the fundamental of those bar charts: 1/period),
-    edge_angle_deg, direction.
+    edge_angle_deg, direction. ``mtf50_cy_per_mm`` is NaN where the SFR stays at or above
+    0.5 up to the sampling frequency (``mtf50_reached`` False: an edge sharper than the
+    pixels can show; ``freq_cy_per_mm[-1]`` is how far it was followed).
 
     Raises
     ------
     ValueError
         No usable edge: none, more than one along ``direction``, too close to the grid
         or the border, or a profile without a single step (an SFR that would not be 1 at
-        low frequency).
+        low frequency); or an image of two grey levels (1-bit or thresholded), which
+        holds no SFR.
     """
     img = np.asarray(image, dtype=np.float64)
     if img.ndim != 2 or min(img.shape) < 8:
@@ -228,6 +247,7 @@ def sfr(
         raise ValueError(f"direction must be x, y or auto (got {direction!r})")
     if not np.isfinite(img).all():
         raise ValueError("the image holds NaN or infinite values")
+    _check_grey_levels(img)
     n_tr = dict(zip("xy", _transitions(img), strict=True))
     per_line = {k: float(np.median(n[n > 0])) if n.any() else 0.0 for k, n in n_tr.items()}
     if direction == "auto" and min(per_line.values()) > 1:  # a dark square: its left edge
@@ -338,6 +358,7 @@ def sfr(
         "freq_cy_per_mm": f_mm,
         "sfr": s,
         "mtf50_cy_per_mm": mtf50,
+        "mtf50_reached": bool(np.isfinite(mtf50)),
         "sfr_at_dpi": at,
         "nyquist_cy_per_mm": UM_PER_MM / pitch_of_dpi(dpi) / 2,
         "oversample": oversample,
@@ -373,6 +394,9 @@ def sfr_xy(
     image: np.ndarray, dpi: float, oversample: int = 4, at_dpi=(100.0, 200.0)
 ) -> dict[str, dict]:
     """SFR along x and along y from a slanted dark square (:func:`square_edge_rois`)."""
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim == 2 and img.size and np.isfinite(img).all():
+        _check_grey_levels(img)  # before looking for the square in a two-level image
     out = {}
     for axis, (x0, y0, x1, y1) in square_edge_rois(image).items():
         out[axis] = sfr(

@@ -317,6 +317,13 @@ def plot_diffraction(res):
     return fig
 
 
+def _mtf50_text(res: dict, unit: str = " cy/mm") -> str:
+    """The MTF50 in a label: "MTF50 4.54 cy/mm", or "MTF50 not reached" where the SFR
+    stays above 0.5 up to the sampling frequency."""
+    f = res["mtf50_cy_per_mm"]
+    return f"MTF50 {f:.2f}{unit}" if np.isfinite(f) else "MTF50 not reached"
+
+
 def plot_sfr(res: dict, title: str = "", extra: dict | None = None):
     """SFR curve of a slanted edge with MTF50 and the 100/200-dpi values (``extra``: a
     second curve, e.g. along y)."""
@@ -327,7 +334,7 @@ def plot_sfr(res: dict, title: str = "", extra: dict | None = None):
             extra["freq_cy_per_mm"],
             extra["sfr"],
             "-",
-            label=f"along {extra['direction']}: MTF50 {extra['mtf50_cy_per_mm']:.2f}",
+            label=f"along {extra['direction']}: {_mtf50_text(extra, unit='')}",
         )
     ax.axhline(0.5, color="k", lw=0.5, ls=":")
     for k, v in res["sfr_at_dpi"].items():
@@ -338,8 +345,7 @@ def plot_sfr(res: dict, title: str = "", extra: dict | None = None):
     ax.set_xlabel("spatial frequency (cycles/mm)")
     ax.set_ylabel("SFR")
     ax.set_title(
-        f"{title} slanted-edge SFR along {res['direction']}: MTF50 "
-        f"{res['mtf50_cy_per_mm']:.2f} cy/mm",
+        f"{title} slanted-edge SFR along {res['direction']}: {_mtf50_text(res)}",
         fontsize=9,
     )
     ax.legend(fontsize=8)
