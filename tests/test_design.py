@@ -63,7 +63,7 @@ def _error(mutate, preset: str = "paper2016") -> str:
 def test_thickness_must_be_positive(value):
     msg = _error(lambda d: d["slabs"][1].__setitem__("thickness_um", value))
     assert "slabs.1.thickness_um" in msg
-    assert "greater than 0" in msg
+    assert "must be at least 0.1 um" in msg  # MIN_LENGTH_UM: positive and then some
 
 
 def test_negative_reference_gap():

@@ -5,8 +5,9 @@ medium, with a hole at least as large as both neighbours' holes, never clips an 
 ray (a straight line between two points inside two convex holes stays inside their
 convex hull). So the 5- and 6-mask stacks built that way have the prototype's own path,
 ray for ray; only ghost light can be blocked by the extra masks. A mask doubled by a
-slightly larger twin 1 nm above it blocks nothing at all: the ghost paths are the
-prototype's, each listed with the twin's hole equal to its original's.
+slightly larger twin 0.1 um above it (the shortest slab a design takes) blocks nothing at
+all: the ghost paths are the prototype's, each listed with the twin's hole equal to its
+original's.
 """
 
 from __future__ import annotations
@@ -75,15 +76,16 @@ def test_own_path_is_the_prototypes_ray_by_ray(n_masks):
 
 
 def twin_prototype(n_masks: int):
-    """paper2016 with each of its top ``n_masks - 3`` masks doubled 1 nm above itself.
+    """paper2016 with each of its top ``n_masks - 3`` masks doubled 0.1 um above itself.
 
-    The twin holes are 0.01 um larger; over 1 nm of glass no ray drifts by more than
-    0.001 um, so a ray passes a twin exactly when it passes the mask below it: the stack
+    The twin holes are 0.2 um larger; over 0.1 um of glass (n = 1.52) no ray that left the
+    pixel's air gap drifts by more than 0.1 um tan(asin(1 / 1.52)) = 0.087 um, so a ray
+    passes a twin exactly when it passes the mask below it: the stack
     has the prototype's own path and ghost paths, ray for ray, with those holes listed
     twice. The first mask and the slabs below it are the prototype's, so importance
     sampling draws the same rays.
     """
-    eps = 0.001
+    eps = 0.1  # MIN_LENGTH_UM: the shortest slab a design takes
     stack = [("air", 450.0, "layer 3", 40.0), (1.52, 400.0, "layer 2", 40.0)]
     stack += [(1.52, 1000.0, "layer 1", 48.0)]
     doubled = [name for *_, name, _ in stack][6 - n_masks :]
@@ -93,7 +95,7 @@ def twin_prototype(n_masks: int):
             t -= eps  # the twin's slab is cut from this plate
         slabs.append(_slab(medium, t, name, size))
         if name in doubled:
-            slabs.append(_slab(1.52, eps, f"twin {name}", size + 0.01))
+            slabs.append(_slab(1.52, eps, f"twin {name}", size + 0.2))
     data = preset_dict("paper2016")
     data["slabs"] = slabs
     data["name"] = f"twins-{n_masks}"

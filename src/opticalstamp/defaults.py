@@ -19,6 +19,8 @@ SHIFT_STEP_UM = 1.0  # chart shift step (the maximum over shifts suppresses Moir
 # Monte Carlo
 RAYS_LSF = 1 << 21  # rays per pixel row for the folded line-spread functions (RMTF)
 RAYS_MAP = 1 << 22  # rays for maps: spots, PSFs, the report's spots
+MAP_MAX_BINS = 1024  # the most bins a side of a pixel's map has: a spot wider than that
+# many bins (a stack too thin to confine the light) is mapped on coarser bins
 RSE_OWN = 1e-3  # ghost analysis: run until the own-path etendue has this relative SE ...
 RSE_GHOST = 1e-2  # ... and the ghost etendue this one
 DETECTOR_HALF_UM = 500.0  # half width of the virtual detector of paper Fig. 4

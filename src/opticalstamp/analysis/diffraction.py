@@ -59,7 +59,13 @@ def slit_intensity(x_um, slit_um, r1_um, r2_um, wavelength_um, x_source_um=0.0) 
 
 
 def geometric_edge(width_um: float, r1_um: float, r2_um: float) -> float:
-    """Half width (um) of the aperture's geometric shadow on the observation plane."""
+    """Half width (um) of the aperture's geometric shadow on the observation plane.
+
+    A source in the aperture's plane (``r1_um`` = 0: a document touching a design's top
+    mask) casts no shadow: the edge is at infinity.
+    """
+    if r1_um == 0:
+        return float("inf")
     return width_um / 2 * (r1_um + r2_um) / r1_um
 
 
@@ -106,7 +112,15 @@ def fraction_outside(
     The region is the hole's geometric shadow (default) or, with ``half_um``, a square
     of that half width (circle: a disk of that radius) centred on the axis (e.g. the next
     layer's hole). ``shape``: "slit", "square" (separable) or "circle".
+
+    A source in the aperture's plane (``r1_um`` = 0) is the limit the formula tends to:
+    the hole does not bound its light, nothing lies outside the (infinite) shadow and
+    all of it lies outside any finite region.
     """
+    if shape not in ("slit", "square", "rectangle", "circle"):
+        raise ValueError(f"shape must be slit, square or circle (got {shape!r})")
+    if r1_um == 0 and r2_um > 0 and wavelength_um > 0:
+        return 0.0 if half_um is None else 1.0
     xg = geometric_edge(size_um, r1_um, r2_um)
     h = xg if half_um is None else half_um
     if shape == "slit":
@@ -119,7 +133,6 @@ def fraction_outside(
         from scipy.integrate import simpson
 
         return float(1.0 - simpson(i * 2 * np.pi * r, x=r) / (np.pi * xg * xg))
-    raise ValueError(f"shape must be slit, square or circle (got {shape!r})")
 
 
 @dataclass(frozen=True)
@@ -166,6 +179,11 @@ def slit_case(
     if slit_um <= 0 or z_mm < 0 or gap_um < 0:
         raise ValueError("slit width must be > 0, Z and gap >= 0")
     r1 = z_mm * 1000.0 + gap_um
+    if r1 <= 0:
+        raise ValueError(
+            "Z = 0 with a gap of 0 puts the point source in the slit (R1 = 0): it casts no "
+            "geometric shadow, so there is no edge to diffract around; give Z > 0 or a gap > 0"
+        )
     xg = geometric_edge(slit_um, r1, r2_um)
     x = np.linspace(-2 * xg, 2 * xg, n_points)
     ws = [float(w) for w in wavelengths_um]
@@ -238,7 +256,9 @@ def diffraction_budget(
             k = _wkey(float(w))
             row["outside_shadow"][k] = fraction_outside(shape, size, r_src, r2, w)
             row["outside_next"][k] = fraction_outside(shape, size, r_src, r2, w, next_half)
-            row["fresnel_number"][k] = (size / 2) ** 2 / (w * _lengths(r_src, r2, w))
+            row["fresnel_number"][k] = (
+                float("inf") if r_src == 0 else (size / 2) ** 2 / (w * _lengths(r_src, r2, w))
+            )
             if row["outside_shadow"][k] > warn_fraction:
                 warnings.append(
                     f"{row['layer']}: {row['outside_shadow'][k]:.0%} of the light through "

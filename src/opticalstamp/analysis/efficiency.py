@@ -182,8 +182,8 @@ def efficiency(
                 "etendue_own_um2sr": ok,
                 "etendue_um2sr": ok + ghost,
                 "ghost_fraction": ghost / (ok + ghost) if exact and ok > 0 else gk.ghost_fraction,
-                "gain_vs_design": (ok + ghost) / tot,
-                "gain_own_vs_design": ok / g_own,
+                "gain_vs_design": _over(ok + ghost, tot),
+                "gain_own_vs_design": _over(ok, g_own),
             }
         )
     ratio, ratio_own = tot / g_ref, g_own / g_ref
@@ -204,8 +204,8 @@ def efficiency(
         reference_f_number=f_ref,
         ratio=ratio,
         ratio_own=ratio_own,
-        working_f_number=f_ref / math.sqrt(ratio),
-        working_f_number_own=f_ref / math.sqrt(ratio_own),
+        working_f_number=_over(f_ref, math.sqrt(ratio)),
+        working_f_number_own=_over(f_ref, math.sqrt(ratio_own)),
         by_object_radius=by_r,
         sensitive_area=areas,
         meta={
@@ -217,3 +217,21 @@ def efficiency(
             | ref
         },
     )
+
+
+def ratio_text(ratio: float, digits: int = 1) -> str:
+    """A light ratio as an engineer writes it: "1/26.3" below 1, "3.2×" from 1 up, "0"
+    where no light reaches the pixel (never a division by zero)."""
+    if not ratio > 0:
+        return "0" if ratio == 0 else "-"
+    if ratio < 1:
+        return f"1/{1 / ratio:.{digits}f}"
+    return f"{ratio:.3g}×"
+
+
+def _over(a: float, b: float) -> float:
+    """a / b, where no light (b = 0) gives inf (a working F-number) or NaN (a gain of no
+    light over none): a design through which no light reaches the pixel."""
+    if b == 0:
+        return float("inf") if a > 0 else float("nan")
+    return a / b

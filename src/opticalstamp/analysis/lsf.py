@@ -25,10 +25,11 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
-from ..defaults import RAYS_LSF, RAYS_MAP
+from ..defaults import MAP_MAX_BINS, RAYS_LSF, RAYS_MAP
 from ..design import Design, square_holes
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 from ..raytrace.stack import lattice_of
+from ..validate import check_memory
 
 #: Target width of the bins of a folded LSF (um); each period gets round(P / this) bins.
 FOLD_BIN_UM = 0.5
@@ -316,9 +317,28 @@ class _Axis:
         return cls(np.array(d), np.array(half), np.array(off), red, n_obj)
 
     def levers(self, z_mm: float) -> np.ndarray:
-        """Distance (reduced, um) from each plane up to the object plane at z_mm (> 0)."""
+        """Distance (reduced, um) from each plane up to the object plane at z_mm (>= 0)."""
         big_d = self.top + z_mm * 1000.0 / self.n_obj
         return big_d - self.d
+
+    def at(self, z_mm: float) -> tuple[_Axis, np.ndarray, tuple[float, float]]:
+        """The planes below the object plane with their levers, and the window in U.
+
+        A mask in the object plane (lever 0: a reference gap of 0 at Z = 0, the document
+        on the top mask) bounds U itself, |U - o| <= h, whatever the slope: it is left out
+        of the strips in s and returned as the window ``(lo, hi)`` (infinite otherwise).
+        """
+        lev = self.levers(z_mm)
+        flat = lev <= 0
+        if not flat.any():
+            return self, lev, (-np.inf, np.inf)
+        keep = ~flat
+        win = (
+            float((self.off - self.half)[flat].max()),
+            float((self.off + self.half)[flat].min()),
+        )
+        sub = _Axis(self.d[keep], self.half[keep], self.off[keep], self.top, self.n_obj)
+        return sub, lev[keep], win
 
 
 def paraxial_profile(design: Design, z_mm: float, u_um: np.ndarray, axis: int = 0) -> np.ndarray:
@@ -331,7 +351,9 @@ def paraxial_profile(design: Design, z_mm: float, u_um: np.ndarray, axis: int = 
 
 
 def _profile(ax: _Axis, z_mm: float, u_um: np.ndarray) -> np.ndarray:
-    return _profile_at(ax, ax.levers(z_mm), u_um)
+    sub, lev, (lo, hi) = ax.at(z_mm)
+    u = np.asarray(u_um, dtype=np.float64)
+    return np.where((lo <= u) & (u <= hi), _profile_at(sub, lev, u), 0.0)
 
 
 def _profile_at(ax: _Axis, lev: np.ndarray, u_um: np.ndarray) -> np.ndarray:
@@ -347,6 +369,31 @@ def _profile_at(ax: _Axis, lev: np.ndarray, u_um: np.ndarray) -> np.ndarray:
     return np.maximum(hi - lo, 0.0)
 
 
+#: Steepest own-path slope |s| (n sin theta) up to which the paraxial closed form stands in
+#: for the tracer unasked (the scan's ``--kernel auto``): tan and sin then differ by < 5 %.
+PARAXIAL_MAX_SLOPE = 0.3
+
+
+def paraxial_max_slope(design: Design) -> float:
+    """Bound on the steepest own-path ray, |s| = n sin(theta), over both axes.
+
+    A ray passing planes i and j (the pixel, each mask) has |s| <= (h_i + h_j +
+    |o_i - o_j|) / |d_i - d_j| (half widths h, offsets o, reduced heights d); the least
+    of these over every pair bounds the own path. The prototype's is 0.033 (the pixel
+    and layer 1); a stack much thinner than its holes has one far above 1, where the
+    paraxial model (slopes unbounded, tan = sin) no longer describes it.
+    Circular holes count as their circumscribed squares.
+    """
+    sq = square_holes(design)
+    out = 0.0
+    for axis in (0, 1):
+        ax = _Axis.of(sq, axis)
+        i, j = np.triu_indices(ax.d.size, 1)
+        bound = (ax.half[i] + ax.half[j] + np.abs(ax.off[i] - ax.off[j])) / (ax.d[j] - ax.d[i])
+        out = max(out, float(bound.min()))
+    return out
+
+
 def paraxial_support(design: Design, z_mm: float, axis: int = 0) -> tuple[float, float]:
     """Edges of the paraxial own-path profile (um from the pixel's axis).
 
@@ -356,31 +403,35 @@ def paraxial_support(design: Design, z_mm: float, axis: int = 0) -> tuple[float,
     return _support(_Axis.of(design, axis), z_mm)
 
 
-def _pairs(ax: _Axis, z_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Levers L and a[i, j] = 1/L_i - 1/L_j, with where |a| is large enough to divide by."""
-    lev = ax.levers(z_mm)
+def _pairs(lev: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Levers L (> 0) and a[i, j] = 1/L_i - 1/L_j, with where |a| is large enough to
+    divide by."""
     inv = 1 / lev
     a = inv[:, None] - inv[None, :]
     return lev, a, np.abs(a) >= 1e-15
 
 
 def _support(ax: _Axis, z_mm: float) -> tuple[float, float]:
-    return _support_of(ax, *_pairs(ax, z_mm))
+    sub, lev, win = ax.at(z_mm)
+    return _support_of(sub, *_pairs(lev), win)
 
 
-def _support_of(ax: _Axis, lev: np.ndarray, a: np.ndarray, ok: np.ndarray) -> tuple:
+def _support_of(
+    ax: _Axis, lev: np.ndarray, a: np.ndarray, ok: np.ndarray, window=(-np.inf, np.inf)
+) -> tuple:
     rhs = ((ax.off + ax.half) / lev)[:, None] - ((ax.off - ax.half) / lev)[None, :]
     r = rhs[ok] / a[ok]
     up = a[ok] > 0
-    hi = min(np.inf, r[up].min(initial=np.inf))
-    lo = max(-np.inf, r[~up].max(initial=-np.inf))
+    hi = min(window[1], r[up].min(initial=np.inf))
+    lo = max(window[0], r[~up].max(initial=-np.inf))
     return (float(lo), float(hi)) if lo < hi else (0.0, 0.0)
 
 
 def _kinks(ax: _Axis, z_mm: float) -> np.ndarray:
     """Every U where the piecewise-linear profile can bend, within its support."""
-    lev, a, ok = _pairs(ax, z_mm)
-    return _kinks_of(ax, lev, a, ok, _support_of(ax, lev, a, ok))
+    sub, lev, win = ax.at(z_mm)
+    pairs = _pairs(lev)
+    return _kinks_of(sub, *pairs, _support_of(sub, *pairs, win))
 
 
 def _kinks_of(ax: _Axis, lev, a, ok, support: tuple[float, float]) -> np.ndarray:
@@ -408,9 +459,10 @@ class _Slice:
     integral at the kinks, computed once for every evaluation of :meth:`cumulative`."""
 
     def __init__(self, ax: _Axis, z_mm: float) -> None:
-        lev, a, ok = _pairs(ax, z_mm)
+        ax, lev, win = ax.at(z_mm)  # a mask in the object plane: a window in U
+        lev, a, ok = _pairs(lev)
         self.ax, self.lev = ax, lev
-        self.support = _support_of(ax, lev, a, ok)
+        self.support = _support_of(ax, lev, a, ok, win)
         k = _kinks_of(ax, lev, a, ok, self.support)
         rk = _profile_at(ax, lev, k)
         self.k, self.rk = k, rk
@@ -590,7 +642,9 @@ def traced_map_sets(
     ----------
     z_sets : sequence of sequences of object distances (mm)
     others : as :func:`traced_maps`; where ``half_um`` is None, each set's fine grid
-        covers the own-path spot at that set's largest Z
+        covers the own-path spot at that set's largest Z, on bins of ``fine_bin_um`` or,
+        for a spot wider than ``MAP_MAX_BINS`` of them (a stack too thin to confine the
+        light), on that many coarser bins (``TracedMaps.fine_bin_um`` says which)
 
     Returns
     -------
@@ -606,27 +660,36 @@ def traced_map_sets(
     ncy = int(np.ceil(2 * coarse_half_um[0] / coarse_bin_um))
     ncx = int(np.ceil(2 * coarse_half_um[1] / coarse_bin_um))
     coarse_lo = np.array([-ncy * coarse_bin_um / 2, -ncx * coarse_bin_um / 2])
-    sets = []  # per set: Z (mm), fine grid start, fine and coarse tallies
+    sets = []  # per set: Z (mm), fine grid start and bin, fine and coarse tallies
     for z_mm in z_sets:
         zs = np.asarray(z_mm, dtype=np.float64)
         half = _own_half_width(design, float(zs.max())) if half_um is None else half_um
-        nf = int(np.ceil(2 * half / fine_bin_um))
-        fine_lo = -nf * fine_bin_um / 2
-        sets.append((zs, fine_lo, np.zeros((zs.size, nf, nf)), np.zeros((zs.size, ncy, ncx))))
+        # a spot wider than MAP_MAX_BINS bins (a stack too thin to confine the light):
+        # coarser bins, never a grid that does not fit in memory
+        fine_bin = max(fine_bin_um, 2 * half / MAP_MAX_BINS)
+        nf = int(np.ceil(2 * half / fine_bin))
+        fine_lo = -nf * fine_bin / 2
+        check_memory(
+            8.0 * zs.size * max(nf * nf, ncy * ncx),
+            f"the responsivity maps of {zs.size} object distances",
+        )
+        sets.append(
+            (zs, fine_lo, fine_bin, np.zeros((zs.size, nf, nf)), np.zeros((zs.size, ncy, ncx)))
+        )
     on_gpu = None  # the same maps on the device, where a GPU keeps the rays
     for pb in tr.trace((row, 0), progress=progress):
         b = pb.rays
         if b.device is not None:
             from . import cuda_tallies as gpu
 
-            on_gpu = on_gpu or [(gpu.zeros(f.shape), gpu.zeros(c.shape)) for _, _, f, c in sets]
-            for (zs, fine_lo, _, _), (fine, coarse) in zip(sets, on_gpu, strict=True):
+            on_gpu = on_gpu or [(gpu.zeros(f.shape), gpu.zeros(c.shape)) for *_, f, c in sets]
+            for (zs, fine_lo, fine_bin, _, _), (fine, coarse) in zip(sets, on_gpu, strict=True):
                 gpu.maps(
-                    pb, zs * 1000.0, tr.n_obj, fine_lo, fine_bin_um, coarse_lo,
+                    pb, zs * 1000.0, tr.n_obj, fine_lo, fine_bin, coarse_lo,
                     coarse_bin_um, fine, coarse,
                 )  # fmt: skip
             continue
-        for zs, fine_lo, fine, coarse in sets:
+        for zs, fine_lo, fine_bin, fine, coarse in sets:
             _maps(
                 b.x,
                 b.y,
@@ -639,13 +702,13 @@ def traced_map_sets(
                 zs * 1000.0,
                 tr.n_obj,
                 fine_lo,
-                fine_bin_um,
+                fine_bin,
                 coarse_lo,
                 coarse_bin_um,
                 fine,
                 coarse,
             )
-    for (_, _, fine, coarse), dev in zip(sets, on_gpu or (), strict=False):  # none on a CPU
+    for (*_, fine, coarse), dev in zip(sets, on_gpu or (), strict=False):  # none on a CPU
         fine += dev[0].copy_to_host()
         coarse += dev[1].copy_to_host()
     return [
@@ -653,13 +716,13 @@ def traced_map_sets(
             zs,
             fine / sampling.n_rays,
             fine_lo,
-            fine_bin_um,
+            fine_bin,
             coarse / sampling.n_rays,
             (float(coarse_lo[0]), float(coarse_lo[1])),
             coarse_bin_um,
             sampling.n_rays,
         )
-        for zs, fine_lo, fine, coarse in sets
+        for zs, fine_lo, fine_bin, fine, coarse in sets
     ]
 
 

@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..defaults import RAYS_MAP
+from ..defaults import MAP_MAX_BINS, RAYS_MAP
 from ..design import Design
 from ..raytrace.launch import launch
 from ..raytrace.pixel import PixelTracer, Sampling, acceptance, tracer_for
@@ -164,7 +164,8 @@ def spots(
     Parameters
     ----------
     z_mm : object distances above the reference plane (mm)
-    bin_um : map pixel size (um)
+    bin_um : map pixel size (um); a spot wider than ``MAP_MAX_BINS`` of them (a stack too
+        thin to confine the light) is mapped on that many coarser bins
     ghosts : include ghost paths in the maps and the centre-cell fraction
     sampling : Sampling, replaces ``n_rays``, ``seed``, ``fresnel`` and ``chunk`` (its ray
         count, where None, is ``n_rays``)
@@ -188,7 +189,10 @@ def spots(
             half[iz] = max(half[iz], np.abs(dx[o]).max(initial=0), np.abs(dy[o]).max(initial=0))
     cell_um = output_pitch(design)  # the output pixel grid of paper Fig. 5 (84.6 um)
     half = np.ceil((1.25 * half + 3 * bin_um) / cell_um * 2 + 1) * cell_um / 2
-    edges = [np.arange(-h, h + bin_um / 2, bin_um) for h in half]
+    # a spot wider than MAP_MAX_BINS bins (a stack too thin to confine the light) is
+    # mapped on coarser bins, never on a grid that does not fit in memory
+    bins = np.maximum(bin_um, 2 * half / MAP_MAX_BINS)
+    edges = [np.arange(-h, h + b / 2, b) for h, b in zip(half, bins, strict=True)]
     maps = [np.zeros((e.size - 1, e.size - 1)) for e in edges]
     lo = np.full((len(zs), 2), np.inf)
     hi = np.full((len(zs), 2), -np.inf)
@@ -204,8 +208,8 @@ def spots(
             lo[iz] = np.minimum(lo[iz], [dx[o].min(initial=np.inf), dy[o].min(initial=np.inf)])
             hi[iz] = np.maximum(hi[iz], [dx[o].max(initial=-np.inf), dy[o].max(initial=-np.inf)])
             e = edges[iz]
-            ix = np.floor((dx - e[0]) / bin_um).astype(np.int64)
-            iy = np.floor((dy - e[0]) / bin_um).astype(np.int64)
+            ix = np.floor((dx - e[0]) / bins[iz]).astype(np.int64)
+            iy = np.floor((dy - e[0]) / bins[iz]).astype(np.int64)
             ok = (ix >= 0) & (ix < e.size - 1) & (iy >= 0) & (iy < e.size - 1)
             np.add.at(maps[iz], (iy[ok], ix[ok]), w[ok])
             cell = (np.abs(dx) <= cell_um / 2) & (np.abs(dy) <= cell_um / 2)
@@ -213,7 +217,7 @@ def spots(
     out = []
     for iz, z in enumerate(zs):
         e = edges[iz]
-        m = maps[iz] / (n_rays * bin_um * bin_um)
+        m = maps[iz] / (n_rays * bins[iz] * bins[iz])
         c = 0.5 * (e[1:] + e[:-1])
         out.append(
             Spot(

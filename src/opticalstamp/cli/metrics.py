@@ -153,6 +153,7 @@ def efficiency(
     """Light efficiency against the paper's reference lens (Fig. 13), working F-number
     (a rod-lens array: averaged along the array, with its ripple)."""
     from ..analysis.efficiency import efficiency as run
+    from ..analysis.efficiency import ratio_text
     from ..io.files import provenance
 
     d = open_design(design, kinds=BOTH_KINDS)
@@ -171,13 +172,21 @@ def efficiency(
         f"reference lens (F {r.reference_f_number:g}, "
         f"{r.meta['reference_lens']['pixel_um']:.1f} µm pixel): "
         f"{r.reference_etendue_um2sr:.4g} µm²·sr",
-        f"light efficiency (own path: the signal) 1/{1 / r.ratio_own:.1f}, working F-number "
+        f"light efficiency (own path: the signal) {ratio_text(r.ratio_own)}, working F-number "
         f"{r.working_f_number_own:.1f}; with the ghost light (crosstalk, not signal) "
-        f"1/{1 / r.ratio:.1f}, F {r.working_f_number:.1f}",
+        f"{ratio_text(r.ratio)}, F {r.working_f_number:.1f}",
     ]
+    if r.etendue_um2sr == 0:
+        lines.append("no light found reaching this pixel: efficiency 0, F-number infinite")
     if d.fingerprint() == load_design("paper2016").fingerprint():  # the paper's own design
         lines[-1] += "; the paper (its prototype, Fig. 13): 1/36, F 60"
     for a in r.sensitive_area:
+        if r.etendue_um2sr == 0:  # no gain to state over no light
+            lines.append(
+                f"sensitive area {a['sensitive_um'][0]:.1f} µm ({a['area_scale']:g}× area): "
+                f"{a['etendue_um2sr']:.4g} µm²·sr"
+            )
+            continue
         lines.append(
             f"sensitive area {a['sensitive_um'][0]:.1f} µm ({a['area_scale']:g}× area): "
             f"{a['gain_vs_design']:.2f}× the light ({a['gain_own_vs_design']:.2f}× own path)"
@@ -259,16 +268,25 @@ def diffraction(
     plot: PlotOpt = None,
 ) -> None:
     """Fresnel diffraction of a slit (paper Fig. 6) and the design's per-layer budget."""
-    from ..analysis.diffraction import design_slit_case, diffraction_budget, slit_case
+    from ..analysis.diffraction import diffraction_budget, slit_case
 
+    gap_um_given = gap_um is not None
     d = open_design(design)
     waves = float_list(wavelength_um, "--wavelength-um", 0.2, 2.0)
-    own = design_slit_case(d, z_mm=z, wavelengths_um=waves)  # the design's layer 1
-    slit_um = own.slit_um if slit_um is None else slit_um
-    gap_um = own.r1_um - z * 1000.0 if gap_um is None else gap_um
-    next_um = own.r2_um if next_um is None else next_um
-    r = slit_case(slit_um=slit_um, z_mm=z, gap_um=gap_um, r2_um=next_um, wavelengths_um=waves)
     b = diffraction_budget(d, z_mm=z, wavelengths_um=waves)
+    own = b["layers"][0]  # the design's layer 1, as design_slit_case takes it
+    slit_um = own["hole_um"] if slit_um is None else slit_um
+    if gap_um is None:
+        gap_um = own["r1_um"] - z * 1000.0 / d.index(d.object_medium)
+    next_um = own["r2_um"] if next_um is None else next_um
+    if z == 0 and gap_um <= 0:
+        whose = "" if gap_um_given else " (the design's reference_gap.thickness_um)"
+        fail(
+            f"--z 0 with --gap-um 0{whose} puts the point source in the slit (R1 = 0): it "
+            "casts no geometric shadow, so there is no edge to diffract around; give --z > 0 "
+            "or --gap-um > 0"
+        )
+    r = slit_case(slit_um=slit_um, z_mm=z, gap_um=gap_um, r2_um=next_um, wavelengths_um=waves)
     data = r.to_dict() | {"budget": b}
     lines = [
         f"slit {slit_um:g} µm, source Z = {z:g} mm (R1 {r.r1_um:.0f} µm), next layer "

@@ -297,6 +297,11 @@ def scan(
         f"grey; SNR {sg['target_snr_white']:g} at white needs {sg['exposure_for_target_ms']:.3g} "
         f"ms per line (at most {sg['max_line_rate_for_target_hz']:,.0f} lines/s)"
     ]
+    if sg["electrons_white"] == 0:  # a statement, not a row of zeros and infinities
+        lines = [
+            "signal: no light found reaching the pixels (0 e- at white): the scan shows only "
+            "the sensor's dark signal and noise"
+        ]
     if sg["saturated_white"]:
         lines.append(
             f"warning: white saturates the pixels (the scan clips); an exposure below "

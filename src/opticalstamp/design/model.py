@@ -19,6 +19,7 @@ import math
 from typing import Annotated, Literal
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     BeforeValidator,
     ConfigDict,
@@ -36,6 +37,11 @@ A4_WIDTH_UM = 210_000.0
 #: docs/design-files.md. Wider values are refused at validation: they are typing errors,
 #: not designs (a 1e9 um gap would make a scan allocate petabytes).
 MAX_LENGTH_UM = 100_000.0  # slab, gap, pitch: 100 mm
+#: The shortest slab, hole side or diameter, sensitive area side and non-zero reference
+#: gap: thinner than a mask's chrome film, far below every wavelength the model takes.
+#: Shorter lengths are no design the ray model can honour (a slab of 1e-300 um, a hole
+#: that passes no light) and are refused at validation.
+MIN_LENGTH_UM = 0.1
 MIN_PITCH_UM = 1.0  # pixel pitch (25,400 dpi)
 MAX_OFFSET_UM = 10_000.0  # misregistration and row offsets: 10 mm
 INDEX_RANGE = (1.0, 4.0)
@@ -45,9 +51,28 @@ MAX_DESIGN_FILE_BYTES = 1 << 20
 
 
 def _number(value: object) -> object:
-    """Accept int or float, refuse booleans and strings (TOML's `true`, `"42.0"`)."""
+    """Accept int or float, refuse booleans and strings (TOML's `true`, `"42.0"`); -0.0 is
+    0.0 (no "-0 um" in a table)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ValueError(f"expected a number (got {type(value).__name__} {value!r})")
+    return value + 0.0 if isinstance(value, float) else value
+
+
+def _at_least_min_length(value: float) -> float:
+    if value < MIN_LENGTH_UM:
+        raise ValueError(
+            f"must be at least {MIN_LENGTH_UM:g} um (got {value!r}): shorter lengths are "
+            "far below the wavelength, where the ray model does not hold"
+        )
+    return value
+
+
+def _gap_length(value: float) -> float:
+    if 0 < value < MIN_LENGTH_UM or value < 0:
+        raise ValueError(
+            f"must be 0 (the document on the top mask) or at least {MIN_LENGTH_UM:g} um "
+            f"(got {value!r})"
+        )
     return value
 
 
@@ -59,7 +84,9 @@ def _integer(value: object) -> object:
 
 Rows = Annotated[Literal[1, 2], BeforeValidator(_integer)]
 Number = Annotated[float, BeforeValidator(_number), Field(allow_inf_nan=False)]
-PositiveUm = Annotated[Number, Field(gt=0, le=MAX_LENGTH_UM)]
+#: A length of the stack (slab, hole, sensitive area, pitch): MIN_LENGTH_UM to MAX_LENGTH_UM.
+PositiveUm = Annotated[Number, AfterValidator(_at_least_min_length), Field(le=MAX_LENGTH_UM)]
+GapUm = Annotated[Number, AfterValidator(_gap_length), Field(le=MAX_LENGTH_UM)]
 OffsetUm = Annotated[Number, Field(ge=-MAX_OFFSET_UM, le=MAX_OFFSET_UM)]
 
 
@@ -148,7 +175,7 @@ class Gap(FrozenModel):
     """The reference gap between the top mask and the reference plane (Z = 0)."""
 
     medium: Medium = "air"
-    thickness_um: Annotated[Number, Field(ge=0, le=MAX_LENGTH_UM)] = 1000.0
+    thickness_um: GapUm = 1000.0
 
 
 class Sensor(FrozenModel):

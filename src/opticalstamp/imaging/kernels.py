@@ -22,8 +22,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..analysis.lsf import (
+    PARAXIAL_MAX_SLOPE,
     TracedMaps,
     paraxial_cumulative,
+    paraxial_max_slope,
     paraxial_support,
     traced_map_sets,
 )
@@ -147,8 +149,9 @@ def kernel_source(design: AnyDesign, source: str = "auto", fresnel: bool = False
             raise ValueError(f"a rod-lens array's kernels are traced (got source {source!r})")
         return "trace"
     rect = all(m.shape != "circle" for m in design.masks)
-    if source == "auto":
-        source = "paraxial" if rect and not fresnel else "trace"
+    if source == "auto":  # the closed form where it holds: rectangles, paraxial own path
+        steep = paraxial_max_slope(design) > PARAXIAL_MAX_SLOPE if rect else True
+        source = "paraxial" if rect and not fresnel and not steep else "trace"
     if source not in ("paraxial", "trace"):
         raise ValueError(f"kernel source must be auto, paraxial or trace (got {source!r})")
     if source == "paraxial" and not rect:
@@ -177,7 +180,9 @@ def scan_kernels(
 
     ``source``: "paraxial" (closed form own path; needs rectangular holes), "trace" (own
     path from the exact tracer, SVD-separated), or "auto" (paraxial where the holes are
-    rectangular and Fresnel losses are off, else trace). Ghost maps always come from
+    rectangular, Fresnel losses are off and no own-path ray is steeper than
+    ``PARAXIAL_MAX_SLOPE`` (:func:`~opticalstamp.analysis.lsf.paraxial_max_slope`: a stack
+    much thinner than its holes is not paraxial), else trace). Ghost maps always come from
     the tracer (2^20 rays are plenty for 0.5 mm bins). ``tracer``: a PixelTracer of this
     design whose pilot runs to reuse (the kernels are the same with or without it).
     """

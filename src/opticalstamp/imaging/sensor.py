@@ -73,30 +73,37 @@ def signal_budget(
 
     Solves (k t)^2 = T^2 (k t + d t + r^2 + q^2) for the exposure t, with k the
     photo-electron rate at white, d the dark current, r the read noise, q the ADC's
-    quantisation noise.
+    quantisation noise. A pixel no light reaches (``white_etendue_um2sr`` 0) reaches no
+    SNR at any exposure: the exposure for the target is infinite, the line rate 0.
     """
     white = model.electrons_per_um2sr * white_etendue_um2sr
     k = white / (model.exposure_ms * 1e-3)  # e-/s at white
     d = model.dark_current_e_per_s
     c = model.read_noise_e**2 + model.gain_e_per_dn**2 / 12
     t2 = target_snr**2
-    t_s = (t2 * (k + d) + np.sqrt(t2**2 * (k + d) ** 2 + 4 * k * k * t2 * c)) / (2 * k * k)
+    if k > 0:
+        t_s = (t2 * (k + d) + np.sqrt(t2**2 * (k + d) ** 2 + 4 * k * k * t2 * c)) / (2 * k * k)
+    else:  # no light: no exposure gives the target
+        t_s = float("inf")
     return {
         "electrons_white": float(white),
         "electrons_grey18": float(GREY * white),
         "full_well_fraction_white": float((white + model.dark_e) / model.full_well_e),
         "saturated_white": bool(white + model.dark_e > model.full_well_e),
-        "exposure_to_full_well_ms": float(model.full_well_e / (k + d) * 1e3),
+        "exposure_to_full_well_ms": float(model.full_well_e / (k + d) * 1e3)
+        if k + d > 0
+        else float("inf"),
         "snr_white": float(snr(model, white)),
         "snr_grey18": float(snr(model, GREY * white)),
         "target_snr_white": target_snr,
         "exposure_for_target_ms": float(t_s * 1e3),
         "max_line_rate_for_target_hz": float(model.exposure_duty / t_s),
-        "saturates_at_target": bool(k * t_s + d * t_s > model.full_well_e),
+        "saturates_at_target": bool(k > 0 and (k + d) * t_s > model.full_well_e),
     }
 
 
 def exposure_for_white(model: SensorModel, white_etendue_um2sr: float, fill: float = 0.8) -> float:
     """Exposure (ms) at which white fills ``fill`` of the full well (an auto-exposure)."""
     k = model.electrons_per_um2sr * white_etendue_um2sr / model.exposure_ms  # e- per ms
-    return fill * model.full_well_e / (k + model.dark_current_e_per_s * 1e-3)
+    rate = k + model.dark_current_e_per_s * 1e-3
+    return fill * model.full_well_e / rate if rate > 0 else float("inf")

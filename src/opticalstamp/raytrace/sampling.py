@@ -58,6 +58,7 @@ class Targets:
 
 
 def _reach(rho: np.ndarray, d: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    d, n = d[d > 0], n[d > 0]  # a slab of no thickness carries the ray no distance
     c = np.sqrt(n[None, :] ** 2 - rho[:, None] ** 2)
     dr = (d / c).sum(axis=1)
     dd = (d * n**2 / c**3).sum(axis=1)
@@ -69,6 +70,7 @@ def solve_rho(r: np.ndarray, d: np.ndarray, n: np.ndarray) -> np.ndarray:
     n_min = n.min()
     d_eq = (d * n_min / n).sum()
     rho = n_min * r / np.sqrt(d_eq**2 + r**2)
+    d, n = d[d > 0], n[d > 0]  # the ray crosses a slab of no thickness at no distance
     for _ in range(60):
         f = _reach(rho, d, n)
         c = np.sqrt(n[None, :] ** 2 - rho[:, None] ** 2)
@@ -184,11 +186,19 @@ def geometric_q_per_area(path: Path, source: Source) -> np.ndarray:
 
 
 def _geometric(path: Path, source: Source) -> tuple:
-    """(n_pre, hole x, hole y, hole area, geometric q) of :func:`hole_targets`."""
-    n_pre = path.first_mask_slab + 1
+    """(n_pre, hole x, hole y, hole area, geometric q) of :func:`hole_targets`.
+
+    The targets are the holes of the first mask a finite distance from the source. A mask
+    in the source's own plane (an object point at Z = 0 on a design whose reference gap is
+    0: the point lies on the top mask) cannot be aimed at; the tracer still meets it at
+    the source point, which passes (in a hole) or is absorbed (on the chrome).
+    """
+    masked = np.flatnonzero(path.slabs[:, 2] >= 0)
+    ahead = masked[np.cumsum(path.slabs[:, 0])[masked] > 0]
+    if ahead.size == 0:
+        raise ValueError("importance sampling needs a mask a finite distance from the source")
+    n_pre = int(ahead[0]) + 1
     d, n = path.slabs[:n_pre, 0], path.slabs[:n_pre, 1]
-    if d.sum() <= 0:
-        raise ValueError("importance sampling needs a finite distance to the first mask")
     m0 = int(path.slabs[n_pre - 1, 2])
     lat = path.lattice
     rows, ks = lat.all_sites()

@@ -188,7 +188,11 @@ def disagreements(surrogate: dict, exact: dict, accuracy=SURROGATE_ACCURACY) -> 
     high = "_high_ghost" if exact["ghost_fraction"] >= GHOST_REGIME else ""
     if abs(surrogate["dof_mm"] - exact["dof_mm"]) > accuracy["dof_mm" + high]:
         out.append("dof_mm")
-    rel = abs(surrogate["efficiency_ratio"] / exact["efficiency_ratio"] - 1)
+    e_s, e_x = surrogate["efficiency_ratio"], exact["efficiency_ratio"]
+    if e_x > 0:
+        rel = abs(e_s / e_x - 1)
+    else:  # the exact tracer found no own-path light: any the surrogate gives is off
+        rel = 0.0 if e_s == 0 else math.inf
     if rel > accuracy["efficiency_ratio"]:
         out.append("efficiency_ratio")
     if abs(surrogate["ghost_fraction"] - exact["ghost_fraction"]) > accuracy["ghost_fraction"]:

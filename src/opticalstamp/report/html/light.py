@@ -21,14 +21,14 @@ def efficiency_html(e: dict, signal: dict | None = None, paper: bool = False) ->
             "own path: the signal (the headline figure)",
             e["etendue_own_um2sr"],
             e["ratio_own"],
-            1 / e["ratio_own"],
+            1 / e["ratio_own"] if e["ratio_own"] else None,  # no light: no inverse
             e["working_f_number_own"],
         ],
         [
             "own + ghost light (ghost light is crosstalk)",
             e["etendue_um2sr"],
             e["ratio"],
-            1 / e["ratio"],
+            1 / e["ratio"] if e["ratio"] else None,
             e["working_f_number"],
         ],
     ] + ([["paper (Fig. 13)", None, 1 / 36, 36.0, 60.0]] if paper else [])

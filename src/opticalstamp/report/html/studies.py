@@ -48,7 +48,7 @@ def search_html(
         [
             "/".join(f"{v:g}" for v in p["holes_um"]),
             "/".join(f"{v:g}" for v in p["thicknesses_um"]),
-            f"1/{1 / p['efficiency_ratio']:.0f}",
+            one_in(p["efficiency_ratio"]),
             p["dof_mm"],
             sur(p, "dof_mm"),
             p["ghost_fraction"],
@@ -74,7 +74,7 @@ def search_html(
 {s["n_feasible"]} feasible: no ghost light within {s["meta"]["near_mm"]:g} mm, stack within
 {s["meta"]["budget_mm"]:g} mm, diffraction spill below {s["meta"]["max_spill"]:g}; a compact
 run, `opticalstamp search` runs 480), ranked by the {html.escape(s["meta"]["estimator"])}.
-{note} This design: efficiency 1/{1 / ref["efficiency_ratio"]:.0f}, depth of field
+{note} This design: efficiency {one_in(ref["efficiency_ratio"])}, depth of field
 {ref["dof_mm"]:.2f} mm at {s["meta"]["dof_dpi"]:g} dpi by the search's exact check
 ({headline_dof(rmtf)}), dominated by
 {ref.get("dominated_by", 0)} of the designs found (the Fresnel setting of the report does

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...analysis.efficiency import ratio_text
 from ...analysis.ghosts import GhostResult
 from ...analysis.spots import PSF, SpotResult
 from .axes import REPORT_WIDTH_IN, subplots
@@ -274,13 +275,13 @@ def plot_efficiency(res):
         lab = "infinite object" if r == "inf" else f"object radius {r} mm"
         a1.plot([float(z) for z in zs], vals, "o-", color=f"C{i}", label=lab, ms=4)
     a1.axhline(res.etendue_own_um2sr, color="k", lw=0.6, ls=":", label="own path")
-    a1.set_ylim(0, 1.15 * max(top, res.etendue_own_um2sr))
+    a1.set_ylim(0, 1.15 * max(top, res.etendue_own_um2sr) or 1.0)  # no light: an axis still
     a1.set_xlabel("object distance Z (mm)")
     a1.set_ylabel("etendue collected (µm² sr)")
     a1.set_title(
-        f"own-path light 1/{1 / res.ratio_own:.1f} of the F/{res.reference_f_number:g} "
+        f"own-path light {ratio_text(res.ratio_own)} of the F/{res.reference_f_number:g} "
         f"lens, working F {res.working_f_number_own:.1f}\n"
-        f"with the ghost light 1/{1 / res.ratio:.1f}, F {res.working_f_number:.1f}",
+        f"with the ghost light {ratio_text(res.ratio)}, F {res.working_f_number:.1f}",
         fontsize=9,
     )
     a1.legend(fontsize=8, loc="lower right")
