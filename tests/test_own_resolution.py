@@ -213,3 +213,18 @@ def test_search_of_an_off_grid_600_dpi_design_keeps_it_and_warns_not(paper):
     ).values()
     assert res.meta["dof_dpi"] == 400.0 and res.dpi == 600.0
     assert res.reference["thicknesses_um"] == [500.0, 200.0, 225.0]
+
+
+def test_rmtf_of_a_design_through_which_no_light_passes_says_so(paper, tmp_path):
+    from edges import run
+
+    from opticalstamp.design import design_toml
+
+    dark = replace(
+        paper,
+        {"sensor.acceptance_half_angle_deg": 0.001, "slabs.1.mask_top.offset_x_um": 60.0},
+    )
+    path = tmp_path / "dark.toml"
+    path.write_text(design_toml(dark))
+    res = run(["rmtf", "-d", str(path), "--z", "0:1:0.5", "--rays", "65536"])
+    assert "no light reaches the pixels" in res.output

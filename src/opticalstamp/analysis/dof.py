@@ -196,6 +196,11 @@ def dof_lines(res: dict, line_dpi: float | None = None) -> list[str]:
     threshold (spurious resolution, ghost copies of the periodic chart), with why."""
     key = _key(res["dof_dpi"])
     thr = res["dof_threshold"]
+    if (res.get("meta") or {}).get("no_light"):
+        return [
+            "no light reaches the pixels through this design (every RMTF is 0 for want of a "
+            "signal, not of contrast): no depth of field; see `opticalstamp ghosts`"
+        ]
     out = [f"depth of field ({dof_rule(res, line_dpi)}): {dof_text(res, key)}"]
     others = [k for k in res["dof_mm"] if k != key]
     if others:

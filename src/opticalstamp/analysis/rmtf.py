@@ -520,6 +520,8 @@ def rmtf_from_lsf(
         meta={
             "best_shift_um": pick["best_shift_um"],
             "fast_light": fast_light(lsf),
+            # no light reached the pixels at all: every RMTF is 0 for want of a signal
+            "no_light": not any(float(np.sum(h)) > 0 for h in lsf.h),
         },
         shading=shading,
     )
