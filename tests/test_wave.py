@@ -29,10 +29,11 @@ def paper():
     return load_design("paper2016")
 
 
-def _stack(holes, rows=2, pitch=48.0, sensitive=(8.0, 8.0), lam=LAM, shape="square"):
-    """A small stamp (holes object side last, sensor first): air 60, glass 60, glass 100,
-    air gap 100 um."""
+def _stack(holes, rows=2, pitch=48.0, sensitive=(8.0, 8.0), lam=LAM, shape="square", offsets=None):
+    """A small stamp (holes and misregistration (dx, dy) listed from the sensor up): air
+    60, glass 60, glass 100, air gap 100 um."""
     slabs = [("air", 60.0), (1.52, 60.0), (1.52, 100.0)]
+    offsets = offsets or [(0.0, 0.0)] * 3
     return design_from_dict(
         {
             "name": "small",
@@ -48,8 +49,17 @@ def _stack(holes, rows=2, pitch=48.0, sensitive=(8.0, 8.0), lam=LAM, shape="squa
                 "pixels_per_row": 101,
             },
             "slabs": [
-                {"medium": m, "thickness_um": t, "mask_top": {"shape": shape, "size_um": h}}
-                for (m, t), h in zip(slabs, holes, strict=True)
+                {
+                    "medium": m,
+                    "thickness_um": t,
+                    "mask_top": {
+                        "shape": shape,
+                        "size_um": h,
+                        "offset_x_um": o[0],
+                        "offset_y_um": o[1],
+                    },
+                }
+                for (m, t), h, o in zip(slabs, holes, offsets, strict=True)
             ],
             "reference_gap": {"medium": "air", "thickness_um": 100.0},
         }
@@ -234,12 +244,13 @@ def test_geometric_limit(paper):
 
 # -- 5. separable against 2-D ---------------------------------------------------------------
 def test_separable_path_against_the_2d_path():
-    """A small two-row stamp with square holes (Fresnel numbers 0.65-1.15): the 2-D path
-    with the paraxial propagator (2-D FFTs, 2-D masks, randomized coherent modes) gives
-    the separable path's light, centre-cell share and line-spread functions to 1e-5; with
-    the exact angular spectrum the light moves by -0.2 % and the LSFs by < 1 % of their
-    peak (the paraxial error at these angles)."""
-    d = _stack((10.0, 10.0, 12.0))
+    """A small two-row stamp with square holes (Fresnel numbers 0.65-1.15), two masks
+    misregistered: the 2-D path with the paraxial propagator (2-D FFTs, 2-D masks,
+    randomized coherent modes) gives the separable path's light, centre-cell share and
+    line-spread functions to 1e-5; with the exact angular spectrum the light moves by
+    less than -0.5 % and the LSFs by < 1 % of their peak (the paraxial error at these
+    angles, |s| up to 0.2)."""
+    d = _stack((10.0, 10.0, 12.0), offsets=[(1.5, -1.0), (0.0, 0.0), (-2.0, 0.7)])
     smp = wavebase.wave_sampling(d, band=0.2).refined(margin=0.5)  # the same for both
     zs = (0.05,)
     sep = wave.wave_response(d, zs, sampling=smp)
@@ -250,7 +261,9 @@ def test_separable_path_against_the_2d_path():
     for a, b in ((par.lsf_x, sep.lsf_x), (par.lsf_y, sep.lsf_y)):
         assert np.abs(a - b).max() < 1e-5 * b.max()
     ex = wave_response_2d(d, zs, sampling=smp, propagator="exact")
-    assert ex.etendue_um2sr[0] / sep.etendue_um2sr[0] - 1 == pytest.approx(-2e-3, abs=1.5e-3)
+    # exact against paraxial: -0.37 % (without the misregistration -0.21 %); the own
+    # path's ray etendue moves the same way, -0.19 % (own_etendue / paraxial_etendue)
+    assert -5e-3 < ex.etendue_um2sr[0] / sep.etendue_um2sr[0] - 1 < 0
     assert np.abs(ex.lsf_x - sep.lsf_x).max() < 1e-2 * sep.lsf_x.max()
     assert ex.maps[0].sum() * 4.0 == pytest.approx(ex.etendue_um2sr[0], rel=1e-3)
 

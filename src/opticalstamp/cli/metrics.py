@@ -462,3 +462,33 @@ def sfr(
         from ..report.plotting import plot_sfr
 
         save_plot(plot_sfr(r, str(image.name)), plot)
+
+
+@command()
+def wave(
+    design: DesignOpt = "paper2016",
+    z: Annotated[str, typer.Option(help="object distances (mm), comma-separated")] = "0,1,2,3",
+    rays: RaysOpt = None,
+    seed: SeedOpt = 0,
+    as_json: JsonOpt = False,
+    plot: PlotOpt = None,
+) -> None:
+    """Ray against wave optics (issue 23): light, spot and RMTF of the own path and near
+    crosstalk by the wave engine and by the tracer in the same band, and the layers'
+    Fresnel numbers."""
+    from ..analysis.wavebase import rectangular
+    from ..analysis.wavecompare import compare_wave_ray, comparison_lines
+
+    d = open_design(design)
+    if not rectangular(d):
+        fail(
+            "wave: the separable wave path needs square or rectangular holes; circular holes "
+            "take the 2-D path (opticalstamp.analysis.wave2d.wave_response_2d)"
+        )
+    zs = float_list(z, "--z", 0.0, 100.0)
+    c = compare_wave_ray(d, zs, n_rays=ray_count(rays, RAYS_LSF), seed=seed)
+    emit(c.to_dict(), as_json, comparison_lines(c))
+    if plot:
+        from ..report.plotting.wave import plot_wave_ray
+
+        save_plot(plot_wave_ray(c), plot)
