@@ -49,7 +49,7 @@ def test_a_slab_is_named_as_the_file_and_the_paper_count_it():
     msg = _design_error(lambda d: d["slabs"][1].__setitem__("thickness_um", -5.0))
     assert (
         "  [[slabs]] table 2 of 3 counted from the sensor (slab 2 from the object side) — "
-        "slabs.1.thickness_um: Input should be greater than 0 (got -5.0)"
+        "slabs.1.thickness_um: must be at least 0.1 um (got -5.0)"
     ) in msg
     # the first table, nearest the sensor: slab 3 and mask layer 3 from the object side
     msg = _design_error(lambda d: d["slabs"][0]["mask_top"].__setitem__("size_um", -1))
