@@ -326,11 +326,16 @@ def test_fresnel_numbers_and_sampling(paper):
 
 def test_rows_a_and_b_see_the_same_light(paper):
     """The nominal prototype is symmetric: row B's pixel collects row A's light, with the
-    same spot."""
+    same spot; the binned map holds the light and its x-marginal is the LSF."""
     a = wave.wave_response(paper, (1.0,), pixel=(0, 0))
     b = wave.wave_response(paper, (1.0,), pixel=(1, 0))
     assert b.etendue_um2sr[0] == pytest.approx(a.etendue_um2sr[0], rel=1e-6)
     assert b.center_cell_fraction[0] == pytest.approx(a.center_cell_fraction[0], abs=1e-6)
+    edges, m = a.spot(0, bin_um=2.0)  # the map (sr) holds the light and the LSF
+    assert m.sum() * 4.0 == pytest.approx(a.etendue_um2sr[0], rel=1e-3)
+    c = np.concatenate([[0.0], np.cumsum((a.lsf_x[0][1:] + a.lsf_x[0][:-1]) / 2)])
+    lsf = np.diff(np.interp(edges, a.x_um, c * (a.x_um[1] - a.x_um[0])))
+    assert np.abs(m.sum(axis=0) * 4.0 - lsf).max() < 1e-3 * lsf.max()
 
 
 def test_compare_wave_ray_runs(paper):

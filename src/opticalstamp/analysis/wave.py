@@ -43,6 +43,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from scipy import fft as sfft
+from scipy.linalg import blas
 
 from ..design import Design
 from ..raytrace.stack import lattice_of, output_pitch
@@ -50,7 +51,6 @@ from ..validate import InputError
 from .wavebase import (
     Plane,
     WaveSampling,
-    band_integral,
     fwhm_of,
     gauss_legendre,
     kernel,
@@ -69,7 +69,7 @@ __all__ = ["WaveResponse", "WaveSampling", "wave_response", "wave_sampling"]
 # -- the separable engine ------------------------------------------------------------------
 @dataclass
 class _Axis:
-    """One axis of the run: grids, transfer functions and mask transmissions."""
+    """One axis of the run: the stack grid and each mask's rows' transmission on it."""
 
     plane: Plane
     x: np.ndarray  # stack grid (um)
@@ -118,6 +118,30 @@ def _compress(fields: list[np.ndarray], tol: float) -> list[np.ndarray]:
 
 
 @dataclass(frozen=True)
+class _ObjectSide:
+    """The in-band terms leaving the stack, as spectra on the object grids: per axis the
+    grid (n,), the spectra (J, n, m) and the reduced height of the object-side mask."""
+
+    grids: tuple[np.ndarray, np.ndarray]
+    spectra: tuple[np.ndarray, np.ndarray]
+    planes: tuple[Plane, Plane]
+    sampling: WaveSampling
+
+    def fields(self, z_mm: float) -> list[np.ndarray]:
+        """The terms' fields u_j on the object plane z_mm, per axis (J, n, m)."""
+        smp, out = self.sampling, []
+        for g, spec, pl in zip(self.grids, self.spectra, self.planes, strict=True):
+            d = pl.reduced(z_mm) - pl.heights[-1]
+            h = kernel(g.size, smp.step_um, smp.wavelength_um, d, smp.band)[None, :, None]
+            out.append(sfft.ifft(spec * h, axis=1, workers=-1))
+        return out
+
+    def terms(self, z_mm: float) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per axis (x, X) with X_jl(x) (J, J, n) where the light is (:func:`_crop`)."""
+        return [_crop(g, u) for g, u in zip(self.grids, self.fields(z_mm), strict=True)]
+
+
+@dataclass(frozen=True)
 class WaveResponse:
     """A pixel's responsivity on the object plane by the wave engine.
 
@@ -134,7 +158,9 @@ class WaveResponse:
     budget : per mask: ``incoming``, ``transmitted``, ``in_band`` (um^2 sr) and
         ``sequences`` (row sequences kept) and ``modes`` ((x, y) coherent modes)
     sampling : the :class:`WaveSampling` used
-    meta : what else describes the run (propagator, timings)
+    fields : the separable terms leaving the stack, from which :meth:`spot` recomputes
+        X_jl(x), Y_jl(y) at a Z (R = sum_jl X_jl Y_jl)
+    meta : what else describes the run (propagator, path, sequences kept)
     """
 
     design: str
@@ -149,7 +175,7 @@ class WaveResponse:
     center_cell_fraction: np.ndarray
     budget: list[dict]
     sampling: WaveSampling
-    terms: tuple = field(default=(), repr=False)
+    fields: _ObjectSide | None = field(default=None, repr=False)
     meta: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
@@ -172,7 +198,7 @@ class WaveResponse:
         """The responsivity map at ``z_mm[iz]`` on square bins (sr): (edges, map[y, x]),
         edges from the pixel's axis, ``half_um`` half width (default: where the
         marginals hold all but 1e-4 of the light)."""
-        (x, gx), (y, gy) = self.terms[iz]
+        (x, gx), (y, gy) = self.fields.terms(float(self.z_mm[iz]))
         if half_um is None:
             half_um = max(
                 _half_width(self.x_um, self.lsf_x[iz]), _half_width(self.y_um, self.lsf_y[iz])
@@ -322,7 +348,7 @@ def _prune(new: dict, step: float, tol: float) -> dict:
 
 def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveResponse:
     """From the object-side mask through the reference gap and object medium to every Z."""
-    lam, b, step = smp.wavelength_um, smp.band, smp.step_um
+    step = smp.step_um
     cell = output_pitch(design) if cell_um is None else float(cell_um)
     keys = list(terms)
     grids, spectra = [], []
@@ -330,33 +356,24 @@ def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveRe
     for a, ax in enumerate(axes):
         d_max = ax.plane.reduced(float(zs.max())) - ax.plane.heights[-1]
         xf, off = object_grid(ax.x, d_max, smp)
-        spec = []
-        for k in keys:
-            u = np.zeros((xf.size, terms[k][a].shape[1]), dtype=np.complex128)
-            u[off : off + ax.x.size] = terms[k][a]
-            spec.append(sfft.fft(u, axis=0, workers=-1))
+        u = np.zeros((len(keys), xf.size, terms[keys[0]][a].shape[1]), dtype=np.complex128)
+        for j, k in enumerate(keys):
+            u[j, off : off + ax.x.size] = terms[k][a]
         grids.append(xf)
-        spectra.append(spec)
+        spectra.append(sfft.fft(u, axis=1, workers=-1))  # (J, n, m)
+    side = _ObjectSide(tuple(grids), tuple(spectra), tuple(ax.plane for ax in axes), smp)
     n_z = zs.size
     lsf = [np.zeros((n_z, g.size)) for g in grids]
-    etendue, cells, kept = np.zeros(n_z), np.zeros(n_z), []
+    etendue, cells = np.zeros(n_z), np.zeros(n_z)
+    win = [_cell_weights(g, cell) for g in grids]
     for iz, z in enumerate(zs):
-        xy = []
-        for a, ax in enumerate(axes):
-            d = ax.plane.reduced(float(z)) - ax.plane.heights[-1]
-            h = kernel(grids[a].size, step, lam, d, b)[:, None]
-            xy.append(_cross([sfft.ifft(s * h, axis=0, workers=-1) for s in spectra[a]]))
-        gx, gy = xy  # (J, J, n): X_jl and Y_jl
-        tx, ty = gx.sum(-1) * step, gy.sum(-1) * step
-        lsf[0][iz] = np.einsum("jlx,jl->x", gx, ty).real
-        lsf[1][iz] = np.einsum("jly,jl->y", gy, tx).real
-        etendue[iz] = float(np.sum(tx * ty).real)
-        inside = np.sum(
-            band_integral(grids[0], gx, -cell / 2, cell / 2)
-            * band_integral(grids[1], gy, -cell / 2, cell / 2)
-        )
-        cells[iz] = float(inside.real) / etendue[iz] if etendue[iz] > 0 else 0.0
-        kept.append((_crop(grids[0], gx), _crop(grids[1], gy)))
+        us = side.fields(float(z))  # (J, n, m) per axis
+        tot = [_gram_flat(u) * step for u in us]  # X_jl, Y_jl integrated
+        inc = [_gram_flat(u, w) for u, w in zip(us, win, strict=True)]
+        for a in (0, 1):
+            lsf[a][iz] = _weighted_sum(us[a], tot[1 - a])
+        etendue[iz] = e = float(np.sum(tot[0] * tot[1]).real)
+        cells[iz] = float(np.sum(inc[0] * inc[1]).real) / e if e > 0 else 0.0
     lat = lattice_of(design)
     px, py = (float(v) for v in lat.centers(*pixel))
     for rec in budget:
@@ -374,7 +391,7 @@ def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveRe
         cells,
         budget,
         smp,
-        tuple(kept),
+        side,
         {
             "propagator": "paraxial",
             "path": "separable",
@@ -384,20 +401,57 @@ def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveRe
     )
 
 
-def _crop(x: np.ndarray, g: np.ndarray, tail: float = 1e-7) -> tuple[np.ndarray, np.ndarray]:
-    """(x, g) cut to where the diagonal terms hold all but ``tail`` of their sum (the
-    cross terms are bounded by them: |X_jl|^2 <= X_jj X_ll)."""
-    env = np.einsum("jjx->x", g).real
+def _gram_flat(u: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
+    """G[j, l] = sum_n sum_m u[j, n, m] conj(u[l, n, m]) (times weight[n]) for u (J, n, m),
+    in one BLAS call without a conjugated copy."""
+    b = u.reshape(u.shape[0], -1).T  # (n m, J), Fortran-ordered view
+    a = b if weight is None else (u * weight[None, :, None]).reshape(u.shape[0], -1).T
+    return blas.zgemm(1.0, b, a, trans_a=2).T  # (b^H a)[l, j] = G[j, l]
+
+
+def _weighted_sum(u: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """sum_jl T_jl X_jl(x) for X_jl = sum_m u_j conj(u_l) and a Hermitian positive
+    semi-definite T (the other axis's integrated terms), without forming X_jl: with
+    T = V diag(p) V^H it is sum_k p_k sum_m |sum_j V_jk u_j|^2 (n,), over the k with
+    p_k > 1e-15 max p (the rest adds nothing at double precision)."""
+    p, v = np.linalg.eigh(t)
+    keep = p > 1e-15 * max(p.max(), 1e-300)
+    w = np.tensordot(v[:, keep], u, axes=([0], [0]))  # (k, n, m)
+    out = np.zeros(u.shape[1])
+    for pk, wk in zip(p[keep], w, strict=True):
+        out += pk * (np.square(wk.real) + np.square(wk.imag)).sum(axis=1)
+    return out
+
+
+def _cell_weights(x: np.ndarray, cell: float) -> np.ndarray:
+    """Weights w with sum_n g_n w_n = the integral of g over |x| <= cell / 2, exact for
+    band-limited periodic samples g (:func:`~.wavebase.band_integral` as a vector: the
+    intensities' band 2B is below the grid's Nyquist rate 3B; real, as the Nyquist bin
+    of such g is 0)."""
+    n = x.size
+    nu = sfft.fftfreq(n, x[1] - x[0])
+    a, b = -cell / 2 - x[0], cell / 2 - x[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = (np.exp(2j * np.pi * nu * b) - np.exp(2j * np.pi * nu * a)) / (2j * np.pi * nu)
+    k = np.where(nu == 0, b - a, k)
+    return (sfft.fft(k, workers=-1) / n).real  # sum_k ghat_k K_k = sum_n g_n w_n
+
+
+def _crop(x: np.ndarray, u: np.ndarray, tail: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """(x, X) with X_jl(x) = sum_m u_j conj(u_l) on the part of x where the diagonal terms
+    hold all but ``tail`` of their sum (the cross terms are bounded by them:
+    |X_jl|^2 <= X_jj X_ll)."""
+    env = (u.real**2 + u.imag**2).sum(axis=(0, 2))
     c = np.cumsum(env)
     if c[-1] <= 0:
-        return x[:2], g[..., :2]
+        return x[:2], _cross(u[:, :2])
     c /= c[-1]
     i0 = max(int(np.searchsorted(c, tail)) - 1, 0)
     i1 = min(int(np.searchsorted(c, 1 - tail)) + 2, x.size)
-    return x[i0:i1], g[..., i0:i1]
+    return x[i0:i1], _cross(u[:, i0:i1])
 
 
-def _cross(u: list[np.ndarray]) -> np.ndarray:
-    """X[j, l, n] = sum_m u_j[n, m] conj(u_l[n, m]), shape (J, J, n)."""
-    a = np.stack(u)  # (J, n, m)
-    return np.einsum("jnm,lnm->jln", a, a.conj(), optimize=True)
+def _cross(u: np.ndarray) -> np.ndarray:
+    """X[j, l, n] = sum_m u[j, n, m] conj(u[l, n, m]) for u (J, n, m): shape (J, J, n)."""
+    t = np.ascontiguousarray(u.transpose(1, 0, 2))  # (n, J, m)
+    return np.moveaxis(t @ t.conj().transpose(0, 2, 1), 0, -1)
