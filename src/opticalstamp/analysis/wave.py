@@ -262,6 +262,12 @@ def wave_response(
     WaveResponse
         Marginals on the fine object-plane grids, the in-band light (um^2 sr), the share
         in the central cell, the power budget mask by mask.
+
+    Notes
+    -----
+    Not modelled yet: Fresnel transmission at index changes, the pixel's acceptance cone
+    (``sensor.acceptance_half_angle_deg``: every direction in the band is emitted), a
+    spectrum (the design's one wavelength).
     """
     smp = wave_sampling(design) if sampling is None else sampling
     zs = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))

@@ -30,7 +30,8 @@ OVERSAMPLE = 3.0
 #: Domain margin beyond the band's reach, in units of lambda / B (the tails of
 #: band-limited fields).
 MARGIN = 32.0
-#: Gauss-Legendre nodes per oscillation of the source integrand, and extra nodes.
+#: Gauss-Legendre nodes across the sensitive width w per unit of 2 B w / lambda (the
+#: oscillations of the band-limited source integrand), and extra nodes.
 SOURCE_DENSITY = 1.0
 SOURCE_EXTRA = 8
 #: Relative power left out when the modes are compressed, and below which a sequence of

@@ -269,7 +269,12 @@ def compare_wave_ray(
         wave,
         diff,
         wa.budget,
-        {"seconds_wave": t_wave, "seconds_ray": t_ray, "rows": len(rows)},
+        {
+            "seconds_wave": t_wave,
+            "seconds_ray": t_ray,
+            "rows": len(rows),
+            "acceptance_half_angle_deg": design.sensor.acceptance_half_angle_deg,
+        },
         {"wave_x_um": wa.x_um, "wave_lsf": wa.lsf_x, "ray_x_um": ra.x_um, "ray_lsf": ra.lsf_x},
     )
 
@@ -304,6 +309,12 @@ def comparison_lines(c: WaveRayComparison) -> list[str]:
             f"          {w['rmtf'][i]:.3f} / {r['rmtf'][i]:.3f}"
         )
     m = c.meta
+    acc = m.get("acceptance_half_angle_deg", 90.0)
+    if acc < 90.0:
+        out.append(
+            f"note: the pixel's acceptance cone ({acc:g}°) is applied to the rays only; "
+            "the wave engine takes every direction in its band"
+        )
     out.append(
         f"time: wave {m['seconds_wave']:.1f} s, ray {m['seconds_ray']:.1f} s ({m['rows']} rows)"
     )
