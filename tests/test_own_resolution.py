@@ -217,7 +217,6 @@ def test_search_of_an_off_grid_600_dpi_design_keeps_it_and_warns_not(paper):
 
 def test_rmtf_of_a_design_through_which_no_light_passes_says_so(paper, tmp_path):
     from edges import run
-
     from opticalstamp.design import design_toml
 
     dark = replace(
