@@ -115,9 +115,9 @@ def refine_points(
 
     and, with ``step_for_margin`` (margin -> the Z step that resolves the curve to within
     that margin, from how fast the light's image moves with Z:
-    :func:`~opticalstamp.analysis.lsf.resolving_step_mm`), every interval up to the
+    :func:`~opticalstamp.analysis.lsf.fast_light`), every interval up to the
     first crossing subdivided to at most the step for its margin over the threshold
-    (never more finely than ``steps`` squared per interval): samples that look smooth may
+    (at most ``steps`` subdivisions per interval, as the other rules): samples that look smooth may
     be an oscillation aliased by the grid, and the first crossing is the depth of field.
 
     Returns the new Z, ascending, none of them already a sample. Applied again to the
@@ -147,7 +147,7 @@ def refine_points(
         first = np.flatnonzero(gap < 0)
         upto = first[0] + 1 if first.size else z.size - 1
         step = step_for_margin(np.abs(gap[:upto]))
-        need = np.minimum(np.ceil(np.diff(z)[:upto] / step), steps * steps)
+        need = np.minimum(np.ceil(np.diff(z)[:upto] / step), steps)
         n_sub[:upto] = np.maximum(n_sub[:upto], need.astype(int))
     new = [np.linspace(z[i], z[i + 1], n + 1)[1:-1] for i, n in enumerate(n_sub) if n > 1]
     if not new:
