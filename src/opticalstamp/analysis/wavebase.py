@@ -368,20 +368,11 @@ def object_grid(x: np.ndarray, d_um: float, smp: WaveSampling) -> tuple[np.ndarr
 
 
 def fwhm_of(x: np.ndarray, profile: np.ndarray) -> float:
-    """Full width at half maximum (outermost crossings, linear interpolation)."""
-    if profile.max() <= 0:
-        return float("nan")
-    half = profile.max() / 2
-    above = np.flatnonzero(profile >= half)
-    i0, i1 = above[0], above[-1]
+    """Full width at half maximum of ``profile`` on ``x`` (:func:`~opticalstamp.analysis.
+    spots.fwhm`, the spots' own rule: outermost crossings, linear interpolation)."""
+    from .spots import fwhm
 
-    def cross(i_in: int, i_out: int) -> float:
-        if i_out < 0 or i_out >= profile.size:
-            return x[i_in]
-        a, b = profile[i_out], profile[i_in]
-        return x[i_out] + (half - a) / (b - a) * (x[i_in] - x[i_out])
-
-    return float(cross(i1, i1 + 1) - cross(i0, i0 - 1))
+    return fwhm(profile, x)
 
 
 def band_integral(x: np.ndarray, g: np.ndarray, a: float, b: float) -> np.ndarray:
