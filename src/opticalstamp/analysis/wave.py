@@ -51,13 +51,13 @@ from ..validate import InputError
 from .wavebase import (
     Plane,
     WaveSampling,
-    fwhm_of,
     gauss_legendre,
     kernel,
     mask_field,
     object_grid,
     point_sources,
     propagate,
+    response_summary,
     stack_axes,
     stack_grid,
     wave_sampling,
@@ -180,15 +180,7 @@ class WaveResponse:
 
     def to_dict(self) -> dict:
         """Summary as plain data (no fine arrays)."""
-        return {
-            "design": self.design,
-            "fingerprint": self.fingerprint,
-            "pixel": self.pixel,
-            "z_mm": self.z_mm.tolist(),
-            "etendue_um2sr": self.etendue_um2sr.tolist(),
-            "center_cell_fraction": self.center_cell_fraction.tolist(),
-            "fwhm_x_um": [fwhm_of(self.x_um, p) for p in self.lsf_x],
-            "fwhm_y_um": [fwhm_of(self.y_um, p) for p in self.lsf_y],
+        return response_summary(self) | {
             "budget": self.budget,
             "sampling": asdict(self.sampling),
             "meta": self.meta,

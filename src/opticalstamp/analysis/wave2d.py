@@ -37,11 +37,11 @@ from ..validate import InputError
 from .wavebase import (
     WaveSampling,
     band_integral,
-    fwhm_of,
     gauss_legendre,
     in_band,
     object_grid,
     point_sources,
+    response_summary,
     stack_grid,
     wave_sampling,
 )
@@ -323,17 +323,7 @@ class WaveMaps:
     meta: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        return {
-            "design": self.design,
-            "fingerprint": self.fingerprint,
-            "pixel": self.pixel,
-            "z_mm": self.z_mm.tolist(),
-            "etendue_um2sr": self.etendue_um2sr.tolist(),
-            "center_cell_fraction": self.center_cell_fraction.tolist(),
-            "fwhm_x_um": [fwhm_of(self.x_um, p) for p in self.lsf_x],
-            "fwhm_y_um": [fwhm_of(self.y_um, p) for p in self.lsf_y],
-            "meta": self.meta,
-        }
+        return response_summary(self) | {"meta": self.meta}
 
 
 def wave_response_2d(

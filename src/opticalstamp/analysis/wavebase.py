@@ -385,3 +385,18 @@ def band_integral(x: np.ndarray, g: np.ndarray, a: float, b: float) -> np.ndarra
         k = np.exp(2j * np.pi * nu * (b - x[0])) - np.exp(2j * np.pi * nu * (a - x[0]))
         k = np.where(nu == 0, b - a, k / (2j * np.pi * nu))
     return c @ k
+
+
+def response_summary(r) -> dict:
+    """The plain-data summary that both wave responses (separable and 2-D) share: design,
+    pixel, Z, light, central-cell share and the FWHM of each line-spread function."""
+    return {
+        "design": r.design,
+        "fingerprint": r.fingerprint,
+        "pixel": r.pixel,
+        "z_mm": r.z_mm.tolist(),
+        "etendue_um2sr": r.etendue_um2sr.tolist(),
+        "center_cell_fraction": r.center_cell_fraction.tolist(),
+        "fwhm_x_um": [fwhm_of(r.x_um, p) for p in r.lsf_x],
+        "fwhm_y_um": [fwhm_of(r.y_um, p) for p in r.lsf_y],
+    }

@@ -20,6 +20,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ..design import Design
+from ..design.resolution import output_pitch_um
 
 #: margin (um) beyond the array ends and either side of the rows where the plates end;
 #: a ray that leaves this region inside the stack is counted as escaped.
@@ -198,5 +199,6 @@ def pixel_center(design: Design, row: int = 0, k: int = 0) -> tuple[float, float
 
 def output_pitch(design: Design) -> float:
     """Pitch (um) of the merged output line and of its lines: the row pitch over the
-    number of staggered rows (84.6 um for the paper's prototype, 300 dpi)."""
-    return lattice_of(design).pitch / design.sensor.rows
+    number of staggered rows (84.6 um for the paper's prototype, 300 dpi;
+    :func:`~opticalstamp.design.resolution.output_pitch_um`)."""
+    return output_pitch_um(design)
