@@ -196,7 +196,6 @@ MAX_LINES = 600
 #: for any other module that grows past MAX_LINES
 LONG_MODULES = MappingProxyType(
     {
-        "analysis.lsf": "issue 22: the traced LSF moves onto the tally layer",
         "studies.search": "issue 22: the search's evaluation and its front to split",
         "analysis.wave": "the wave-optics engine, in progress",
     }

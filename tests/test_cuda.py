@@ -109,7 +109,8 @@ import numpy as np
 from opticalstamp.analysis import cuda_tallies as ct
 from opticalstamp.analysis.cuda_tallies import ghost_tallies
 from opticalstamp.analysis.ghosts import analyse_ghosts
-from opticalstamp.analysis.lsf import traced_folded_lsf_pair, traced_map_sets
+from opticalstamp.analysis.lsf import traced_folded_lsf_pair
+from opticalstamp.analysis.maps import traced_map_sets
 from opticalstamp.design import load_design
 from opticalstamp.raytrace import cuda
 from opticalstamp.raytrace.pixel import PixelTracer, Sampling
@@ -193,7 +194,8 @@ import sys
 import numpy as np
 from opticalstamp.analysis import cuda_tallies as ct
 from opticalstamp.analysis.ghosts import analyse_ghosts
-from opticalstamp.analysis.lsf import traced_folded_lsf_pair, traced_map_sets
+from opticalstamp.analysis.lsf import traced_folded_lsf_pair
+from opticalstamp.analysis.maps import traced_map_sets
 from opticalstamp.design import load_design
 from opticalstamp.raytrace import cuda as rc
 from opticalstamp.raytrace.kernel import seed_key

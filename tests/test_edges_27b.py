@@ -117,7 +117,7 @@ def test_diffraction_with_the_source_in_the_slit_is_refused(tmp_path, monkeypatc
 def test_zero_gap_paraxial_model_is_continuous_at_z0():
     """A mask in the object plane bounds U to its hole whatever the slope: the paraxial
     profile at Z = 0 is the limit of Z -> 0+ (it was a division by zero)."""
-    from opticalstamp.analysis.lsf import (
+    from opticalstamp.analysis.paraxial import (
         paraxial_cumulative,
         paraxial_etendue_1d,
         paraxial_support,
@@ -262,11 +262,8 @@ def _thin() -> dict:
 
 
 def test_thin_stack_maps_fit_and_the_scan_traces():
-    from opticalstamp.analysis.lsf import (
-        PARAXIAL_MAX_SLOPE,
-        paraxial_max_slope,
-        traced_maps,
-    )
+    from opticalstamp.analysis.maps import traced_maps
+    from opticalstamp.analysis.paraxial import PARAXIAL_MAX_SLOPE, paraxial_max_slope
     from opticalstamp.analysis.spots import spots
     from opticalstamp.defaults import MAP_MAX_BINS
     from opticalstamp.imaging.kernels import kernel_source

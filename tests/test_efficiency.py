@@ -14,7 +14,7 @@ from opticalstamp.analysis.efficiency import (
     reference_etendue,
     reference_f_number,
 )
-from opticalstamp.analysis.lsf import paraxial_etendue
+from opticalstamp.analysis.paraxial import paraxial_etendue
 from opticalstamp.design import load_design, with_sensitive_area
 
 

@@ -14,8 +14,8 @@ import pytest
 
 from opticalstamp.analysis.efficiency import efficiency
 from opticalstamp.analysis.ghosts import analyse_ghosts
-from opticalstamp.analysis.lsf import paraxial_etendue
 from opticalstamp.analysis.own_etendue import own_etendue, transmittance
+from opticalstamp.analysis.paraxial import paraxial_etendue
 from opticalstamp.design import (
     load_design,
     replace,

@@ -11,7 +11,8 @@ import pytest
 import opticalstamp.raytrace.pixel as pixel_mod
 from helpers import assert_agree
 from opticalstamp.analysis.ghosts import analyse_ghosts
-from opticalstamp.analysis.lsf import traced_folded_lsf, traced_maps
+from opticalstamp.analysis.lsf import traced_folded_lsf
+from opticalstamp.analysis.maps import traced_maps
 from opticalstamp.analysis.spots import spots
 from opticalstamp.design import load_design
 from opticalstamp.raytrace.launch import launch

@@ -8,13 +8,13 @@ import pytest
 
 from helpers import assert_agree
 from opticalstamp.analysis.ghosts import analyse_ghosts
-from opticalstamp.analysis.lsf import (
+from opticalstamp.analysis.lsf import traced_folded_lsf
+from opticalstamp.analysis.paraxial import (
     paraxial_cumulative,
     paraxial_etendue,
     paraxial_folded_lsf,
     paraxial_profile,
     paraxial_support,
-    traced_folded_lsf,
 )
 from opticalstamp.design import load_design
 

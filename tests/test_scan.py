@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opticalstamp.analysis.lsf import paraxial_etendue
+from opticalstamp.analysis.paraxial import paraxial_etendue
 from opticalstamp.analysis.rmtf import rmtf
 from opticalstamp.design import design_from_dict, load_design
 from opticalstamp.imaging.charts import bar_chart

@@ -277,7 +277,7 @@ def test_cli_bad_options(args, text):
 
 
 def test_structural_variants_and_merged_front(paper):
-    from opticalstamp.analysis.lsf import paraxial_etendue
+    from opticalstamp.analysis.paraxial import paraxial_etendue
     from opticalstamp.design import structural_variants
     from opticalstamp.studies.search import merged_front
 

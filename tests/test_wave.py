@@ -12,8 +12,8 @@ import pytest
 
 from opticalstamp.analysis import wave, wavebase
 from opticalstamp.analysis.diffraction import design_slit_case, geometric_edge
-from opticalstamp.analysis.lsf import paraxial_cumulative
 from opticalstamp.analysis.own_etendue import own_etendue
+from opticalstamp.analysis.paraxial import paraxial_cumulative
 from opticalstamp.analysis.spots import spots
 from opticalstamp.analysis.wave2d import Hole, mask_field_2d, wave_response_2d
 from opticalstamp.analysis.wavecompare import compare_wave_ray

@@ -29,7 +29,7 @@ support of the own path. F is 1, or with ``fresnel`` the unpolarised transmittan
 the whole stack, (prod T_s + prod T_p) / 2, a function of rho alone (the tracer's rule).
 
 In the paraxial limit (a_i = rho sum t_j / n_j) L_x depends on s_x alone and G is the
-closed form G_x G_y of :func:`~opticalstamp.analysis.lsf.paraxial_etendue`; exact
+closed form G_x G_y of :func:`~opticalstamp.analysis.paraxial.paraxial_etendue`; exact
 refraction moves rays slightly further (t s / sqrt(n^2 - s^2) > t s / n), so G is a
 little smaller: 0.046 % for the paper's prototype.
 """

@@ -36,7 +36,8 @@ from ..raytrace.stack import lattice_of
 from ..units import period_of_dpi
 from ..validate import check_memory, parse_grid
 from .dof import depth_of_field, dof_bounds, dof_text, refine_points, spurious_ranges
-from .lsf import FoldedLSF, fast_light, paraxial_folded_lsf, traced_folded_lsf
+from .lsf import FoldedLSF, fast_light, traced_folded_lsf
+from .paraxial import paraxial_folded_lsf
 
 __all__ = ["depth_of_field", "dof_bounds", "dof_text", "refine_points", "spurious_ranges"]
 

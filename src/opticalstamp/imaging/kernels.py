@@ -21,13 +21,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..analysis.lsf import (
+from ..analysis.maps import TracedMaps, traced_map_sets
+from ..analysis.paraxial import (
     PARAXIAL_MAX_SLOPE,
-    TracedMaps,
     paraxial_cumulative,
     paraxial_max_slope,
     paraxial_support,
-    traced_map_sets,
 )
 from ..defaults import RAYS_MAP
 from ..design import AnyDesign, Design, RodLensDesign
@@ -181,7 +180,7 @@ def scan_kernels(
     ``source``: "paraxial" (closed form own path; needs rectangular holes), "trace" (own
     path from the exact tracer, SVD-separated), or "auto" (paraxial where the holes are
     rectangular, Fresnel losses are off and no own-path ray is steeper than
-    ``PARAXIAL_MAX_SLOPE`` (:func:`~opticalstamp.analysis.lsf.paraxial_max_slope`: a stack
+    ``PARAXIAL_MAX_SLOPE`` (:func:`~opticalstamp.analysis.paraxial.paraxial_max_slope`: a stack
     much thinner than its holes is not paraxial), else trace). Ghost maps always come from
     the tracer (2^20 rays are plenty for 0.5 mm bins). ``tracer``: a PixelTracer of this
     design whose pilot runs to reuse (the kernels are the same with or without it).

@@ -24,7 +24,8 @@ import numpy as np
 from ..analysis.diffraction import diffraction_budget
 from ..analysis.efficiency import reference_etendue
 from ..analysis.ghosts import analyse_ghosts
-from ..analysis.lsf import FoldedLSF, paraxial_etendue, paraxial_folded_lsf
+from ..analysis.lsf import FoldedLSF
+from ..analysis.paraxial import paraxial_etendue, paraxial_folded_lsf
 from ..analysis.rmtf import DEFAULT_Z_MM, depth_of_field, period_of_dpi, rmtf_curves
 from ..defaults import WINDOW_UM
 from ..design import Design
