@@ -137,16 +137,22 @@ def traced_folded_lsf(
     progress: bool = False,
     sampling: Sampling | None = None,
     tracer: PixelTracer | None = None,
+    outside_band: float | None = None,
 ) -> FoldedLSF:
     """Fold each row's traced LSF onto every period at every Z (one trace per row).
 
     ``sampling`` replaces ``n_rays``, ``seed``, ``fresnel`` and ``chunk`` (its ray count,
     where None, is ``n_rays``; rounded up to a multiple of ``n_batches``). ``tracer``: a
     PixelTracer of this design whose pilot runs to reuse (other analyses of the same
-    pixels share them); the sampling is still this call's.
+    pixels share them); the sampling is still this call's. ``outside_band``: fold only
+    the rays with |s_x| or |s_y| >= this (the light a wave engine of that band leaves to
+    the tracer, :mod:`~opticalstamp.analysis.responsivity`); s is conserved through
+    the stack, so the test is the same at every plane.
     """
     s = _lsf_sampling(sampling, n_rays, seed, fresnel, chunk, n_batches)
-    (lsf,) = _traced_folds(design, (ghosts,), z_mm, periods_um, s, n_batches, progress, tracer)
+    (lsf,) = _traced_folds(
+        design, (ghosts,), z_mm, periods_um, s, n_batches, progress, tracer, outside_band
+    )
     return lsf
 
 
@@ -222,8 +228,10 @@ def _traced_folds(
     n_batches: int,
     progress: bool,
     tracer: PixelTracer | None,
+    outside_band: float | None = None,
 ) -> list[FoldedLSF]:
-    """One trace per row, folded once per entry of ``kinds`` (True: ghost light too)."""
+    """One trace per row, folded once per entry of ``kinds`` (True: ghost light too);
+    ``outside_band`` as :func:`traced_folded_lsf` (tallied on the CPU)."""
     n_rays = sampling.n_rays
     tr = tracer_for(design, sampling, tracer)
     zs = np.asarray(z_mm, dtype=np.float64)
@@ -240,7 +248,7 @@ def _traced_folds(
         on_gpu = None  # the same tallies on the device, where a GPU keeps the rays
         for pb in tr.trace((row, k), progress=progress):
             b = pb.rays
-            if b.device is not None:
+            if b.device is not None and outside_band is None:
                 from . import cuda_tallies as gpu
 
                 on_gpu = on_gpu or [gpu.zeros(out.shape) for out in outs]
@@ -248,8 +256,12 @@ def _traced_folds(
                     gpu.fold(pb, not ghosts, zs * 1000.0, tr.n_obj, per, nb, n_batches, res)
                 continue
             batch = (b.ids % n_batches).astype(np.int64)
+            keep = None
+            if outside_band is not None:
+                keep = (np.abs(b.sx) >= outside_band) | (np.abs(b.sy) >= outside_band)
             for ghosts, out, sl in zip(kinds, outs, slopes, strict=True):
                 w = pb.w if ghosts else pb.w * pb.own
+                w = w if keep is None else w * keep
                 _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, tr.n_obj, per, nb, out)
                 sl += _slopes(b, w, tr.n_obj) / n_rays
         for out, res in zip(outs, on_gpu or (), strict=False):  # nothing on the CPU

@@ -36,8 +36,8 @@ from ..raytrace.stack import lattice_of
 from ..units import period_of_dpi
 from ..validate import check_memory, parse_grid
 from .dof import depth_of_field, dof_bounds, dof_text, refine_points, spurious_ranges
-from .lsf import FoldedLSF, fast_light, traced_folded_lsf
-from .paraxial import paraxial_folded_lsf
+from .lsf import FoldedLSF, fast_light
+from .responsivity import Optics, folded_lsf, resolve_optics
 
 __all__ = ["depth_of_field", "dof_bounds", "dof_text", "refine_points", "spurious_ranges"]
 
@@ -402,6 +402,7 @@ def rmtf(
     refine: int = 8,
     passes: int = 1,
     shading: bool = True,
+    optics: str | Optics = "ray",
 ) -> RMTFResult:
     """RMTF of paper Eq. 1 for bar charts of the given dpi versus Z, and depth of field.
 
@@ -428,6 +429,10 @@ def rmtf(
         1: on the grid alone
     shading : the merged line shading-corrected, as a scanner delivers it (each pixel
         over its white response); False: the raw merged line (:func:`rmtf_curves`)
+    optics : "ray", "wave" or "auto" (or a resolved
+        :class:`~opticalstamp.analysis.responsivity.Optics`): which engine gives the
+        responsivity (:func:`~opticalstamp.analysis.responsivity.folded_lsf`); the
+        result's ``meta["optics"]`` says which one did and why
     """
     dpis = sorted({float(d) for d in (chart_dpis(design) if dpi is None else dpi)})
     dof_dpi = float(dof_chart_dpi(design) if dof_dpi is None else dof_dpi)
@@ -442,14 +447,15 @@ def rmtf(
     check_rmtf_memory(design, periods.max(), zs.size, window_um, shift_step_um)
     if method not in ("trace", "paraxial"):
         raise ValueError(f"method must be 'trace' or 'paraxial' (got {method!r})")
+    opt = resolve_optics(design, optics)
 
     def lsf_at(z: np.ndarray) -> FoldedLSF:
-        if method == "paraxial":
-            return paraxial_folded_lsf(design, z_mm=z, periods_um=periods)
-        return traced_folded_lsf(
+        return folded_lsf(
             design,
             z_mm=z,
             periods_um=periods,
+            optics=opt,
+            method=method,
             n_rays=n_rays,
             seed=seed,
             ghosts=ghosts,
@@ -470,7 +476,7 @@ def rmtf(
         shading=shading,
     )
     (res,) = refine_results([res], lambda z: [lsf_at(z)], design, steps=refine, passes=passes)
-    return res
+    return replace(res, meta={**res.meta, "optics": opt.to_dict()})
 
 
 def rmtf_from_lsf(

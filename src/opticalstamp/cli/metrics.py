@@ -34,6 +34,7 @@ from .common import (
     save_plot,
     z_grid,
 )
+from .optics import OpticsOpt, optics_line
 
 
 def _dpi_list(text: str) -> tuple[float, ...]:
@@ -93,6 +94,7 @@ def rmtf(
         ),
     ] = True,
     fresnel: FresnelOpt = False,
+    optics: OpticsOpt = "ray",
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:
@@ -123,11 +125,13 @@ def rmtf(
         dof_dpi=dof_dpi,
         progress=not as_json,
         shading=shading,
+        optics=optics,
     )
     data = r.to_dict() | {"provenance": provenance(d, seed)}
     keys = list(r.rmtf_max)
     light = "with ghost light" if r.ghosts else "own path only"
     lines = [f"design {d.name}: RMTF (max over chart shifts), {r.method}, {light}"]
+    lines.append(optics_line(r.meta["optics"]))
     lines.append("Z (mm) " + "".join(f"{k + ' dpi':>10}" for k in keys))
     for i, zz in enumerate(r.z_mm):
         lines.append(f"{zz:6.2f} " + "".join(f"{r.rmtf_max[k][i]:10.3f}" for k in keys))

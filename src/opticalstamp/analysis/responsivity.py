@@ -1,0 +1,207 @@
+"""One responsivity, two engines: the used pixels' line-spread functions from ray or wave
+optics, behind one interface.
+
+The analyses that consume a pixel's responsivity on the object plane (RMTF and depth of
+field, the light it collects) ask :func:`folded_lsf` for the LSFs folded onto their chart
+periods, with an :class:`Optics` value that says which engine gives them:
+
+* ``ray``: the exact tracer (:func:`~opticalstamp.analysis.lsf.traced_folded_lsf`), own
+  and ghost paths, geometric optics;
+* ``wave``: the wave engine (:mod:`.wave`, scalar diffraction) for the light whose
+  invariant direction lies in its band, |s_x|, |s_y| < B (the own path, its diffraction
+  and the near crosstalk), joined with the tracer's light outside the band (the far
+  ghost paths, which land millimetres away at grazing angles, where ray optics holds).
+  s = n sin(theta) is conserved through the planar stack, so the split is one test on
+  each traced ray and nothing is counted twice or lost, apart from the light a mask
+  diffracts beyond the band, which the wave engine counts (``budget``) but does not
+  propagate (a faint halo; docs/wave.md). :func:`folded_lsf` with two bands shows the
+  sum does not depend on where the band is split (tests/test_optics_engines.py).
+
+:func:`resolve_optics` turns the user's ``ray | wave | auto`` into an :class:`Optics`;
+``auto`` applies the measured validity rule (:mod:`.validity`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..defaults import RAYS_LSF
+from ..design import Design
+from ..raytrace.pixel import PixelTracer
+from ..validate import InputError
+from .lsf import SLOPE_EDGES, FoldedLSF, traced_folded_lsf
+from .paraxial import paraxial_folded_lsf
+from .wavebase import WaveSampling, rectangular, wave_sampling
+
+#: what a user may ask for
+OPTICS = ("ray", "wave", "auto")
+
+
+@dataclass(frozen=True)
+class Optics:
+    """Which engine gives a design's responsivity, and why.
+
+    Attributes
+    ----------
+    asked : what the user asked for: "ray", "wave" or "auto"
+    engine : what is used: "ray" or "wave"
+    reason : why, in words (the validity rule's verdict for "auto")
+    sampling : the wave engine's sampling (band, grid) where ``engine`` is "wave"
+    rule : the validity rule's figures for "auto" (plain data), else None
+    """
+
+    asked: str
+    engine: str
+    reason: str
+    sampling: WaveSampling | None = None
+    rule: dict | None = None
+
+    @property
+    def band(self) -> float | None:
+        return None if self.sampling is None else self.sampling.band
+
+    def to_dict(self) -> dict:
+        return {
+            "asked": self.asked,
+            "engine": self.engine,
+            "reason": self.reason,
+            "band": self.band,
+            "wavelength_um": None if self.sampling is None else self.sampling.wavelength_um,
+            "rule": self.rule,
+        }
+
+
+RAY = Optics("ray", "ray", "asked for")
+
+
+def wave_unavailable(design: Design) -> str | None:
+    """Why the wave engine cannot give this design's responsivity yet, or None."""
+    if not rectangular(design):
+        return "the wave engine feeds the analyses for rectangular holes only (circles: not yet)"
+    return None
+
+
+def resolve_optics(design: Design, optics: str | Optics = "ray") -> Optics:
+    """The :class:`Optics` for ``design`` from ``"ray"``, ``"wave"`` or ``"auto"``.
+
+    ``wave`` for a design the wave engine cannot do raises :class:`InputError` naming
+    the reason; ``auto`` picks ray there, and elsewhere follows the measured validity
+    rule (:func:`~opticalstamp.analysis.validity.choose_optics`)."""
+    if isinstance(optics, Optics):
+        return optics
+    if optics not in OPTICS:
+        raise InputError(f"optics: must be one of {', '.join(OPTICS)} (got {optics!r})")
+    if optics == "ray":
+        return RAY
+    if optics == "wave":
+        why = wave_unavailable(design)
+        if why is not None:
+            raise InputError(f"optics: 'wave' is not available for {design.name}: {why}")
+        return Optics("wave", "wave", "asked for", wave_sampling(design))
+    from .validity import choose_optics
+
+    choice = choose_optics(design, optics="auto")
+    rule = {
+        "fresnel_min": choice.fresnel_min,
+        "predictor": choice.predictor,
+        "predicted_error": choice.predicted_error,
+        "tolerance": choice.tolerance,
+    }
+    if choice.engine == "wave" and wave_unavailable(design) is None:
+        return Optics("auto", "wave", choice.reason, wave_sampling(design), rule)
+    return Optics("auto", "ray", choice.reason, None, rule)
+
+
+def folded_lsf(
+    design: Design,
+    *,
+    z_mm,
+    periods_um,
+    optics: Optics = RAY,
+    method: str = "trace",
+    n_rays: int = RAYS_LSF,
+    seed: int = 0,
+    ghosts: bool = True,
+    fresnel: bool = False,
+    progress: bool = False,
+    tracer: PixelTracer | None = None,
+) -> FoldedLSF:
+    """The used pixels' LSFs folded onto ``periods_um`` at each ``z_mm``, by ``optics``.
+
+    Ray optics: ``method`` "trace" (exact tracer; ``ghosts``, ``fresnel``, ``n_rays``,
+    ``seed``, ``tracer`` as :func:`~opticalstamp.analysis.lsf.traced_folded_lsf`) or
+    "paraxial" (own path, closed form). Wave optics: the wave engine's LSFs in its band
+    plus, with ``ghosts``, the traced light outside it (:func:`join`); its method is
+    "wave" and its standard errors those of the traced part (the wave part has no
+    sampling noise). Fresnel losses are the tracer's only: with wave optics ``fresnel``
+    is refused rather than applied to half the light.
+    """
+    if optics.engine == "ray":
+        if method == "paraxial":
+            return paraxial_folded_lsf(design, z_mm=z_mm, periods_um=periods_um)
+        return traced_folded_lsf(
+            design,
+            z_mm=z_mm,
+            periods_um=periods_um,
+            n_rays=n_rays,
+            seed=seed,
+            ghosts=ghosts,
+            fresnel=fresnel,
+            progress=progress,
+            tracer=tracer,
+        )
+    if fresnel:
+        raise InputError(
+            "fresnel: the wave engine has no Fresnel losses yet; use --optics ray with --fresnel"
+        )
+    if method == "paraxial":
+        raise InputError("method: 'paraxial' is a ray-optics closed form; not with --optics wave")
+    from .wavecompare import wave_folded_lsf
+
+    wave = wave_folded_lsf(design, z_mm, periods_um, sampling=optics.sampling)
+    if not ghosts:
+        return wave
+    far = traced_folded_lsf(
+        design,
+        z_mm=z_mm,
+        periods_um=periods_um,
+        n_rays=n_rays,
+        seed=seed,
+        ghosts=True,
+        fresnel=False,
+        progress=progress,
+        tracer=tracer,
+        outside_band=optics.band,
+    )
+    return join(wave, far, optics.band, _n_obj(design))
+
+
+def _n_obj(design: Design) -> float:
+    return float(design.index(design.object_medium))
+
+
+def join(wave: FoldedLSF, far: FoldedLSF, band: float, n_obj: float) -> FoldedLSF:
+    """The wave engine's in-band LSFs plus the tracer's out-of-band ones (same Z,
+    periods and rows). The wave part is dealt evenly into the tracer's batches, so the
+    batch scatter (the standard errors) is the traced part's alone. The light's
+    lateral slopes (:func:`~opticalstamp.analysis.lsf.fast_light`): the traced part's,
+    and the in-band light at the band's edge slope, the fastest it can move (a bound
+    that can only make the refinement of the Z grid finer)."""
+    if not (
+        np.array_equal(wave.z_mm, far.z_mm) and np.array_equal(wave.periods_um, far.periods_um)
+    ):
+        raise ValueError("join: the wave and traced LSFs must share their Z and periods")
+    nb = far.n_batches
+    h = [
+        f + np.broadcast_to(w.sum(axis=1, keepdims=True) / nb, f.shape)
+        for w, f in zip(wave.h, far.h, strict=True)
+    ]
+    slopes = None
+    if far.slope_power is not None:
+        slopes = far.slope_power.copy()
+        light = float(np.sum(wave.h[0][:, :, 0, :])) / len(wave.rows)
+        edge = band / np.sqrt(max(n_obj * n_obj - band * band, 1e-12))
+        slopes[min(int(np.searchsorted(SLOPE_EDGES, edge, "right")) - 1, slopes.size - 1)] += light
+    return replace(far, h=h, method="wave", slope_power=slopes)

@@ -1,0 +1,124 @@
+"""One responsivity, two engines (issue 23): the wave engine's in-band LSFs joined with the
+tracer's out-of-band light, behind :func:`opticalstamp.analysis.responsivity.folded_lsf`."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from opticalstamp.analysis.lsf import FoldedLSF, traced_folded_lsf
+from opticalstamp.analysis.responsivity import RAY, Optics, folded_lsf, join, resolve_optics
+from opticalstamp.analysis.rmtf import rmtf, rmtf_from_lsf
+from opticalstamp.analysis.wavebase import wave_sampling
+from opticalstamp.analysis.wavecompare import ray_in_band
+from opticalstamp.design import load_design, with_unstated
+from opticalstamp.validate import InputError
+
+N = 1 << 17
+ZS = np.array([0.0, 1.0, 2.0, 3.0])
+PER = [254.0]  # the prototype's 200-dpi depth-of-field chart
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return load_design("paper2016")
+
+
+def _light(lsf: FoldedLSF) -> np.ndarray:
+    """Each Z's light per row (um^2 sr)."""
+    return lsf.h[0].sum(axis=(0, 1, 3)) / len(lsf.rows)
+
+
+def _wave(design, **kw) -> Optics:
+    return Optics("wave", "wave", "test", wave_sampling(design, **kw))
+
+
+def test_out_of_band_fold_is_the_complement_of_the_band(paper):
+    """The tracer's light outside the band (one test on s, conserved through the stack)
+    equals all traced light minus the in-band light that ray_in_band tallies on its own;
+    a band of 0 keeps every ray (bit for bit the plain fold)."""
+    band = wave_sampling(paper).band
+    out = traced_folded_lsf(paper, z_mm=ZS, periods_um=PER, n_rays=N, outside_band=band)
+    ref = ray_in_band(paper, [0.0], band, period_um=PER[0], n_rays=N)
+    expect = ref.traced_um2sr - ref.own_um2sr - ref.near_um2sr
+    # row A alone: ray_in_band traces row A's pixel (0, 0)
+    row_a = out.h[0][0].sum(axis=(0, 2))
+    assert row_a[0] == pytest.approx(expect, rel=1e-9)
+    assert expect > 0  # the prototype's far ghosts
+    full = traced_folded_lsf(paper, z_mm=ZS, periods_um=PER, n_rays=N)
+    zero = traced_folded_lsf(paper, z_mm=ZS, periods_um=PER, n_rays=N, outside_band=0.0)
+    assert all(np.array_equal(a, b) for a, b in zip(full.h, zero.h, strict=True))
+
+
+def test_join_adds_the_wave_light_without_changing_the_scatter():
+    rng = np.random.default_rng(1)
+    far_h = [rng.random((2, 16, 3, 10))]
+    wave_h = [rng.random((2, 1, 3, 10))]
+    zs, per = np.array([0.0, 1.0, 2.0]), np.array([5.0])
+    far = FoldedLSF(zs, per, [(0, 0), (1, 1)], far_h, "trace", 160, True, False, np.ones(160))
+    wave = FoldedLSF(zs, per, [(0, 0), (1, 1)], wave_h, "wave", 0, False, False)
+    j = join(wave, far, 0.2, 1.0)
+    assert j.method == "wave" and j.n_batches == 16
+    np.testing.assert_allclose(j.h[0].sum(axis=1), far_h[0].sum(axis=1) + wave_h[0][:, 0])
+    # the batch scatter, which gives the standard errors, is the traced part's
+    np.testing.assert_allclose(np.std(j.h[0], axis=1), np.std(far_h[0], axis=1), atol=1e-12)
+    # the wave light counts at the band's edge slope, 0.2 / sqrt(1 - 0.04)
+    added = j.slope_power - far.slope_power
+    assert added.sum() == pytest.approx(wave_h[0][:, :, 0].sum() / 2)
+    assert np.flatnonzero(added).tolist() == [8]  # bins of 0.025: 0.204 lies in [0.2, 0.225)
+    with pytest.raises(ValueError, match="share"):
+        join(wave, FoldedLSF(zs[:2], per, [], [far_h[0][:, :, :2]], "trace", 1, 1, 0), 0.2, 1)
+
+
+def test_the_sum_does_not_depend_on_where_the_band_is_split(paper):
+    """Light and RMTF with the default band B and with 0.8 B: the light that moves from the
+    tracer to the wave engine is counted once (measured: light 0.3 %, RMTF 0.004)."""
+    b = wave_sampling(paper).band
+    ls = [
+        folded_lsf(paper, z_mm=ZS, periods_um=PER, optics=_wave(paper, band=f * b), n_rays=N)
+        for f in (1.0, 0.8)
+    ]
+    light = [_light(x) for x in ls]
+    np.testing.assert_allclose(light[0], light[1], rtol=0.01)
+    r = [rmtf_from_lsf(x, paper, dpi=[200.0]).rmtf_max["200"] for x in ls]
+    np.testing.assert_allclose(r[0], r[1], atol=0.01)
+
+
+def test_geometric_limit_gives_the_ray_figures(paper):
+    """At a wavelength shrunk 20x the joined responsivity gives the tracer's RMTF
+    (max |difference| 0.0034, the tracer's standard error 0.003) and light (+0.56 %: the
+    own path's diffraction excess falls as lambda, tests/test_wave.py)."""
+    w = folded_lsf(
+        paper, z_mm=ZS, periods_um=PER, optics=_wave(paper, wavelength_um=0.55 / 20), n_rays=N
+    )
+    r = folded_lsf(paper, z_mm=ZS, periods_um=PER, optics=RAY, n_rays=N)
+    rw = rmtf_from_lsf(w, paper, dpi=[200.0])
+    rr = rmtf_from_lsf(r, paper, dpi=[200.0])
+    se = np.hypot(rw.rmtf_max_se["200"], rr.rmtf_max_se["200"])
+    np.testing.assert_array_less(
+        np.abs(np.subtract(rw.rmtf_max["200"], rr.rmtf_max["200"])), 3 * se + 0.005
+    )
+    np.testing.assert_allclose(_light(w), _light(r), rtol=0.01)
+    # at the design's wavelength the wave light is clearly above the ray figure
+    w1 = folded_lsf(paper, z_mm=ZS[:1], periods_um=PER, optics=_wave(paper), n_rays=N)
+    assert _light(w1)[0] / _light(r)[0] - 1 > 0.05
+
+
+def test_rmtf_says_which_optics(paper):
+    r = rmtf(paper, dpi=[200.0], z_mm=[0.0, 1.0, 2.0], optics="wave", n_rays=N, refine=0)
+    o = r.meta["optics"]
+    assert o["engine"] == "wave" and o["asked"] == "wave" and 0 < o["band"] < 0.35
+    assert r.method == "wave"
+    assert (
+        rmtf(paper, dpi=[200.0], z_mm=[0.0], n_rays=N, refine=0).meta["optics"]["engine"] == "ray"
+    )
+
+
+def test_bad_optics_are_refused(paper):
+    with pytest.raises(InputError, match="optics: must be one of ray, wave, auto"):
+        resolve_optics(paper, "waves")
+    with pytest.raises(InputError, match="fresnel"):
+        folded_lsf(paper, z_mm=ZS, periods_um=PER, optics=_wave(paper), fresnel=True)
+    circles = with_unstated(paper, hole_shape="circle")
+    with pytest.raises(InputError, match="rectangular holes only"):
+        resolve_optics(circles, "wave")
