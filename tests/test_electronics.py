@@ -45,6 +45,7 @@ TABLE = {
     "photons_per_lumen_s": 8.0e15,
     "exposure_duty": 0.9,
     "channel_response": [0.7, 1.0, 0.5],
+    "illumination": "white",
 }
 
 
@@ -82,6 +83,7 @@ def test_sensor_model_is_the_design_table_with_the_same_defaults():
         "black_level_dn": 64,
         "exposure_duty": 1.0,
         "channel_response": (0.8, 1.0, 0.6),
+        "illumination": "mono",
     }
     assert load_design("paper2016").electronics == m
 

@@ -23,7 +23,7 @@ the defaults.
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
@@ -46,6 +46,10 @@ Real = Annotated[float, BeforeValidator(_finite), Field(allow_inf_nan=False)]
 #: the signal budget (the exposure for a target SNR grows past any float).
 MIN_ILLUMINANCE_LUX = 1e-3
 Whole = Annotated[int, BeforeValidator(_whole)]
+#: The light a design is lit with (analysis/spectrum.py): "mono" is one wavelength, the
+#: design's ``wavelength_um``; the others are typical LED spectra times a silicon QE curve.
+ILLUMINATIONS = ("mono", "white", "red", "green", "blue", "rgb")
+Illumination = Literal["mono", "white", "red", "green", "blue", "rgb"]
 
 
 class Electronics(BaseModel):
@@ -69,6 +73,9 @@ class Electronics(BaseModel):
     channel_response: tuple[
         Annotated[Real, Field(gt=0)], Annotated[Real, Field(gt=0)], Annotated[Real, Field(gt=0)]
     ] = (0.8, 1.0, 0.6)  # R, G, B relative
+    # the light's spectrum for the wave engine: one wavelength (the design's), a white
+    # phosphor LED, one colour LED, or R, G and B LEDs lit in turn (three channels)
+    illumination: Illumination = "mono"
 
     @model_validator(mode="after")
     def _pedestal(self) -> Electronics:
