@@ -25,6 +25,7 @@ from ..design import Design, with_sensitive_area
 from ..raytrace.stack import output_pitch
 from .ghosts import GhostResult, analyse_ghosts
 from .own_etendue import own_etendue, rectangular_holes
+from .responsivity import Optics, pixel_light, resolve_optics
 
 
 def disk_projected_solid_angle(rho_um, h_um: float, radius_um: float) -> np.ndarray:
@@ -119,6 +120,7 @@ def efficiency(
     reference: dict | None = None,
     ghosts: GhostResult | None = None,
     progress: bool = False,
+    optics: str | Optics = "ray",
 ) -> EfficiencyResult:
     """Light efficiency of one used pixel (paper Fig. 13), with and without ghost light.
 
@@ -132,6 +134,13 @@ def efficiency(
     The own-path etendue (every figure built on it) is the deterministic integral of
     :func:`~opticalstamp.analysis.own_etendue.own_etendue` where every hole is
     rectangular, with the same Fresnel option; the ghost etendue is traced.
+
+    ``optics`` "wave" (or "auto" where the validity rule picks it): the headline light
+    (``etendue_um2sr``, its SE, ``ratio``, ``working_f_number``) is the wave engine's
+    in-band light plus the traced light outside its band
+    (:func:`~opticalstamp.analysis.responsivity.pixel_light`); ``optics`` holds the
+    breakdown and the ray figures it replaces. The own-path figures, the object-radius
+    and sensitive-area studies stay geometric (ray optics), and say so there.
     """
     ref = {"pixel_um": output_pitch(design)} | dict(reference or {})
     g_ref = reference_etendue(**ref)
@@ -186,6 +195,16 @@ def efficiency(
                 "gain_own_vs_design": _over(ok, g_own),
             }
         )
+    opt = resolve_optics(design, optics)
+    optics_meta = opt.to_dict()
+    if opt.engine == "wave":
+        light = pixel_light(design, opt, pixel=pixel, seed=seed)
+        optics_meta |= light | {
+            "ray_etendue_um2sr": tot,
+            "ray_ratio": tot / g_ref,
+            "geometric": ["etendue_own_um2sr", "by_object_radius", "sensitive_area"],
+        }
+        tot, se = light["etendue_um2sr"], g.etendue_ghost_se
     ratio, ratio_own = tot / g_ref, g_own / g_ref
     return EfficiencyResult(
         design=design.name,
@@ -214,7 +233,8 @@ def efficiency(
                 "pupil_mm": 2.0,
                 "conjugate_mm": 20.0,
             }
-            | ref
+            | ref,
+            "optics": optics_meta,
         },
     )
 

@@ -205,3 +205,39 @@ def join(wave: FoldedLSF, far: FoldedLSF, band: float, n_obj: float) -> FoldedLS
         edge = band / np.sqrt(max(n_obj * n_obj - band * band, 1e-12))
         slopes[min(int(np.searchsorted(SLOPE_EDGES, edge, "right")) - 1, slopes.size - 1)] += light
     return replace(far, h=h, method="wave", slope_power=slopes)
+
+
+def pixel_light(
+    design: Design,
+    optics: Optics,
+    *,
+    pixel: tuple[int, int] = (0, 0),
+    n_rays: int = RAYS_LSF,
+    seed: int = 0,
+) -> dict:
+    """A used pixel's light from a uniform Lambertian object (um^2 sr) by wave optics:
+    the wave engine's in-band light plus the tracer's light outside the band, with the
+    tracer's in-band light beside it (what ray optics gives for the same directions) and
+    the light the object-side mask diffracts beyond the band (counted, not propagated:
+    an upper bound on the halo left out)."""
+    from .wave import wave_response
+    from .wavecompare import ray_in_band
+
+    if optics.engine != "wave":
+        raise ValueError("pixel_light: wave optics only (the ray figures are the ghost analysis')")
+    w = wave_response(design, [0.0], pixel=pixel, sampling=optics.sampling)
+    per = float(design.sensor.row_pitch_um)
+    r = ray_in_band(
+        design, [0.0], optics.band, pixel=pixel, period_um=per, n_rays=n_rays, seed=seed
+    )
+    wave = float(w.etendue_um2sr[0])
+    far = r.traced_um2sr - r.own_um2sr - r.near_um2sr
+    return {
+        "etendue_um2sr": wave + far,
+        "wave_in_band_um2sr": wave,
+        "far_traced_um2sr": far,
+        "ray_in_band_um2sr": float(r.own_um2sr + r.near_um2sr),
+        "lost_to_band_um2sr": float(w.budget[-1]["lost_to_band"]),
+        "n_rays": n_rays,
+        "seed": seed,
+    }

@@ -151,6 +151,7 @@ def efficiency(
         bool, typer.Option("--study", help="also run the study of the unstated parameters")
     ] = False,
     fresnel: FresnelOpt = False,
+    optics: OpticsOpt = "ray",
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:
@@ -168,9 +169,19 @@ def efficiency(
         return
     from ..design import load_design
 
-    r = run(d, seed=seed, fresnel=fresnel, progress=not as_json)
+    r = run(d, seed=seed, fresnel=fresnel, progress=not as_json, optics=optics)
     data = r.to_dict() | {"provenance": provenance(d, seed)}
-    lines = [
+    o = r.meta["optics"]
+    lines = [optics_line(o)]
+    if o["engine"] == "wave":
+        lines.append(
+            f"all light {o['etendue_um2sr']:.4g} µm²·sr = wave in band "
+            f"{o['wave_in_band_um2sr']:.4g} + traced beyond it {o['far_traced_um2sr']:.4g}; "
+            f"ray optics gives {o['ray_etendue_um2sr']:.4g} "
+            f"({o['etendue_um2sr'] / o['ray_etendue_um2sr'] - 1:+.1%} by wave optics); the "
+            "own-path and sensitive-area figures below are geometric"
+        )
+    lines += [
         f"design {d.name}: etendue of one pixel {r.etendue_um2sr:.4g} ± {r.etendue_se:.2g}"
         f" µm²·sr (own path {r.etendue_own_um2sr:.4g})",
         f"reference lens (F {r.reference_f_number:g}, "
