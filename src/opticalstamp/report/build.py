@@ -56,6 +56,7 @@ from .studies import (
     study_jobs,
     tolerance_spec,
 )
+from .wave import wave_section
 from .work import CONCEPTS, PAPER_PRESET, Z_MM, StudyBudget, Work, is_paper_preset, report_work
 
 #: the names callers import from here (the report's parts now live in the modules above)
@@ -160,6 +161,8 @@ def build_report(
         eff = run(efficiency_section, design, g, work, **traced)
         diffraction = run(diffraction_section, design)
         clock.lap("quality")
+        wave = run(wave_section, design, work, seed=seed, dof_dpi=dpi)
+        clock.lap("ray_vs_wave")
         scans = run(
             scan_section, design, work, **traced, tracer=tracer, rmtf_section=rm, chart_dpi=dpi
         )
@@ -177,6 +180,7 @@ def build_report(
             scans=scans,
             restoration=restoration,
             chart_dpi=dpi,
+            wave=wave,
         )
         # each figure drawn by a background process that is idle (while the studies run
         # on), else here; written in this order either way
@@ -229,6 +233,7 @@ def build_report(
             "efficiency": as_data(eff),
             "signal": as_data(signal),
             "diffraction": as_data(diffraction),
+            "ray_vs_wave": as_data(wave),
             "parameter_study": as_data(done.get("parameter_study")),
             "scans": as_data(scans),
             "restoration": as_data(restoration),

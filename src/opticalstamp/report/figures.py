@@ -37,6 +37,7 @@ def section_figures(
     scans,
     restoration,
     chart_dpi: float,
+    wave=None,
 ) -> dict:
     """The figures of the sections computed here, in the page's order: file name ->
     (plot, its arguments); none for a section that is not measurable."""
@@ -59,6 +60,10 @@ def section_figures(
         figures["efficiency.png"] = (plotting.plot_efficiency, efficiency)
     if measured(diffraction) is not None:
         figures["diffraction.png"] = (plotting.plot_diffraction, diffraction.slit)
+    if measured(wave) is not None:
+        from .plotting.wave import plot_wave_report
+
+        figures["raywave.png"] = (plot_wave_report, wave.comparison, wave.verdict)
     if measured(scans) is not None:
         p = scans.panels
         figures |= {

@@ -178,4 +178,6 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
         "yield_note": _yield_doubt(tol) if tol and tol.get("spec") else None,
         "spec": [f"{n}{op}{v:g}" for n, op, v in spec],
         "meets_spec": all(c["pass"] for c in checks.values()) if checks else None,
+        # the ray-vs-wave section's verdict in one line (None: not computed)
+        "optics": (section(data, "ray_vs_wave") or {}).get("verdict", {}).get("text"),
     }

@@ -58,6 +58,10 @@ class Work:
     paper : the paper's own sections (Fig. 1 concepts, the study of its unstated
         parameters, the paper-vs-model table)
     budget : the background studies' budgets (with ``studies``)
+    wave_z_step_mm, wave_max_heights : heights of the ray-vs-wave section: the RMTF
+        grid's heights every ``wave_z_step_mm`` and its top, at most ``wave_max_heights``
+        (:func:`~opticalstamp.analysis.raywave.sub_grid`)
+    wave_rays : rays per pixel row of the ray-vs-wave section's ray side
     """
 
     z_mm: tuple[float, ...]
@@ -75,6 +79,9 @@ class Work:
     reduced: tuple[str, ...] = ()
     paper: bool = True
     budget: StudyBudget = field(default_factory=StudyBudget)
+    wave_z_step_mm: float = 0.25
+    wave_max_heights: int = 19
+    wave_rays: int = RAYS_LSF
 
 
 def report_work(
@@ -171,7 +178,11 @@ def _work(quick: bool, n_rays: int) -> Work:
             "RMTF: 2^19 rays per pixel row, Z every 0.5 mm",
             "simulated scans: 600-dpi charts, kernels from 2^18 rays",
             "restoration: Wiener only, at Z = 1.5, 3, 4.5 mm, no OCR",
+            "ray vs wave optics: Z every 1 mm, 2^19 rays per pixel row",
         ),
+        wave_z_step_mm=1.0,
+        wave_max_heights=10,
+        wave_rays=1 << 19,
     )
 
 

@@ -17,6 +17,7 @@ from .quality import rmtf_html
 from .restoration import restoration_html
 from .scans import scans_html
 from .studies import rodlens_html, search_html, study_html
+from .wave import wave_html
 
 
 def page(design: Design, d: dict) -> str:
@@ -26,6 +27,7 @@ def page(design: Design, d: dict) -> str:
     prov = d["provenance"]
     paper = d.get("paper_vs_model") is not None
     rmtf = d["rmtf"] if not_measurable(d["rmtf"]) is None else None
+    wave = wave_html(d.get("ray_vs_wave"), prov["fresnel"])
     return f"""<!doctype html><html><head><meta charset="utf-8">
 <title>opticalstamp report: {html.escape(design.name)}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}}
@@ -47,7 +49,7 @@ Numbers: <a href="report.json">report.json</a>.</p>
 {ghosts_html(d["ghosts"])}{concepts_html(d["concepts"])}
 {spots_html(d["spots"], pitch_um)}{psf_html(d["psf"])}{rmtf_html(d, design)}{
         efficiency_html(d["efficiency"], d.get("signal"), paper)
-    }{diffraction_html(d["diffraction"], paper)}{
+    }{diffraction_html(d["diffraction"], paper)}{wave}{
         study_html(d["parameter_study"], d.get("quick", False))
     }
 
@@ -149,12 +151,14 @@ def summary_html(s: dict | None) -> str:
         f"{html.escape(near)} from the pixel's axis: the design is ghost-free within that "
         "radius; own-path light is the signal.</p>"
     )
+    optics = f"<p>Ray vs wave optics: {html.escape(s['optics'])}</p>" if s.get("optics") else ""
     return (
         f"<div style='border:2px solid #444;padding:.5em 1em;margin:1em 0'>"
         f"<h2>Verdict</h2><p>{top}</p>"
         + table(body, head)
         + (f"<p>{html.escape(s['yield_note'])}.</p>" if s.get("yield_note") else "")
         + ghosts
+        + optics
         + "</div>"
     )
 

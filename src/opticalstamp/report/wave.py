@@ -1,0 +1,74 @@
+"""The report's "Ray vs wave optics" section (issue 23): the layers' Fresnel numbers, the
+light, spot and RMTF on the depth-of-field chart of the own path and near crosstalk by
+the tracer and by the wave engine in the same band
+(:func:`~opticalstamp.analysis.wavecompare.compare_wave_ray`), and the verdict on which
+optics holds for the design (:func:`~opticalstamp.analysis.raywave.judge`: the measured
+differences against stated tolerances)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..design import Design
+from .work import Work
+
+#: why the section is not measurable for a design with circular holes
+NEEDS_RECTANGLES = "the separable wave engine needs rectangular holes"
+
+
+@dataclass(frozen=True)
+class WaveSection:
+    """The ray-vs-wave section's results.
+
+    Attributes
+    ----------
+    comparison : the :class:`~opticalstamp.analysis.wavecompare.WaveRayComparison`
+        (its ``profiles``, row A's x LSFs by both engines, feed the figure)
+    verdict : :func:`~opticalstamp.analysis.raywave.judge`'s verdict
+    """
+
+    comparison: object
+    verdict: dict
+
+    def to_dict(self) -> dict:
+        """report.json's "ray_vs_wave": the comparison's numbers and the verdict."""
+        return self.comparison.to_dict() | {"verdict": self.verdict}
+
+
+def wave_heights(work: Work) -> tuple[float, ...]:
+    """The section's heights (mm): the report's RMTF grid every ``work.wave_z_step_mm``
+    and its top, at most ``work.wave_max_heights`` of them."""
+    from ..analysis.raywave import sub_grid
+    from ..analysis.rmtf import DEFAULT_Z_MM
+
+    grid = DEFAULT_Z_MM if work.lsf_z_mm is None else work.lsf_z_mm
+    return sub_grid(grid, work.wave_z_step_mm, work.wave_max_heights)
+
+
+def wave_section(
+    design: Design,
+    work: Work,
+    *,
+    seed: int,
+    dof_dpi: float,
+    sampling=None,
+) -> WaveSection:
+    """Ray against wave optics for ``design`` at the heights of :func:`wave_heights`, on
+    the ``dof_dpi`` chart, ``work.wave_rays`` rays per pixel row; ``sampling``: the wave
+    engine's (:func:`~opticalstamp.analysis.wavebase.wave_sampling`; default from the
+    design). ValueError (not measurable) for circular holes."""
+    from ..analysis.raywave import judge
+    from ..analysis.wavebase import rectangular
+    from ..analysis.wavecompare import compare_wave_ray
+
+    if not rectangular(design):
+        raise ValueError(NEEDS_RECTANGLES)
+    c = compare_wave_ray(
+        design,
+        wave_heights(work),
+        sampling=sampling,
+        n_rays=work.wave_rays,
+        seed=seed,
+        dof_dpi=dof_dpi,
+    )
+    return WaveSection(c, judge(c))
