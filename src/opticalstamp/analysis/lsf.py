@@ -169,12 +169,15 @@ def traced_folded_lsf_pair(
     progress: bool = False,
     sampling: Sampling | None = None,
     tracer: PixelTracer | None = None,
+    outside_band: float | None = None,
 ) -> tuple[FoldedLSF, FoldedLSF]:
     """All light and the own path alone, folded from one trace per row.
 
-    The parameters are those of :func:`traced_folded_lsf`. Each ray is folded twice:
-    with its weight, and with its weight where it followed the own path (the tracer's
-    own-path mask, :attr:`~opticalstamp.raytrace.pixel.PixelBatch.own`) and 0 elsewhere.
+    The parameters are those of :func:`traced_folded_lsf`; ``outside_band`` applies to
+    the all-light fold only (the wave engine gives the rest, the own path stays whole).
+    Each ray is folded twice: with its weight, and with its weight where it followed
+    the own path (the tracer's own-path mask,
+    :attr:`~opticalstamp.raytrace.pixel.PixelBatch.own`) and 0 elsewhere.
 
     Returns
     -------
@@ -185,7 +188,7 @@ def traced_folded_lsf_pair(
     """
     s = _lsf_sampling(sampling, n_rays, seed, fresnel, chunk, n_batches)
     both, own = _traced_folds(
-        design, (True, False), z_mm, periods_um, s, n_batches, progress, tracer
+        design, (True, False), z_mm, periods_um, s, n_batches, progress, tracer, outside_band
     )
     return both, own
 
@@ -231,7 +234,8 @@ def _traced_folds(
     outside_band: float | None = None,
 ) -> list[FoldedLSF]:
     """One trace per row, folded once per entry of ``kinds`` (True: ghost light too);
-    ``outside_band`` as :func:`traced_folded_lsf` (tallied on the CPU)."""
+    ``outside_band`` as :func:`traced_folded_lsf` for the all-light kinds (tallied on
+    the CPU); an own-path fold stays whole (the own path lies inside the band)."""
     n_rays = sampling.n_rays
     tr = tracer_for(design, sampling, tracer)
     zs = np.asarray(z_mm, dtype=np.float64)
@@ -261,7 +265,7 @@ def _traced_folds(
                 keep = (np.abs(b.sx) >= outside_band) | (np.abs(b.sy) >= outside_band)
             for ghosts, out, sl in zip(kinds, outs, slopes, strict=True):
                 w = pb.w if ghosts else pb.w * pb.own
-                w = w if keep is None else w * keep
+                w = w if keep is None or not ghosts else w * keep
                 _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, tr.n_obj, per, nb, out)
                 sl += _slopes(b, w, tr.n_obj) / n_rays
         for out, res in zip(outs, on_gpu or (), strict=False):  # nothing on the CPU

@@ -178,6 +178,47 @@ def folded_lsf(
     return join(wave, far, optics.band, _n_obj(design))
 
 
+def folded_lsf_pair(
+    design: Design,
+    *,
+    z_mm,
+    periods_um,
+    optics: Optics = RAY,
+    n_rays: int = RAYS_LSF,
+    seed: int = 0,
+    fresnel: bool = False,
+    progress: bool = False,
+    tracer: PixelTracer | None = None,
+) -> tuple[FoldedLSF, FoldedLSF]:
+    """All light by ``optics`` and the own path alone (traced, geometric), from one trace
+    per row (:func:`~opticalstamp.analysis.lsf.traced_folded_lsf_pair`): with wave
+    optics the all-light LSFs are the wave engine's in band joined with the traced light
+    beyond it (:func:`join`), as :func:`folded_lsf` gives them."""
+    from .lsf import traced_folded_lsf_pair
+
+    if optics.engine == "wave" and fresnel:
+        raise InputError(
+            "fresnel: the wave engine has no Fresnel losses yet; use --optics ray with --fresnel"
+        )
+    both, own = traced_folded_lsf_pair(
+        design,
+        z_mm=z_mm,
+        periods_um=periods_um,
+        n_rays=n_rays,
+        seed=seed,
+        fresnel=fresnel,
+        progress=progress,
+        tracer=tracer,
+        outside_band=optics.band,
+    )
+    if optics.engine == "ray":
+        return both, own
+    from .wavecompare import wave_folded_lsf
+
+    wave = wave_folded_lsf(design, z_mm, periods_um, sampling=optics.sampling)
+    return join(wave, both, optics.band, _n_obj(design)), own
+
+
 def _n_obj(design: Design) -> float:
     return float(design.index(design.object_medium))
 

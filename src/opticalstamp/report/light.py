@@ -3,16 +3,19 @@ study, and the signal and noise of a used pixel with the design's electronics.""
 
 from __future__ import annotations
 
+from ..analysis.responsivity import RAY, Optics
 from ..design import Design
 from .section import measured
 from .work import Work
 
 
-def efficiency_section(design: Design, g, work: Work, *, seed: int, fresnel: bool):
+def efficiency_section(
+    design: Design, g, work: Work, *, seed: int, fresnel: bool, optics: Optics = RAY
+):
     """Light efficiency of the design (own path and all light) against the reference
     lens, and with the larger sensitive areas that fit (:func:`custom_area_scales`).
     ``g``: the report's ghost analysis, reused (traced again where it is not
-    measurable)."""
+    measurable). ``optics``: the engine of the headline light (own path: geometric)."""
     from ..analysis.efficiency import efficiency
 
     return efficiency(
@@ -21,6 +24,7 @@ def efficiency_section(design: Design, g, work: Work, *, seed: int, fresnel: boo
         fresnel=fresnel,
         ghosts=measured(g),
         area_scales=custom_area_scales(design, work.area_scales),
+        optics=optics,
     )
 
 

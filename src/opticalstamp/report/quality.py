@@ -4,8 +4,9 @@ closed form, and the depth-of-field chart as the merged line sees it."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
+from ..analysis.responsivity import RAY, Optics
 from ..design import Design
 from ..design.resolution import chart_dpis
 from ..raytrace.pixel import PixelTracer
@@ -45,12 +46,14 @@ def rmtf_section(
     progress: bool,
     tracer: PixelTracer,
     dof_dpi: float,
+    optics: Optics = RAY,
 ) -> RmtfSection:
-    """RMTF and depth of field (at ``dof_dpi``) of all light and of the own path, the
-    paraxial RMTF and the chart profiles (Fig. 12 analogue)."""
+    """RMTF and depth of field (at ``dof_dpi``) of all light (by ``optics``: the ray or
+    the wave engine, :func:`~opticalstamp.analysis.responsivity.folded_lsf_pair`) and of
+    the own path (traced), the paraxial RMTF and the chart profiles (Fig. 12 analogue)."""
     import numpy as np
 
-    from ..analysis.lsf import traced_folded_lsf_pair
+    from ..analysis.responsivity import folded_lsf_pair
     from ..analysis.rmtf import (
         DEFAULT_Z_MM,
         chart_waveform,
@@ -66,10 +69,11 @@ def rmtf_section(
     zs = np.asarray(DEFAULT_Z_MM if work.lsf_z_mm is None else work.lsf_z_mm)
 
     def pair(z, show: bool):  # all light and the own path alone from one trace per row
-        return traced_folded_lsf_pair(
+        return folded_lsf_pair(
             design,
             z_mm=z,
             periods_um=periods,
+            optics=optics,
             n_rays=work.lsf_rays,
             seed=seed,
             fresnel=fresnel,
@@ -82,6 +86,7 @@ def rmtf_section(
     own = rmtf_from_lsf(lsf_own, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
     # the crossings again on a finer Z step where they need it (the same rays)
     res, own = refine_results([res, own], lambda z: pair(z, False), design)
+    res = replace(res, meta={**res.meta, "optics": optics.to_dict()})
     rect = all(m.shape != "circle" for m in design.masks)
     par = rmtf(design, dpi=dpis, z_mm=zs, method="paraxial", dof_dpi=dof_dpi) if rect else own
     # Fig. 12 analogue: the merged line's waveform for the depth-of-field chart (200 dpi for
