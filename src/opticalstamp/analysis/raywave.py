@@ -21,6 +21,8 @@ import numpy as np
 from ..defaults import DOF_THRESHOLD
 from .dof import depth_of_field
 
+#: why no wave figures for a design with circular holes
+NEEDS_RECTANGLES = "the separable wave engine needs rectangular holes"
 #: Ray optics holds where the wave light is within this fraction of the ray light
 LIGHT_TOLERANCE = 0.05
 #: ... and the wave RMTF within this (absolute) of the ray RMTF at every height compared

@@ -524,7 +524,7 @@ def compare(
     one chart (the first design's, 2/3 of its resolution: 200 dpi for 300), ghost
     fraction, and contrast vs height on one axis (paper §4: the stamp has ~1/100 of a
     rod-lens array's light; a rod-lens scanner is ≥ 15 mm thick)."""
-    from ..report.compare import write_comparison
+    from ..report.compare import wave_cells, write_comparison
 
     if len(designs) < 2:
         fail("compare: give at least two designs")
@@ -541,6 +541,17 @@ def compare(
             f"{r['light_vs_first']:>9.3g} {r['working_f_number']:>6.1f} "
             f"{r['thickness_mm']:>8.2f} {r['dof_mm'][0]:>10.2f} .. {r['dof_mm'][1]:<9.2f} "
             f"{r['ghost_fraction']:>6.3f}"
+        )
+    lines.append(
+        f"ray vs wave optics (own path and near crosstalk, {rows[0]['dof_dpi']:g}-dpi chart):"
+    )
+    for r in rows:
+        fres, ratio, dof, holds = wave_cells(r)
+        lines.append(
+            f"  {r['name']:<22} Fresnel min {fres:>5}  light wave/ray {ratio:>6}  "
+            f"DOF wave/ray {dof} mm  {holds}"
+            if dof != "-"
+            else f"  {r['name']:<22} Fresnel min {fres:>5}  {ratio}"
         )
     lines.append(f"wrote {out / 'index.html'} and {out / 'compare.json'}")
     emit({"designs": rows}, as_json, lines)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
+from ..analysis.raywave import LIGHT_TOLERANCE, RMTF_TOLERANCE
 from ..analysis.rodlens import rod_psf
 from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
 from ..studies.compare import TEXT_HEIGHTS_MM, compare, text_scans
@@ -32,6 +33,7 @@ def rows_table(rows: list[dict]) -> str:
                 "{:.2f} .. {:.2f}".format(*r["dof_mm"]),
                 r["dof_span_mm"],
                 r["ghost_fraction"],
+                *wave_cells(r),
             ]
         )
     head = [
@@ -44,14 +46,42 @@ def rows_table(rows: list[dict]) -> str:
         f"{rows[0]['dof_dpi']:g}-dpi DOF (mm from nominal)",
         "DOF span (mm)",
         "ghost fraction",
+        "Fresnel number, smallest",
+        "light wave/ray",
+        "DOF wave / ray, own + near (mm)",
+        "ray vs wave optics",
     ]
     return table(body, head)
+
+
+def wave_cells(r: dict) -> list:
+    """A row's ray-vs-wave cells: the smallest Fresnel number, the wave/ray light ratio,
+    the depth of field by both engines and which optics holds (or why there is none)."""
+    w = r.get("wave") or {}
+    fres = "n/a" if r.get("fresnel_min") is None else f"{r['fresnel_min']:.2f}"
+    if "holds" not in w:
+        why = w.get("note") or f"not measurable: {w.get('not_measurable', 'not computed')}"
+        return [fres, why, "-", "-"]
+    ratio = w["light_wave_over_ray"]
+    open_w, open_r = ("≥ " if w["dof_open_ended"][k] else "" for k in ("wave", "ray"))
+    return [
+        fres,
+        "-" if ratio is None else f"{ratio:.3f}",
+        f"{open_w}{w['dof_wave_mm']:.2f} / {open_r}{w['dof_ray_mm']:.2f}",
+        "ray optics holds" if w["holds"] == "ray" else "diffraction dominates",
+    ]
 
 
 def page(rows: list[dict], figures: dict[str, str]) -> str:
     notes = "".join(
         f"<li><b>{html.escape(r['name'])}</b>: {html.escape(r['ghost_note'])}; "
-        f"{html.escape(r['dof_detail']['note'])}</li>"
+        f"{html.escape(r['dof_detail']['note'])}"
+        + (
+            f". Ray vs wave optics: {html.escape(r['wave']['verdict'])}"
+            if "verdict" in (r.get("wave") or {})
+            else ""
+        )
+        + "</li>"
         for r in rows
     )
     imgs = "".join(
@@ -65,7 +95,13 @@ def page(rows: list[dict], figures: dict[str, str]) -> str:
         "object over the paper's F/10 1:1 lens for the same pixel (a stamp's own-path light; "
         "a rod-lens array's averaged along the array). Heights from the document reference "
         "(a stamp's reference plane, a rod-lens array's cover-glass top or focus), positive "
-        "away from the scanner. Thickness: sensor to document reference.</p>"
+        "away from the scanner. Thickness: sensor to document reference. Ray vs wave "
+        "optics: the smallest Fresnel number a²/(λd) of a stamp's masks over the gaps below "
+        "them; light and depth of field of the own path and near crosstalk by the wave "
+        "engine and by the tracer's rays in its band (the far ghost light left out on both "
+        "sides), at a few heights on the same chart; ray optics holds where the two agree "
+        f"within {LIGHT_TOLERANCE * 100:g} % in light and {RMTF_TOLERANCE:g} in RMTF at every "
+        "height.</p>"
         f"<ul>{notes}</ul>{imgs}</body></html>"
     )
 

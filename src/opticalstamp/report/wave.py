@@ -9,11 +9,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..analysis.raywave import NEEDS_RECTANGLES
 from ..design import Design
 from .work import Work
-
-#: why the section is not measurable for a design with circular holes
-NEEDS_RECTANGLES = "the separable wave engine needs rectangular holes"
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,13 @@ Every design is evaluated with the definitions shared by both kinds:
   (``dof_detail``: whether an end is the grid's, and a note).
 * ``ghost_fraction``: the stamp's traced ghost light over all light; 0 for a rod-lens
   array, whose model has no stray path (skin and resin absorb: ``ghost_note`` says so).
+* ``fresnel_min``: the smallest Fresnel number a^2/(lambda d) of the stamp's masks over
+  the gaps below them (:func:`~opticalstamp.analysis.wavebase.fresnel_numbers`); None
+  for a rod-lens array. ``wave``: ray against wave optics on the same chart at
+  :data:`WAVE_HEIGHTS_MM` (:func:`wave_figures`: the wave/ray light ratio, the RMTF and
+  depth of field of the own path and near crosstalk by both engines, which optics holds);
+  for circular holes ``{"not_measurable": reason}``, for a rod-lens array ``{"note":
+  "n/a (not an aperture stack)"}``.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ import math
 import numpy as np
 
 from ..analysis.efficiency import efficiency
+from ..analysis.raywave import NEEDS_RECTANGLES, judge
 from ..analysis.rmtf import rmtf
 from ..analysis.rodlens import RAYS_CONTRAST, rod_contrast, rod_efficiency
 from ..defaults import Z_GRID_MM
@@ -50,6 +58,13 @@ WHITE_FILL = 0.8
 TEXT_DPI = 600.0
 #: Heights (mm from the nominal object plane) of a rod-lens array's contrast curve.
 ROD_HEIGHTS_MM = tuple(np.round(np.arange(-1.5, 1.5001, 0.125), 6))
+#: Heights (mm from the reference plane) of a stamp's ray-vs-wave comparison: a few, the
+#: wave engine's cost grows with each (finer where a 600-dpi stamp's RMTF falls).
+WAVE_HEIGHTS_MM = (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0)
+#: Rays per pixel row of the ray side of that comparison.
+WAVE_RAYS = 1 << 19
+#: A rod-lens array's ray-vs-wave entry: it has no aperture stack to diffract.
+NOT_A_STACK = "n/a (not an aperture stack)"
 
 
 def _kind(design: AnyDesign) -> str:
@@ -68,7 +83,47 @@ def evaluate_stamp(
         fresnel=fresnel,
         dof_dpi=dof_dpi,
     )
-    return stamp_row(design, eff, r)
+    return stamp_row(design, eff, r) | wave_figures(design, seed=seed, dof_dpi=r.dof_dpi)
+
+
+def wave_figures(design: Design, *, seed: int = 0, dof_dpi: float | None = None) -> dict:
+    """A stamp's ``fresnel_min`` and ``wave`` (see the module's docstring): the wave
+    engine against the tracer in its band at :data:`WAVE_HEIGHTS_MM`, ``WAVE_RAYS`` rays
+    per pixel row, on the ``dof_dpi`` chart (default the design's)."""
+    from ..analysis.wavebase import fresnel_numbers, rectangular
+    from ..analysis.wavecompare import compare_wave_ray
+
+    fres = fresnel_numbers(design)
+    out: dict = {"fresnel_min": min(f["fresnel_number"] for f in fres) if fres else None}
+    if not rectangular(design):
+        return out | {"wave": {"not_measurable": NEEDS_RECTANGLES}}
+    c = compare_wave_ray(design, WAVE_HEIGHTS_MM, n_rays=WAVE_RAYS, seed=seed, dof_dpi=dof_dpi)
+    v = judge(c)
+    light = v["light_difference"]
+    return out | {
+        "wave": {
+            "holds": v["holds"],
+            "light_wave_over_ray": None if light is None else 1 + light,
+            "light_wave_um2sr": c.wave["light_um2sr"],
+            "light_ray_um2sr": c.ray["light_um2sr"],
+            "heights_mm": list(c.z_mm),
+            "dof_dpi": c.dof_dpi,
+            "rmtf_wave": c.wave["rmtf"],
+            "rmtf_ray": c.ray["rmtf"],
+            "dof_wave_mm": v["dof_mm"]["wave"],
+            "dof_ray_mm": v["dof_mm"]["ray"],
+            "dof_open_ended": v["dof_open_ended"],
+            "rmtf_difference_max": v["rmtf_difference_max"],
+            "tolerances": v["tolerances"],
+            "verdict": v["text"],
+            "wavelength_um": c.sampling["wavelength_um"],
+            "band": c.sampling["band"],
+            "n_rays": WAVE_RAYS,
+            "note": "own path and near crosstalk in the wave band, by both engines (the far "
+            "ghost light, in dof_mm, is left out on both sides); depth of field "
+            "interpolated between these heights",
+        }
+    }
 
 
 def stamp_row(design: Design, eff, r) -> dict:
@@ -164,6 +219,8 @@ def evaluate_rodlens(
             "relative": (np.asarray(eff.etendue_by_position_um2sr) / eff.etendue_um2sr).tolist(),
         },
         "estimator": "trace",
+        "fresnel_min": None,
+        "wave": {"note": NOT_A_STACK},
     }
 
 
