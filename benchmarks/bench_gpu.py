@@ -46,7 +46,8 @@ from opticalstamp.raytrace.pixel import pixel_source
 from opticalstamp.raytrace.stack import reverse_path
 d = load_design("paper2016")
 for importance in (False, True):
-    list(launch(reverse_path(d), pixel_source(d, 0, 0), 1 << 16, 1, importance=importance))
+    src = pixel_source(d, 0, 0)
+    list(launch(reverse_path(d), src, 1 << 16, 1, importance=importance, device=DEVICE))
 """
 
 
@@ -56,10 +57,11 @@ def startup(device: str) -> dict:
     kernels loaded from it): what compile-once saves."""
     out = {}
     with tempfile.TemporaryDirectory() as cache:
-        env = os.environ | {"NUMBA_CACHE_DIR": cache, "OPTICALSTAMP_DEVICE": device}
+        env = os.environ | {"NUMBA_CACHE_DIR": cache}
+        code = f"DEVICE = {device!r}\n{STARTUP}"
         for name in ("cold_cache_s", "warm_cache_s"):
             t = time.perf_counter()
-            subprocess.run([sys.executable, "-c", STARTUP], check=True, env=env)
+            subprocess.run([sys.executable, "-c", code], check=True, env=env)
             out[name] = round(time.perf_counter() - t, 2)
     return out
 
@@ -72,12 +74,11 @@ def main() -> None:
     ap.add_argument("--search-designs", type=int, default=480, help="designs of the exact search")
     ap.add_argument("--no-report", action="store_true", help="skip the report's timing")
     args = ap.parse_args()
-    os.environ["OPTICALSTAMP_DEVICE"] = args.device
     from opticalstamp.analysis.ghosts import analyse_ghosts
     from opticalstamp.design import load_design
     from opticalstamp.device import resolve_device
     from opticalstamp.raytrace.launch import launch
-    from opticalstamp.raytrace.pixel import pixel_source
+    from opticalstamp.raytrace.pixel import PixelTracer, pixel_source
     from opticalstamp.raytrace.stack import reverse_path
     from opticalstamp.studies.search import search
 
@@ -121,14 +122,15 @@ def main() -> None:
             out[f"plain_kernel_queue_{queue}_rays_per_s"] = rate
             print(f"  plain kernel, queue {queue}: {rate:.3g} launched rays/s")
     t = time.perf_counter()
-    g = analyse_ghosts(d, rse_own=1e-4, rse_ghost=1e-3, max_rays=1 << 31)
+    tracer = PixelTracer(d, device=device)
+    g = analyse_ghosts(d, rse_own=1e-4, rse_ghost=1e-3, max_rays=1 << 31, tracer=tracer)
     dt = time.perf_counter() - t
     out["ghosts_precise"] = {"s": dt, "rays": g.n_rays, "ghost_fraction": g.ghost_fraction}
     print(f"ghost analysis to 0.01 % / 0.1 %: {dt:.2f} s ({g.n_rays:,} rays)")
     pop = 32
     gens = max(1, args.search_designs // pop)
     t = time.perf_counter()
-    r = search(d, population=pop, generations=gens, estimator="trace")
+    r = search(d, population=pop, generations=gens, estimator="trace", device=device)
     dt = time.perf_counter() - t
     out["exact_search"] = {"designs": len(r.records), "s": dt, "front": len(r.pareto)}
     print(f"search --estimator trace, {len(r.records)} designs: {dt:.1f} s")

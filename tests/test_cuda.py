@@ -100,6 +100,15 @@ try:
     raise SystemExit("18 masks not refused")
 except DeviceUnavailable as err:
     assert "--device cpu" in str(err), err
+# the device of a run: named, or scoped, in the provenance
+from opticalstamp.device import using_device
+from opticalstamp.io.files import provenance
+
+assert provenance(d, 0, device="cuda")["device"] == "cuda"
+with using_device("cuda"):
+    assert provenance(d, 0)["device"] == "cuda"
+    assert provenance(load_design("sla-1row-12deg"), 0)["device"] == "cpu"
+assert provenance(d, 0)["device"] == "cpu"
 print("same")
 """
 
@@ -120,11 +129,10 @@ N = int(os.environ.get("RAYS_LOG2", "12"))  # 2^(N+1) rays (the simulator is slo
 s = Sampling(n_rays=1 << (N + 1), seed=5, chunk=1 << N)  # two chunks (one on a GPU)
 res = {}
 for dev in ("cpu", "cuda"):
-    tr = PixelTracer(d, s, replay=True)  # each chunk traced once, tallied by all three
-    os.environ["OPTICALSTAMP_DEVICE"] = "cpu"  # the pilots (2^18 rays) on the CPU
+    tr = PixelTracer(d, s, replay=True, device="cpu")  # each chunk traced once
     for px in [(0, 0), (1, 0)]:
-        tr.hole_weights(px)
-    os.environ["OPTICALSTAMP_DEVICE"] = dev
+        tr.hole_weights(px)  # the pilots (2^18 rays) on the CPU
+    tr = tr.with_device(dev)  # the same pilots; the rays, tallied by all three, on dev
     g = analyse_ghosts(d, z_mm=(0.0, 2.0), sampling=s, tracer=tr)
     f = traced_folded_lsf_pair(
         d, z_mm=[0.5, 3.0], periods_um=[169.3, 254.0], sampling=s, tracer=tr, n_batches=4
@@ -222,10 +230,9 @@ for mod in (rc, ct):
     for name in [n for n in dir(mod) if n.endswith("_kernel")]:
         setattr(mod, name, Recorder(name, getattr(mod, name)))
 d = load_design("paper2016")
-tr = PixelTracer(d, Sampling(n_rays=1 << 12, seed=1, chunk=1 << 12), replay=True)
-os.environ["OPTICALSTAMP_DEVICE"] = "cpu"
+tr = PixelTracer(d, Sampling(n_rays=1 << 12, seed=1, chunk=1 << 12), replay=True, device="cpu")
 tr.hole_weights((0, 0))  # the pilot (2^18 rays) on the CPU
-os.environ["OPTICALSTAMP_DEVICE"] = "cuda"
+tr = tr.with_device("cuda")  # the same pilot, the rays on the (simulated) device
 analyse_ghosts(d, z_mm=(0.0,), sampling=tr.sampling, tracer=tr)
 traced_map_sets(d, z_sets=[[1.0]], sampling=tr.sampling, tracer=tr)
 path, src = tr.path, pixel_source(d, 0, 0)
@@ -358,16 +365,20 @@ def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path):
     assert got["importance_kernel"][1] == 0, got
 
 
-def test_provenance_says_where_the_rays_were_traced(monkeypatch):
-    """With CUDA chosen, a stamp's results say cuda; a rod-lens array's say cpu (its GRIN
-    tracer has no GPU kernel), e.g. side by side in a comparison."""
+def test_provenance_says_where_the_rays_were_traced():
+    """A stamp's results say the device they were traced on (the CPU outside a run that
+    chose one; cuda under the simulator: SIMULATED); a rod-lens array's say cpu whatever
+    the device (its GRIN tracer has no GPU kernel), e.g. side by side in a comparison."""
     from opticalstamp.design import load_design
+    from opticalstamp.device import using_device
     from opticalstamp.io.files import provenance
 
-    monkeypatch.setenv("NUMBA_ENABLE_CUDASIM", "1")  # cuda can run: numba's simulator
-    monkeypatch.setenv("OPTICALSTAMP_DEVICE", "cuda")
-    assert provenance(load_design("paper2016"), 0)["device"] == "cuda"
-    assert provenance(load_design("sla-1row-12deg"), 0)["device"] == "cpu"
+    stamp, rod = load_design("paper2016"), load_design("sla-1row-12deg")
+    assert provenance(stamp, 0)["device"] == "cpu"
+    assert provenance(rod, 0, device="cuda")["device"] == "cpu"
+    with using_device("cpu"):
+        assert provenance(stamp, 0)["device"] == "cpu"
+    assert provenance(stamp, None, traced=False)["device"] is None
 
 
 def test_device_choice():
@@ -456,14 +467,10 @@ def test_on_the_gpu_the_same_ghost_estimates():  # pragma: no cover - GPU machin
     """On a real GPU (float64): the ghost analysis gives the CPU's etendues to rounding."""
     from opticalstamp.analysis.ghosts import analyse_ghosts
     from opticalstamp.design import load_design
+    from opticalstamp.raytrace.pixel import PixelTracer
 
     d = load_design("paper2016")
-    os.environ["OPTICALSTAMP_DEVICE"] = "cpu"
-    try:
-        cpu = analyse_ghosts(d, n_rays=1 << 22, seed=3)
-        os.environ["OPTICALSTAMP_DEVICE"] = "cuda"
-        gpu = analyse_ghosts(d, n_rays=1 << 22, seed=3)
-    finally:
-        os.environ.pop("OPTICALSTAMP_DEVICE", None)
+    cpu = analyse_ghosts(d, n_rays=1 << 22, seed=3, tracer=PixelTracer(d, device="cpu"))
+    gpu = analyse_ghosts(d, n_rays=1 << 22, seed=3, tracer=PixelTracer(d, device="cuda"))
     assert gpu.etendue_own_um2sr == pytest.approx(cpu.etendue_own_um2sr, rel=1e-12)
     assert gpu.etendue_ghost_um2sr == pytest.approx(cpu.etendue_ghost_um2sr, rel=1e-12)

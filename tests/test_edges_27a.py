@@ -24,7 +24,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from edges import assert_clean_refusal, run
-from opticalstamp.device import ENV, device_name
+from opticalstamp.device import device_name
 from opticalstamp.io.files import MAX_PROFILE_BYTES, read_illumination_profile, write_png
 from opticalstamp.io.journal import JournalWarning, append_record, journal_lock, read_journal
 from opticalstamp.studies.evaluate import RMTF_Z_MM, check_figures
@@ -325,8 +325,11 @@ def test_an_empty_device_is_refused(monkeypatch):
     assert_clean_refusal(res, "--device")
     with pytest.raises(InputError, match="device"):
         device_name("")
-    monkeypatch.setenv(ENV, "")  # an empty variable is an unset one, as in a shell
     assert device_name() == "auto"
+    monkeypatch.setenv("OPTICALSTAMP_DEVICE", "")  # an empty variable is an unset one, as in
+    assert run(["presets"]).exit_code == 0  # a shell
+    monkeypatch.setenv("OPTICALSTAMP_DEVICE", "tpu")  # the command line's default: named
+    assert_clean_refusal(run(["presets"]), "OPTICALSTAMP_DEVICE")
 
 
 def test_a_spec_at_a_height_the_study_does_not_compute_is_refused(tmp_path):

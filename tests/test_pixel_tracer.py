@@ -41,9 +41,9 @@ def pilots(monkeypatch):
     """Counts the pilot runs (calls of allocate_holes through the tracer)."""
     calls = []
 
-    def counting(design, path, src, row, k, *args):
+    def counting(design, path, src, row, k, *args, **kw):
         calls.append((row, k, *args))
-        return allocate_holes(design, path, src, row, k, *args)
+        return allocate_holes(design, path, src, row, k, *args, **kw)
 
     monkeypatch.setattr(pixel_mod, "allocate_holes", counting)
     return calls

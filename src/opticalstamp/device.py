@@ -1,23 +1,37 @@
 """Which device traces the rays: ``cpu`` (numba, always there) or ``cuda`` (numba.cuda,
 with the optional ``opticalstamp[cuda]`` and a GPU).
 
-The choice is ``--device`` (the app's option) or the environment's ``OPTICALSTAMP_DEVICE``,
-``auto`` by default: CUDA where the optional numba-cuda package is installed and a GPU
-answers, else the CPU. On the CPU path nothing of numba.cuda is imported: ``auto`` looks
-for the numba-cuda package without importing it. ``NUMBA_ENABLE_CUDASIM=1`` makes
-``cuda`` run numba's CUDA simulator (slow; the tests' way to check the kernels).
+The device is a value: a name (``auto``, ``cpu`` or ``cuda``) resolved once by
+:func:`resolve_device` to ``cpu`` or ``cuda`` and then carried by what traces rays (the
+:class:`~opticalstamp.raytrace.pixel.PixelTracer`, ``launch(device=)``, a study's task
+payloads, a result's provenance). ``auto``: CUDA where the optional numba-cuda package is
+installed and a GPU answers, else the CPU. On the CPU path nothing of numba.cuda is
+imported: ``auto`` looks for the numba-cuda package without importing it. numba's own
+``NUMBA_ENABLE_CUDASIM=1`` makes ``cuda`` run numba's CUDA simulator (slow; the tests' way
+to check the kernels).
+
+Where a caller names no device, rays are traced on the device of the run in progress:
+:func:`using_device` scopes one (the command line does, for the command it runs, from
+``--device``); outside such a scope, the CPU. Nothing here reads or writes the process
+environment.
 """
 
 from __future__ import annotations
 
 import importlib.util
-import os
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 
 from .validate import InputError
 
 DEVICES = ("auto", "cpu", "cuda")
-ENV = "OPTICALSTAMP_DEVICE"
+
+#: the resolved device of the run in progress (:func:`using_device`); None outside one.
+#: A context variable, not process state: it is local to a thread or task, undone on
+#: leaving the scope, and not inherited by worker processes (their payloads carry it).
+_RUN: ContextVar[str | None] = ContextVar("opticalstamp_device", default=None)
 
 
 class DeviceUnavailable(InputError):
@@ -45,9 +59,17 @@ def _compiler_found() -> bool:
         return True
 
 
+def simulated() -> bool:
+    """Whether numba runs CUDA kernels in its simulator (numba's ``NUMBA_ENABLE_CUDASIM``,
+    as numba read it)."""
+    import numba
+
+    return bool(numba.config.ENABLE_CUDASIM)
+
+
 def _cuda_ready() -> tuple[bool, str]:
     """Whether numba.cuda can run kernels here (a GPU, or the simulator), and why not."""
-    if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":
+    if simulated():
         return True, ""
     if importlib.util.find_spec("numba_cuda") is None:
         return False, (
@@ -68,38 +90,47 @@ def _cuda_ready() -> tuple[bool, str]:
     return True, ""
 
 
-def device_name(name: str | None = None) -> str:
-    """``auto``, ``cpu`` or ``cuda``: ``name`` (None: the environment's
-    ``OPTICALSTAMP_DEVICE``, else ``auto``), checked but not looked for; InputError for
-    another name, the empty one included (naming OPTICALSTAMP_DEVICE where the name came
-    from it; an empty OPTICALSTAMP_DEVICE is unset, as in a shell's ``VAR= cmd``)."""
-    where = "device"
-    if name is None:
-        if os.environ.get(ENV):
-            where = ENV  # named where it came from: the environment
-        name = os.environ.get(ENV) or "auto"
-    name = name.strip().lower()
-    if name not in DEVICES:
-        raise InputError(f"{where}: must be one of {', '.join(DEVICES)} (got {name!r})")
-    return name
+def device_name(name: str = "auto") -> str:
+    """``auto``, ``cpu`` or ``cuda``: ``name`` checked (case and spaces aside) but not
+    looked for; InputError naming ``device`` for another name, the empty one included."""
+    if not isinstance(name, str) or name.strip().lower() not in DEVICES:
+        raise InputError(f"device: must be one of {', '.join(DEVICES)} (got {name!r})")
+    return name.strip().lower()
 
 
-def resolve_device(name: str | None = None) -> str:
+def resolve_device(name: str = "auto") -> str:
     """``cpu`` or ``cuda`` for ``name`` (:func:`device_name`). ``auto`` is ``cuda`` only
     with the numba-cuda package and a real GPU (never the simulator). Raises
-    :class:`DeviceUnavailable` for ``cuda`` where it cannot run, saying why and naming
-    both ways to choose (``--device`` sets OPTICALSTAMP_DEVICE for the whole run)."""
+    :class:`DeviceUnavailable` for ``cuda`` where it cannot run, saying why."""
     name = device_name(name)
     if name == "cpu":
         return "cpu"
     if name == "auto":
-        simulated = os.environ.get("NUMBA_ENABLE_CUDASIM") == "1"
-        if simulated or importlib.util.find_spec("numba_cuda") is None or not _driver_found():
+        if importlib.util.find_spec("numba_cuda") is None or not _driver_found():
+            return "cpu"
+        if simulated():
             return "cpu"
         return "cuda" if _cuda_ready()[0] else "cpu"
     ok, why = _cuda_ready()
     if not ok:
-        raise DeviceUnavailable(
-            f"device cuda (--device or {ENV}) cannot run here: {why}; choose cpu or auto"
-        )
+        raise DeviceUnavailable(f"device cuda cannot run here: {why}; choose cpu or auto")
     return "cuda"
+
+
+def run_device(name: str | None = None) -> str:
+    """``cpu`` or ``cuda``: ``name`` resolved (:func:`resolve_device`); None: the device of
+    the run in progress (:func:`using_device`), the CPU outside one."""
+    if name is not None:
+        return resolve_device(name)
+    return _RUN.get() or "cpu"
+
+
+@contextmanager
+def using_device(name: str) -> Iterator[str]:
+    """Trace the rays of what runs inside on ``name`` (resolved once, here), where a
+    caller names no device; undone on leaving. Yields the resolved device."""
+    token = _RUN.set(resolve_device(name))
+    try:
+        yield _RUN.get()
+    finally:
+        _RUN.reset(token)

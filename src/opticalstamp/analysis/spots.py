@@ -383,6 +383,7 @@ def psf(
     bin_um: float = 2.0,
     chunk: int = 1 << 21,
     progress: bool = False,
+    device: str | None = None,
 ) -> PSF:
     """Forward-trace a Lambertian object point at (x, y, Z) to the sensor (paper Fig. 10).
 
@@ -394,7 +395,9 @@ def psf(
     The landing map (``fine_map``, ``bin_um`` bins) covers ``window_um`` either side of
     the point in x and in y, wherever the sensor's lines are: ghost light lands beyond
     them (about 100 um off the axis for the prototype). The share of the power reaching
-    the sensor plane that lands outside it is ``meta["outside_map"]``.
+    the sensor plane that lands outside it is ``meta["outside_map"]``. ``device``: where
+    the rays are traced (:func:`~opticalstamp.device.run_device`; the same rays either
+    way).
     """
     path = forward_path(design, z_mm * 1000.0)
     src = Source(x_obj_um, y_obj_um)
@@ -411,7 +414,10 @@ def psf(
     fine = np.zeros((ey.size - 1, ex.size - 1))
     parts = np.zeros(4)
     reach = np.zeros(1)
-    for b in launch(path, src, n_rays, seed, fresnel=fresnel, chunk=chunk, progress=progress):
+    rays = launch(
+        path, src, n_rays, seed, fresnel=fresnel, chunk=chunk, progress=progress, device=device
+    )
+    for b in rays:
         w = b.w * acceptance(design, n_s, b.sx, b.sy)
         np.add.at(reach, np.zeros(w.size, np.int64), w)
         row, k = pixel_hit(design, b.x, b.y)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import functools
 import sys
+from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Annotated
 
@@ -37,26 +39,33 @@ def _version(value: bool) -> None:
         raise typer.Exit()
 
 
-def _device(value: str | None) -> str | None:
-    """--device: its name checked now (exit 2 naming it), then handed to every ray launch
-    of this process and of its worker processes through OPTICALSTAMP_DEVICE; whether CUDA
-    can run is checked when a command that traces rays starts (:func:`command`), so that
-    ``--help`` and the commands that trace nothing work anywhere."""
-    if value is None:
-        return None
-    import os
+#: the environment variable that gives ``--device`` its default; click reads it for the
+#: command line (the library never reads the environment: it is handed the device)
+DEVICE_ENV = "OPTICALSTAMP_DEVICE"
 
-    from ..device import ENV, device_name
+
+def _device(ctx: typer.Context, param: typer.CallbackParam, value: str | None) -> str | None:
+    """--device (or OPTICALSTAMP_DEVICE): its name checked now, exit 2 naming where it
+    came from; whether CUDA can run is checked when a command that traces rays starts
+    (:func:`command`), so that ``--help`` and the commands that trace nothing work
+    anywhere."""
+    if value is None or ctx.resilient_parsing:
+        return value
+    from ..device import device_name
 
     try:
-        os.environ[ENV] = device_name(value)
+        return device_name(value)
     except InputError as err:
-        raise typer.BadParameter(str(err).replace("device: ", "")) from None
-    return value
+        msg = str(err).removeprefix("device: ")
+        source = ctx.get_parameter_source(param.name)
+        if source is not None and source.name == "ENVIRONMENT":
+            fail(f"{DEVICE_ENV}: {msg}")
+        raise typer.BadParameter(msg) from None
 
 
 @app.callback()
 def _options(
+    ctx: typer.Context,
     version: Annotated[
         bool,
         typer.Option(
@@ -69,21 +78,30 @@ def _options(
             "--device",
             metavar="[auto|cpu|cuda]",
             help="where rays are traced: auto (a CUDA GPU where opticalstamp[cuda] is "
-            "installed, else the CPU), cpu or cuda; default: OPTICALSTAMP_DEVICE, else auto",
+            f"installed, else the CPU), cpu or cuda; default: {DEVICE_ENV}, else auto",
             callback=_device,
+            envvar=DEVICE_ENV,
+            show_envvar=False,
         ),
     ] = None,
 ) -> None:
     """Design and analyse lensless contact image scanners (optical stamps)."""
-    import os
+    ctx.with_resource(_choosing(device or "auto"))
 
-    from ..device import ENV, device_name
 
-    if device is None and os.environ.get(ENV):  # the environment's choice, checked first
-        try:
-            device_name()
-        except InputError as err:
-            fail(str(err))
+#: the device name this command line chose (--device, else OPTICALSTAMP_DEVICE, else
+#: auto), set for the invocation by :func:`_options` and undone when it ends; resolved by
+#: :func:`command` for the commands that trace rays
+_CHOSEN: ContextVar[str] = ContextVar("opticalstamp_cli_device", default="auto")
+
+
+@contextmanager
+def _choosing(name: str):
+    token = _CHOSEN.set(name)
+    try:
+        yield
+    finally:
+        _CHOSEN.reset(token)
 
 
 def command(*args, traces: bool = True, **kwargs):
@@ -93,19 +111,28 @@ def command(*args, traces: bool = True, **kwargs):
     ``Invalid value for '--option'`` with exit 2); what only the library can check (a
     design file, an image, a height map) raises InputError before any work is done. An
     OSError while writing (disk full) is reported in one line with exit code 1.
-    ``traces``: the command traces rays, so the device chosen must be able to run before
-    it starts (``cuda`` without a GPU: exit 2, before any work).
+    ``traces``: the command traces rays: the device chosen is resolved once, before any
+    work (``cuda`` without a GPU: exit 2), and the command runs with it as the run's
+    device (:func:`~opticalstamp.device.using_device`): every tracer, study payload and
+    provenance of the command takes it from there.
     """
 
     def deco(fn):
         @functools.wraps(fn)
         def run(*a, **kw):
-            try:
-                if traces:
-                    from ..device import resolve_device
+            from contextlib import nullcontext
 
-                    resolve_device()
-                return fn(*a, **kw)
+            from ..device import DeviceUnavailable, resolve_device, using_device
+
+            try:
+                scope = nullcontext()
+                if traces:
+                    try:
+                        scope = using_device(resolve_device(_CHOSEN.get()))
+                    except DeviceUnavailable as err:
+                        fail(f"{err} (chosen by --device, else {DEVICE_ENV})")
+                with scope:
+                    return fn(*a, **kw)
             except InputError as err:
                 fail(str(err))
             except OSError as err:  # the disk failed us mid-run: no traceback, exit 1

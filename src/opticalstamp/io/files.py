@@ -75,23 +75,25 @@ def file_stem(name: str) -> str:
     return stem or "design"
 
 
-def provenance(design, seed: int | None, traced: bool = True) -> dict:
+def provenance(design, seed: int | None, traced: bool = True, device: str | None = None) -> dict:
     """What a result was made from: the design, the seed, the version and the device that
-    traced its rays (None where ``traced`` is False: nothing was traced)."""
+    traced its rays: ``device`` (:func:`~opticalstamp.device.run_device`; None: the device
+    of the run in progress, the CPU outside one), or None where ``traced`` is False
+    (nothing was traced)."""
     from ..design.rodlens import RodLensDesign
-    from ..device import resolve_device
+    from ..device import run_device
 
-    # where the rays were traced (cpu or cuda); a rod-lens array's GRIN tracer has no GPU
-    # kernel: its rays are traced on the CPU whatever the device
-    device = None
+    # a rod-lens array's GRIN tracer has no GPU kernel: its rays are traced on the CPU
+    # whatever the device
+    where = None
     if traced:
-        device = "cpu" if isinstance(design, RodLensDesign) else resolve_device()
+        where = "cpu" if isinstance(design, RodLensDesign) else run_device(device)
     return {
         "design": design.name,
         "design_fingerprint": design.fingerprint(),
         "seed": seed,
         "opticalstamp_version": __version__,
-        "device": device,
+        "device": where,
     }
 
 

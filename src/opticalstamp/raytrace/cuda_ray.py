@@ -12,15 +12,35 @@ device (or numba's CUDA simulator) is used.
 
 from __future__ import annotations
 
+import importlib
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
-if not hasattr(np, "row_stack"):  # numba-cuda <= 0.30 calls np.row_stack, gone in numpy 2.5
-    setattr(np, "row_stack", np.vstack)  # noqa: B010
 
-from numba import config, cuda  # noqa: E402
-from numba.cuda import libdevice  # noqa: E402
+@contextmanager
+def _row_stack_for_numba_cuda() -> Iterator[None]:
+    """numba-cuda <= 0.30 names ``np.row_stack`` (gone in numpy 2.5) once, when its
+    array module is imported: numpy lends it ``np.vstack`` under that name for that import
+    only, and gets it back as it was on leaving (nothing is lent where numpy has it)."""
+    lent = not hasattr(np, "row_stack")
+    if lent:
+        setattr(np, "row_stack", np.vstack)  # noqa: B010 - the one scoped module patch
+    try:
+        yield
+    finally:
+        if lent:
+            delattr(np, "row_stack")
+
+
+with _row_stack_for_numba_cuda():
+    from numba import config, cuda
+    from numba.cuda import libdevice
+
+    # where numba-cuda names np.row_stack; imported here, not at its first compilation
+    importlib.import_module("numba.cuda.np.arrayobj")
 
 TRANSMITTED, ABSORBED, TIR, ESCAPED = 0, 1, 2, 3
 ALIVE = -1  # a ray that goes on (between the stages of the queued kernel)

@@ -19,7 +19,7 @@ import numpy as np
 from tqdm.asyncio import tqdm as console_tqdm
 from tqdm.auto import tqdm
 
-from ..device import resolve_device
+from ..device import run_device
 from .kernel import run_importance, run_plain, seed_key, trace_bundle
 from .sampling import Source, hole_targets
 from .stack import Path
@@ -182,8 +182,8 @@ def launch(
     (:func:`progress_bar`).
     ``hole_weights`` (one per lattice site) steers importance sampling towards the holes
     of the first mask that matter (see :func:`~opticalstamp.sources.hole_targets`).
-    ``device``: cpu, cuda or auto (:func:`~opticalstamp.device.resolve_device`;
-    None: the environment's OPTICALSTAMP_DEVICE, else auto); the same rays either way.
+    ``device``: cpu, cuda or auto (:func:`~opticalstamp.device.run_device`; None: the
+    device of the run in progress, the CPU outside one); the same rays either way.
     On a GPU a chunk holds at least :data:`DEVICE_CHUNK` rays (:func:`chunk_for`).
 
     Yields
@@ -194,7 +194,7 @@ def launch(
     """
     if n_rays < 0:
         raise ValueError("n_rays must be >= 0")
-    where = resolve_device(device)
+    where = run_device(device)
     chunk = chunk_for(chunk, where)
     gpu = None
     if where == "cuda":

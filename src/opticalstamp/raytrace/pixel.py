@@ -27,7 +27,7 @@ import numpy as np
 
 from ..defaults import RSE_GHOST, RSE_OWN
 from ..design import Design
-from ..device import resolve_device
+from ..device import run_device
 from ..validate import InputError, check_number, check_seed
 from .launch import RayBatch, chunk_for, launch
 from .sampling import DEFENSIVE_SHARE, Source, geometric_q_per_area, site_index
@@ -100,6 +100,7 @@ def allocate_holes(
     fresnel: bool,
     rse_own: float = RSE_OWN,
     rse_ghost: float = RSE_GHOST,
+    device: str | None = None,
 ) -> np.ndarray:
     """Weights over the first mask's holes for importance sampling (from a pilot run).
 
@@ -118,6 +119,8 @@ def allocate_holes(
     row, k : the pixel
     seed, fresnel : random seed (the pilot uses stream 1) and Fresnel losses
     rse_own, rse_ghost : relative standard errors the allocation aims at
+    device : where the pilot is traced (:func:`~opticalstamp.device.run_device`; the
+        weights do not depend on it)
 
     Returns
     -------
@@ -130,7 +133,7 @@ def allocate_holes(
     s1 = np.zeros((2, n_sites))
     s2 = np.zeros((2, n_sites))
     n0 = path.slabs[0, 1]
-    for b in launch(path, src, PILOT_RAYS, seed, stream=1, fresnel=fresnel):
+    for b in launch(path, src, PILOT_RAYS, seed, stream=1, fresnel=fresnel, device=device):
         w = b.w * acceptance(design, n0, b.sx, b.sy)
         site = site_index(path, b.hole_row[:, m0], b.hole_k[:, m0])
         g = (~is_own_path(b, row, k)).astype(np.int64)
@@ -285,6 +288,11 @@ class PixelTracer:
         design) trace them once. It holds the rays that leave the stack (about 11 MB per
         2^20 rays launched for the paper's prototype) as long as the tracer lives; where a
         GPU traced them, in the GPU's memory (with their weights and own-path flags).
+    device : where the rays are traced: auto, cpu or cuda, resolved once here
+        (:func:`~opticalstamp.device.run_device`; None: the device of the run in
+        progress, the CPU outside one) and kept as :attr:`device` (``cpu`` or ``cuda``).
+        Every launch of the tracer, pilots included, goes there; the rays and every
+        result are the same on either device.
 
     Notes
     -----
@@ -296,8 +304,14 @@ class PixelTracer:
     """
 
     def __init__(
-        self, design: Design, sampling: Sampling | None = None, *, replay: bool = False
+        self,
+        design: Design,
+        sampling: Sampling | None = None,
+        *,
+        replay: bool = False,
+        device: str | None = None,
     ) -> None:
+        self.device = run_device(device)
         self.design = design
         self.sampling = Sampling() if sampling is None else sampling
         self.path = reverse_path(design)
@@ -311,6 +325,16 @@ class PixelTracer:
         """A tracer of the same design under ``sampling``, sharing this one's pilots."""
         other = copy.copy(self)  # shallow: the path and the memos are shared
         other.sampling = sampling
+        return other
+
+    def with_device(self, device: str) -> PixelTracer:
+        """A tracer of the same design and sampling on ``device``, sharing this one's
+        pilots (they do not depend on the device); batches kept for ``replay`` are kept
+        per device (a GPU deals rays into other chunks)."""
+        other = copy.copy(self)
+        other.device = run_device(device)
+        if other.device != self.device and self._replays is not None:
+            other._replays = {}
         return other
 
     def source(self, pixel: tuple[int, int]) -> Source:
@@ -336,7 +360,16 @@ class PixelTracer:
         if key not in self._pilots:
             src = self.source(pixel)
             w = allocate_holes(
-                self.design, self.path, src, row, k, s.seed, s.fresnel, s.rse_own, s.rse_ghost
+                self.design,
+                self.path,
+                src,
+                row,
+                k,
+                s.seed,
+                s.fresnel,
+                s.rse_own,
+                s.rse_ghost,
+                device=self.device,
             )
             if w is not None:  # None: no light reaches the object side in the pilot
                 w.flags.writeable = False
@@ -378,7 +411,7 @@ class PixelTracer:
         # the chunks launch() deals the rays into; each is kept, and handed out again to a
         # later trace with the same chunk (rays, stream, seed, Fresnel option and pilot)
         self.source(pixel)  # InputError for a pixel that is not used, as _trace
-        chunk = chunk_for(s.chunk, resolve_device())  # as launch() deals them
+        chunk = chunk_for(s.chunk, self.device)  # as launch() deals them
         base = (int(pixel[0]), int(pixel[1]), int(stream), *s.pilot_key)
         spans = [(int(first_id) + d, min(chunk, n - d)) for d in range(0, n, chunk)]
         i = 0
@@ -415,6 +448,7 @@ class PixelTracer:
             chunk=s.chunk,
             progress=progress,
             hole_weights=weights,
+            device=self.device,
         ):
             yield PixelBatch(b, row, k, self.s2_max, src.x, src.y, self.n_obj)
 

@@ -30,8 +30,11 @@ from ..io.journal import append_record, journal_lock, read_journal
 
 
 def task_key(payload: dict) -> str:
-    """Stable key of a payload (sorted JSON, SHA-256, 16 hex digits)."""
-    blob = json.dumps(payload, sort_keys=True, default=str).encode()
+    """Stable key of a payload (sorted JSON, SHA-256, 16 hex digits). A payload's
+    ``device`` (where its rays are traced) is not part of it: a result is the same on
+    either device, so a journal made on one resumes on the other."""
+    named = {k: v for k, v in payload.items() if k != "device"}
+    blob = json.dumps(named, sort_keys=True, default=str).encode()
     return hashlib.sha256(blob).hexdigest()[:16]
 
 

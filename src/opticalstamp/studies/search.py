@@ -38,6 +38,7 @@ from ..design import (
     with_stack,
 )
 from ..design.resolution import dof_chart_dpi, nominal_dpi
+from ..device import run_device, using_device
 from ..io.journal import journal_lock
 from ..raytrace.stack import output_pitch
 from ..units import pitch_of_dpi
@@ -101,10 +102,12 @@ def _on_grid(dist, value: float):
 
 def _evaluate_payload(payload: dict) -> dict:
     """Worker entry: build the candidate from plain data and evaluate it with the
-    payload's estimator (:func:`~opticalstamp.studies.verify.evaluate_with`)."""
+    payload's estimator (:func:`~opticalstamp.studies.verify.evaluate_with`), its rays on
+    the payload's device."""
     base = design_from_dict(payload["base"], "search base")
     d = with_stack(base, holes_um=payload["holes_um"], thicknesses_um=payload["thicknesses_um"])
-    return evaluate_with(d, payload["options"])
+    with using_device(payload.get("device", "cpu")):
+        return evaluate_with(d, payload["options"])
 
 
 @dataclass(frozen=True)
@@ -204,6 +207,7 @@ def search(
     progress: bool = False,
     objective: str = "dof",
     estimator: str = "surrogate",
+    device: str | None = None,
 ) -> SearchResult:
     """NSGA-II search of hole sizes and thicknesses; returns every evaluation and the front.
 
@@ -214,6 +218,9 @@ def search(
     "trace" (every candidate's ghosts, light, RMTF and depth of field from the exact
     tracer, :func:`~opticalstamp.studies.verify.evaluate_exact`; about 0.3 s a design on
     the CPU, on the GPU with ``--device cuda``).
+    ``device``: where the evaluations trace their rays
+    (:func:`~opticalstamp.device.run_device`, resolved once here; None: the device of the
+    run in progress), handed to the workers in each task's payload.
 
     ``design`` gives the sensor, the glass, the number and order of slabs and masks and
     the reference gap (scale it to another resolution with
@@ -259,6 +266,7 @@ def search(
     if depth != "dof_mm":
         options["restored"] = True
     base_json = design.model_dump(mode="json", exclude_none=True)
+    where = run_device(device)
 
     def payload(params: dict) -> dict:
         holes = [float(params[f"hole{j + 1}"]) for j in range(n_h)]
@@ -268,6 +276,7 @@ def search(
             "holes_um": holes,
             "thicknesses_um": ts,
             "options": options | {"seed": seed},
+            "device": where,
         }
 
     sampler = optuna.samplers.NSGAIISampler(population_size=population, seed=seed)
@@ -543,10 +552,12 @@ def merged_front(results: dict[str, SearchResult]) -> list[dict]:
 
 
 def _exact_payload(payload: dict) -> dict:
-    """Worker entry: the exact tracer's figures of a candidate built from plain data."""
+    """Worker entry: the exact tracer's figures of a candidate built from plain data, its
+    rays on the payload's device."""
     base = design_from_dict(payload["base"], "search base")
     d = with_stack(base, holes_um=payload["holes_um"], thicknesses_um=payload["thicknesses_um"])
-    return exact_figures(d, **payload["options"])
+    with using_device(payload.get("device", "cpu")):
+        return exact_figures(d, **payload["options"])
 
 
 def _verified(row: dict, exact: dict | None) -> dict:
@@ -576,6 +587,7 @@ def verify_front(
     dask_address: str | None = None,
     journal: Path | None = None,
     progress: bool = False,
+    device: str | None = None,
 ) -> SearchResult:
     """The search's front and base design re-verified by the exact tracer.
 
@@ -585,7 +597,8 @@ def verify_front(
     and ``disagrees`` names the figures where the two differ by more than
     ``SURROGATE_ACCURACY``. ``exact_dominated_by``: how many other points of the front
     dominate it in the exact figures (the surrogate ranked it on the front; 0 where the
-    exact tracer agrees). Runs on the search's workers and journal, so it resumes.
+    exact tracer agrees). Runs on the search's workers and journal, so it resumes;
+    ``device`` as in :func:`search`.
     """
     if res.design is None:
         raise ValueError("verify_front: the search result carries no design")
@@ -598,6 +611,7 @@ def verify_front(
         "seed": res.seed,
     }
     rows = list(res.pareto) + ([res.reference] if res.reference else [])
+    where = run_device(device)
     tasks = []
     for r in rows:
         p = {
@@ -606,6 +620,7 @@ def verify_front(
             "thicknesses_um": r["thicknesses_um"],
             "options": options,
             "exact": True,
+            "device": where,
         }
         tasks.append((task_key(p), p))
     recs = run_tasks(

@@ -26,6 +26,7 @@ import numpy as np
 from ..defaults import TOLERANCE_SAMPLES, TOLERANCE_SIGMAS
 from ..design import Design, design_from_dict, stack_params, with_stack
 from ..design.resolution import dof_chart_dpi
+from ..device import run_device, using_device
 from ..raytrace.stack import lattice_of
 from ..validate import check_seed
 from .evaluate import check_figures
@@ -81,8 +82,10 @@ def apply_errors(design: Design, errors: dict) -> Design:
 
 
 def _evaluate_payload(payload: dict) -> dict:
+    """Worker entry: one sample's figures, its rays on the payload's device."""
     base = design_from_dict(payload["base"], "tolerance base")
-    return evaluate_with(apply_errors(base, payload["errors"]), payload["options"])
+    with using_device(payload.get("device", "cpu")):
+        return evaluate_with(apply_errors(base, payload["errors"]), payload["options"])
 
 
 def parse_spec(text: str | None, z_mm=None) -> list[tuple[str, str, float]]:
@@ -311,6 +314,7 @@ def tolerance(
     progress: bool = False,
     verify: bool = True,
     estimator: str = "surrogate",
+    device: str | None = None,
 ) -> ToleranceResult:
     """Monte Carlo of assembly errors, sensitivity table and yield (see module doc).
 
@@ -323,6 +327,9 @@ def tolerance(
     ``estimator``: "surrogate" or "trace" (every sample traced exactly,
     :func:`~opticalstamp.studies.verify.evaluate_exact`; the nominal then needs no
     re-verification).
+    ``device``: where the samples trace their rays (:func:`~opticalstamp.device.run_device`,
+    resolved once here; None: the device of the run in progress), handed to the workers in
+    each task's payload.
     """
     check_estimator(estimator)
     check_seed(seed)
@@ -343,8 +350,10 @@ def tolerance(
     if estimator == "trace":
         options["estimator"] = "trace"
 
+    where = run_device(device)
+
     def task(errors: dict) -> tuple[str, dict]:
-        p = {"base": base, "errors": errors, "options": options}
+        p = {"base": base, "errors": errors, "options": options, "device": where}
         return task_key(p), p
 
     nominal_key, nominal_p = task({})
