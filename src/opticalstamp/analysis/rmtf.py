@@ -37,7 +37,7 @@ from ..units import period_of_dpi
 from ..validate import check_memory, parse_grid
 from .dof import depth_of_field, dof_bounds, dof_text, refine_points, spurious_ranges
 from .lsf import FoldedLSF, fast_light
-from .responsivity import Optics, folded_lsf, resolve_optics
+from .responsivity import RAY, Optics, folded_lsf, resolve_optics
 
 __all__ = ["depth_of_field", "dof_bounds", "dof_text", "refine_points", "spurious_ranges"]
 
@@ -474,9 +474,10 @@ def rmtf(
         dof_threshold=dof_threshold,
         dof_dpi=dof_dpi,
         shading=shading,
+        optics=opt,
     )
     (res,) = refine_results([res], lambda z: [lsf_at(z)], design, steps=refine, passes=passes)
-    return replace(res, meta={**res.meta, "optics": opt.to_dict()})
+    return res
 
 
 def rmtf_from_lsf(
@@ -490,10 +491,12 @@ def rmtf_from_lsf(
     dof_threshold: float = DOF_THRESHOLD,
     dof_dpi: float | None = None,
     shading: bool = True,
+    optics: Optics = RAY,
 ) -> RMTFResult:
     """RMTF and depth of field from folded LSFs (periods in the order of ``dpi``) on
     their Z alone (:func:`refine_results` refines the crossings); ``dof_dpi`` default as
-    :func:`rmtf`. ``meta["fast_light"]``: the fraction of the light whose image moves
+    :func:`rmtf`; ``optics``: the engine that gave ``lsf`` (``meta["optics"]``).
+    ``meta["fast_light"]``: the fraction of the light whose image moves
     faster than each slope with Z (:func:`~opticalstamp.analysis.lsf.fast_light`), from
     which :func:`crossing_brackets` sets the Z step that resolves the curve."""
     dpis = [float(d) for d in dpi]
@@ -529,6 +532,7 @@ def rmtf_from_lsf(
             "fast_light": fast_light(lsf),
             # no light reached the pixels at all: every RMTF is 0 for want of a signal
             "no_light": not any(float(np.sum(h)) > 0 for h in lsf.h),
+            "optics": optics.to_dict(),
         },
         shading=shading,
     )

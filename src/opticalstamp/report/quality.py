@@ -4,7 +4,7 @@ closed form, and the depth-of-field chart as the merged line sees it."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from ..analysis.responsivity import RAY, Optics
 from ..design import Design
@@ -82,11 +82,10 @@ def rmtf_section(
         )
 
     lsf, lsf_own = pair(zs, progress)
-    res = rmtf_from_lsf(lsf, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
+    res = rmtf_from_lsf(lsf, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi, optics=optics)
     own = rmtf_from_lsf(lsf_own, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
     # the crossings again on a finer Z step where they need it (the same rays)
     res, own = refine_results([res, own], lambda z: pair(z, False), design)
-    res = replace(res, meta={**res.meta, "optics": optics.to_dict()})
     rect = all(m.shape != "circle" for m in design.masks)
     par = rmtf(design, dpi=dpis, z_mm=zs, method="paraxial", dof_dpi=dof_dpi) if rect else own
     # Fig. 12 analogue: the merged line's waveform for the depth-of-field chart (200 dpi for
