@@ -135,12 +135,14 @@ def efficiency(
     :func:`~opticalstamp.analysis.own_etendue.own_etendue` where every hole is
     rectangular, with the same Fresnel option; the ghost etendue is traced.
 
-    ``optics`` "wave" (or "auto" where the validity rule picks it): the headline light
+    ``optics`` "wave" (or "auto" where the validity rule picks it): all light
     (``etendue_um2sr``, its SE, ``ratio``, ``working_f_number``) is the wave engine's
-    in-band light plus the traced light outside its band
-    (:func:`~opticalstamp.analysis.responsivity.pixel_light`); ``optics`` holds the
-    breakdown and the ray figures it replaces. The own-path figures, the object-radius
-    and sensitive-area studies stay geometric (ray optics), and say so there.
+    in-band light plus the traced light outside its band, and the signal
+    (``etendue_own_um2sr``, ``ratio_own``; ``own_method`` "wave (in band)") the wave
+    engine's in-band light: the own path with its diffraction and the near crosstalk in
+    the band (:func:`~opticalstamp.analysis.responsivity.pixel_light`); ``meta["optics"]``
+    holds the breakdown and the ray figures they replace. The object-radius and
+    sensitive-area studies stay geometric (ray optics), and say so there.
     """
     ref = {"pixel_um": output_pitch(design)} | dict(reference or {})
     g_ref = reference_etendue(**ref)
@@ -197,14 +199,19 @@ def efficiency(
         )
     opt = resolve_optics(design, optics)
     optics_meta = opt.to_dict()
+    own_method = "quadrature" if exact else "trace"
     if opt.engine == "wave":
         light = pixel_light(design, opt, pixel=pixel, seed=seed)
         optics_meta |= light | {
             "ray_etendue_um2sr": tot,
+            "ray_etendue_own_um2sr": g_own,
             "ray_ratio": tot / g_ref,
-            "geometric": ["etendue_own_um2sr", "by_object_radius", "sensitive_area"],
+            "ray_ratio_own": g_own / g_ref,
+            "geometric": ["by_object_radius", "sensitive_area"],
         }
+        # the signal: the own path with its diffraction (and the near crosstalk in the band)
         tot, se = light["etendue_um2sr"], g.etendue_ghost_se
+        g_own, g_own_se, own_method = light["wave_in_band_um2sr"], 0.0, "wave (in band)"
     ratio, ratio_own = tot / g_ref, g_own / g_ref
     return EfficiencyResult(
         design=design.name,
@@ -215,7 +222,7 @@ def efficiency(
         etendue_se=se,
         etendue_own_um2sr=g_own,
         etendue_own_se=g_own_se,
-        own_method="quadrature" if exact else "trace",
+        own_method=own_method,
         etendue_own_traced_um2sr=g.etendue_own_um2sr,
         etendue_own_traced_se=g.etendue_own_se,
         etendue_ghost_um2sr=g.etendue_ghost_um2sr,

@@ -531,6 +531,15 @@ def report(
             "paper vs model): auto (only for the paper's presets), yes or no"
         ),
     ] = "auto",
+    optics: Annotated[
+        str,
+        typer.Option(
+            "--optics",
+            help="engine of the headline RMTF, depth of field and light: ray, wave or auto "
+            "(wave where the measured validity rule says ray optics is off by more than "
+            "its tolerance)",
+        ),
+    ] = "ray",
 ) -> None:
     """Run every analysis and write JSON, PNG figures and one HTML page."""
     from ..report.build import build_report
@@ -554,6 +563,7 @@ def report(
         z_mm=zs,
         dpi=dpi,
         paper_sections=None if paper_sections == "auto" else paper_sections == "yes",
+        optics=optics,
     )
     typer.echo(f"wrote {out / 'index.html'} and {out / 'report.json'}", err=as_json)
     if as_json:

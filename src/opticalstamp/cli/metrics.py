@@ -179,7 +179,7 @@ def efficiency(
             f"{o['wave_in_band_um2sr']:.4g} + traced beyond it {o['far_traced_um2sr']:.4g}; "
             f"ray optics gives {o['ray_etendue_um2sr']:.4g} "
             f"({o['etendue_um2sr'] / o['ray_etendue_um2sr'] - 1:+.1%} by wave optics); the "
-            "own-path and sensitive-area figures below are geometric"
+            "own path below is the wave light in band, the sensitive-area figures are geometric"
         )
     lines += [
         f"design {d.name}: etendue of one pixel {r.etendue_um2sr:.4g} ± {r.etendue_se:.2g}"

@@ -32,6 +32,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ..analysis.responsivity import resolve_optics
 from ..defaults import RAYS_MAP
 from ..design import Design, load_design
 from ..design.describe import stack_rows
@@ -93,6 +94,7 @@ def build_report(
     z_mm: tuple[float, ...] | None = None,
     dpi: float | None = None,
     paper_sections: bool | None = None,
+    optics: str = "ray",
 ) -> dict:
     """Run every analysis and write report.json, PNG figures and index.html to out_dir.
 
@@ -119,6 +121,10 @@ def build_report(
         resolution: 200 dpi for 300, as the paper; 400 for 600)
     paper_sections : the paper's own sections (its Fig. 1 concepts, the study of its
         unstated parameters, the paper-vs-model table); None: only for the paper's presets
+    optics : the engine of the headline RMTF, depth of field and light: "ray", "wave" or
+        "auto" (the measured validity rule,
+        :func:`~opticalstamp.analysis.responsivity.resolve_optics`); the ghosts, spots,
+        PSFs, scans and restoration are ray optics; the "ray vs wave" section shows both
 
     Returns
     -------
@@ -132,6 +138,7 @@ def build_report(
     from .summary import parse_report_spec, summary
 
     parse_report_spec(spec)  # a bad spec is refused before any work
+    opt = resolve_optics(design, optics)  # and a bad or impossible optics
     t0 = time.perf_counter()
     clock = _Clock()
     dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
@@ -157,8 +164,8 @@ def build_report(
         clock.lap("ghosts_spots_psf")
         concepts = run(concept_section, design, g, work, **traced) if work.paper else None
         clock.lap("concepts")
-        rm = run(rmtf_section, design, work, **shown, tracer=tracer, dof_dpi=dpi)
-        eff = run(efficiency_section, design, g, work, **traced)
+        rm = run(rmtf_section, design, work, **shown, tracer=tracer, dof_dpi=dpi, optics=opt)
+        eff = run(efficiency_section, design, g, work, **traced, optics=opt)
         diffraction = run(diffraction_section, design)
         clock.lap("quality")
         wave = run(wave_section, design, work, seed=seed, dof_dpi=dpi)
@@ -221,6 +228,7 @@ def build_report(
             "left_out": list(work.left_out),
             "reduced": list(work.reduced),
             "design": design.model_dump(mode="json"),
+            "optics": opt.to_dict(),
             "stack": stack_rows(design),
             "ghosts": as_data(g),
             "spots": as_data(sp),

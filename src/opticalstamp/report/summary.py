@@ -180,4 +180,6 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
         "meets_spec": all(c["pass"] for c in checks.values()) if checks else None,
         # the ray-vs-wave section's verdict in one line (None: not computed)
         "optics": (section(data, "ray_vs_wave") or {}).get("verdict", {}).get("text"),
+        # which engine gave the headline RMTF, depth of field and light, and why
+        "headline_optics": data.get("optics"),
     }

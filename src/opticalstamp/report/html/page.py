@@ -152,6 +152,7 @@ def summary_html(s: dict | None) -> str:
         "radius; own-path light is the signal.</p>"
     )
     optics = f"<p>Ray vs wave optics: {html.escape(s['optics'])}</p>" if s.get("optics") else ""
+    optics += _headline_optics(s.get("headline_optics"))
     return (
         f"<div style='border:2px solid #444;padding:.5em 1em;margin:1em 0'>"
         f"<h2>Verdict</h2><p>{top}</p>"
@@ -160,6 +161,25 @@ def summary_html(s: dict | None) -> str:
         + ghosts
         + optics
         + "</div>"
+    )
+
+
+def _headline_optics(o: dict | None) -> str:
+    """Which engine gave the verdict's depth of field and light, and why."""
+    if not o:
+        return ""
+    if o["engine"] == "wave":
+        what = (
+            f"wave optics (scalar diffraction at {o['wavelength_um']:g} µm in the band "
+            f"|s| &lt; {o['band']:.3f}, the far ghosts traced)"
+        )
+    else:
+        what = "ray optics (the exact tracer)"
+    why = html.escape(o["reason"])
+    return (
+        f"<p>The depth of field, RMTF and light above are by {what}: {why} "
+        f"(--optics {html.escape(o['asked'])}). Ghosts, spots, PSFs, scans and restoration "
+        "are ray optics.</p>"
     )
 
 
