@@ -37,6 +37,17 @@ def test_compare_cli_writes_page_json_and_figures(tmp_path):
         "rodlens-1.png",
     }
     assert "sla-1row-12deg" in (out / "index.html").read_text()
+    # ray vs wave optics (issue 23): the stamp's smallest Fresnel number (48 um over the
+    # 1 mm reference gap at 0.55 um), the wave figures judged; the rod-lens array has none
+    assert stamp["fresnel_min"] == pytest.approx(24.0**2 / (0.55 * 1000.0))
+    w = stamp["wave"]
+    assert w["light_wave_over_ray"] == pytest.approx(w["light_wave_um2sr"] / w["light_ray_um2sr"])
+    assert w["light_wave_over_ray"] == pytest.approx(1.10, abs=0.01)  # docs/wave.md: +10.0 %
+    assert w["holds"] == "wave" and w["dof_dpi"] == stamp["dof_dpi"]
+    assert len(w["rmtf_wave"]) == len(w["rmtf_ray"]) == len(w["heights_mm"])
+    assert w["dof_wave_mm"] == pytest.approx(w["dof_ray_mm"], abs=0.2)
+    assert rodl["fresnel_min"] is None and rodl["wave"] == {"note": "n/a (not an aperture stack)"}
+    assert "diffraction dominates" in (out / "index.html").read_text()
 
 
 def test_stamp_light_is_own_path_only():

@@ -8,9 +8,11 @@ import json
 
 import pytest
 
+from opticalstamp.analysis.wavebase import fresnel_numbers
 from opticalstamp.design import load_design, preset_names, scale_to_dpi, with_stack
 from opticalstamp.design.resolution import dof_chart_dpi
 from opticalstamp.report.build import build_report
+from opticalstamp.report.section import not_measurable
 
 
 def half_scale_prototype():
@@ -38,3 +40,15 @@ def test_quick_report_on_every_design(name, tmp_path):
         assert "the paper's statement" not in page
     for row in saved["scans"]["sfr"]:  # measured, or said why not
         assert "not_measurable" in row or row["mtf50_cy_per_mm"] is not None
+    # ray vs wave optics (issue 23) on every design (square holes), its verdict in the box
+    rw = saved["ray_vs_wave"]
+    assert not_measurable(rw) is None, rw
+    v = rw["verdict"]
+    assert v["fresnel_min"] == pytest.approx(min(f["fresnel_number"] for f in fresnel_numbers(d)))
+    assert saved["summary"]["optics"] == v["text"]
+    if name == "half":  # the 600-dpi copy: wave light +20.7 % over the rays' (docs/wave.md)
+        assert v["fresnel_min"] < 0.3
+        assert v["light_difference"] == pytest.approx(
+            rw["wave"]["light_um2sr"] / rw["ray"]["light_um2sr"] - 1, rel=1e-12
+        )
+        assert v["light_difference"] > 0.15 and v["holds"] == "wave"
