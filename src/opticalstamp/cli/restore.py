@@ -45,13 +45,13 @@ def _sidecar(scan: Path) -> dict:
 
 def check_stamp(d, option: str) -> None:
     """Restoration kernels exist for stamps only: refuse a rod-lens array up front."""
-    from ..design import RodLensDesign
+    from ..imaging.kinds import scanner_of
 
-    if isinstance(d, RodLensDesign):
+    why = scanner_of(d).not_restorable
+    if why is not None:
         fail(
             f"{option}: {d.name} is a rod-lens array; restoration kernels are built for "
-            "aperture-array stamps (a rod-lens array's pixels sit at varying phases of its "
-            "rod lattice)"
+            f"aperture-array stamps ({why})"
         )
 
 
@@ -67,8 +67,11 @@ def restore_and_write(
     seed: int,
     output: Path,
     extra: dict,
+    kernels=None,
 ) -> dict:
-    """Restore ``img`` and write the set (PNG, 16-bit TIFF, JSON sidecar); its metadata."""
+    """Restore ``img`` and write the set (PNG, 16-bit TIFF, JSON sidecar); its metadata.
+    ``kernels``: the scan kernels built for ``img``'s scan (a KernelCache), not built
+    again; None builds them."""
     from ..imaging.restore import restore_scan
     from ..io.files import encode_png, encode_tiff16, provenance, to_json, write_set
     from ..io.sidecar import relative_to_sidecar
@@ -80,7 +83,16 @@ def restore_and_write(
         if k in extra
     }
     try:
-        r = restore_scan(img, d, z_mm=z, height_map=hm, method=method, settings=settings, seed=seed)
+        r = restore_scan(
+            img,
+            d,
+            z_mm=z,
+            height_map=hm,
+            method=method,
+            settings=settings,
+            seed=seed,
+            kernels=kernels,
+        )
     except ValueError as err:
         msg = str(err).replace("z_mm:", "--z:").replace("height_map:", "--height-map:")
         fail(msg.replace("design:", "--design:"))

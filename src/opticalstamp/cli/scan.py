@@ -237,7 +237,19 @@ def scan(
     )
     doc, use = _document(image, dpi, color)
     hm = _height(height_map, z, doc.shape, use, seed)
+    kernels = None
     try:
+        if restore is not None:  # one kernel set for the scan and its restoration
+            from ..imaging.scan import prepare_kernels
+
+            kernels = prepare_kernels(
+                d,
+                z_mm=() if hm is not None else (z,),
+                height_maps=() if hm is None else (hm,),
+                settings=st,
+                seed=seed,
+                progress=True,
+            )
         r = simulate_scan(
             doc,
             use,
@@ -250,6 +262,7 @@ def scan(
             noiseless=noiseless,
             color=color,
             progress=True,
+            kernels=kernels,
         )
     except ValueError as err:
         fail(str(err))
@@ -286,6 +299,7 @@ def scan(
             method=restore,
             settings=st,
             seed=seed,
+            kernels=kernels,
             output=restored_out,
             extra={"input": str(png), "design_source": design, "height_map_spec": height_map},
         )["restoration"]

@@ -177,6 +177,18 @@ def _read_map(p: Path) -> np.ndarray:
         raise HeightMapError(f"height map {p}: cannot read it ({detail})") from None
 
 
+def check_heights(z_mm: float | None, height_map: np.ndarray | None) -> None:
+    """The one check of a scan's heights: a float height ``z_mm`` (mm) in
+    :data:`Z_RANGE_MM`, or where ``height_map`` is given, its heights (:func:`check_range`);
+    ValueError naming ``z_mm`` or the height map."""
+    if height_map is not None:
+        check_range(np.asarray(height_map, dtype=np.float64), "height_map")
+        return
+    lo, hi = Z_RANGE_MM
+    if z_mm is None or not np.isfinite(z_mm) or not lo <= z_mm <= hi:
+        raise ValueError(f"z_mm: must lie in [{lo:g}, {hi:g}] mm, the kernels' range (got {z_mm})")
+
+
 def check_range(m: np.ndarray, name: str) -> None:
     lo, hi = Z_RANGE_MM
     if not np.all(np.isfinite(m)):

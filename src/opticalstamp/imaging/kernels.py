@@ -23,13 +23,11 @@ import numpy as np
 
 from ..analysis.maps import TracedMaps, traced_map_sets
 from ..analysis.paraxial import (
-    PARAXIAL_MAX_SLOPE,
     paraxial_cumulative,
-    paraxial_max_slope,
     paraxial_support,
 )
 from ..defaults import RAYS_MAP
-from ..design import AnyDesign, Design, RodLensDesign
+from ..design import AnyDesign, Design
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 
 
@@ -136,26 +134,18 @@ def traced_kernels(
 
 
 def kernel_source(design: AnyDesign, source: str = "auto", fresnel: bool = False) -> str:
-    """What ``source`` means for this design: "paraxial" or "trace" (see :func:`scan_kernels`).
+    """What ``source`` means for this design: "paraxial" or "trace" (see :func:`scan_kernels`;
+    each kind of design says, :func:`~opticalstamp.imaging.kinds.scanner_of`).
 
     Raises
     ------
     ValueError
-        For an unknown source, or "paraxial" with circular holes.
+        For an unknown source, "paraxial" with circular holes, or anything but "auto" and
+        "trace" for a rod-lens array.
     """
-    if isinstance(design, RodLensDesign):  # no closed form: always traced
-        if source not in ("auto", "trace"):
-            raise ValueError(f"a rod-lens array's kernels are traced (got source {source!r})")
-        return "trace"
-    rect = all(m.shape != "circle" for m in design.masks)
-    if source == "auto":  # the closed form where it holds: rectangles, paraxial own path
-        steep = paraxial_max_slope(design) > PARAXIAL_MAX_SLOPE if rect else True
-        source = "paraxial" if rect and not fresnel and not steep else "trace"
-    if source not in ("paraxial", "trace"):
-        raise ValueError(f"kernel source must be auto, paraxial or trace (got {source!r})")
-    if source == "paraxial" and not rect:
-        raise ValueError("paraxial kernels need rectangular holes (this design has circles)")
-    return source
+    from .kinds import scanner_of
+
+    return scanner_of(design).kernel_source(design, source, fresnel)
 
 
 def _rays(source: str, n_rays: int) -> int:
@@ -202,13 +192,26 @@ def _kernel_sets(
 ) -> list[list[list[ScanKernel]]]:
     """Kernels [set][row][level] for each set of distances, from one trace per row
     (a rod-lens array: [set][phase class][level], from one trace)."""
-    source = kernel_source(design, source, fresnel)
-    if isinstance(design, RodLensDesign):
-        from .rodkernels import rod_kernel_sets
+    from .kinds import scanner_of
 
-        return rod_kernel_sets(
-            design, z_sets, fresnel=fresnel, n_rays=n_rays, seed=seed, progress=progress
-        )
+    kind = scanner_of(design)
+    source = kind.kernel_source(design, source, fresnel)
+    return kind.kernel_sets(design, z_sets, source, ghosts, fresnel, n_rays, seed, progress, tracer)
+
+
+def stamp_kernel_sets(
+    design: Design,
+    z_sets,
+    source: str,
+    ghosts: bool,
+    fresnel: bool,
+    n_rays: int,
+    seed: int,
+    progress: bool,
+    tracer: PixelTracer | None,
+) -> list[list[list[ScanKernel]]]:
+    """A stamp's kernels [set][row][level] for each set of distances (``source`` resolved:
+    "paraxial" or "trace"), from one trace per row where anything is traced."""
     sampling = Sampling(_rays(source, n_rays), seed, fresnel)
     tr = tracer_for(design, sampling, tracer)  # one reverse path for every row
     out = [[] for _ in z_sets]

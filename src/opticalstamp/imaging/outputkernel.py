@@ -34,9 +34,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, signal
 
-from ..design import AnyDesign, RodLensDesign
+from ..design import AnyDesign
 from ..raytrace.stack import lattice_of
 from .kernels import KernelCache, ScanKernel
+from .kinds import scanner_of
 from .scan import ScanSettings, kernels_for, pixel_groups, scan_pitch
 
 #: output pixels kept beyond a kernel's support for the band-limited kernel's tails
@@ -161,10 +162,10 @@ def output_kernel(
     """The scan's blur at ``z_mm`` on its output grid, from the same scan kernels (source,
     rays, seed, Fresnel) and the same normalisation as :func:`simulate_scan` with
     ``settings``; ``kernels``: those kernels at [z_mm] when already built."""
-    if isinstance(design, RodLensDesign):
+    why = scanner_of(design).not_restorable
+    if why is not None:
         raise ValueError(
-            "design: restoration kernels are built for aperture-array stamps; a rod-lens "
-            "array's pixels sit at varying phases of its rod lattice (not built)"
+            f"design: restoration kernels are built for aperture-array stamps; {why} (not built)"
         )
     st = settings or ScanSettings()
     if kernels is None or isinstance(kernels, KernelCache):

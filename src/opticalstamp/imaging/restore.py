@@ -37,8 +37,9 @@ import numpy as np
 from scipy import fft as sfft
 
 from ..design import Design
-from .heightmap import Z_RANGE_MM
+from .heightmap import check_heights
 from .heightmap import sample as sample_height
+from .kernels import KernelCache
 from .outputkernel import OutputKernel, ghost_background, output_kernel
 from .scan import ScanSettings, kernels_for, prepare_kernels, scan_levels, scan_pitch
 from .sensor import SensorModel
@@ -414,6 +415,7 @@ def restore_scan(
     model_error: float = MODEL_ERROR,
     iterations: int | None = None,
     ghosts: bool = True,
+    kernels: KernelCache | None = None,
 ) -> Restored:
     """Restore a grey scan of ``design`` (shading corrected, white = 1) made at the float
     height ``z_mm`` or over ``height_map`` (mm, any resolution, covering the scan), with
@@ -424,6 +426,11 @@ def restore_scan(
     Z step) and each pixel takes the restorations of the two levels around its height,
     weighted linearly, as the scan simulation blends its kernels (a spatially varying
     kernel, piecewise).
+
+    ``kernels``: the scan kernels built beforehand
+    (:func:`~opticalstamp.imaging.scan.prepare_kernels`, e.g. those the scan was simulated
+    with) for these heights, settings and seed; None builds them here. The result is the
+    same either way; kernels that do not fit raise ValueError.
     """
     st = settings or ScanSettings()
     g = np.asarray(image, dtype=np.float64)
@@ -433,16 +440,11 @@ def restore_scan(
         )
     if (z_mm is None) == (height_map is None):
         raise ValueError("z_mm: give a float height or a height map (one of them)")
-    if z_mm is not None and not Z_RANGE_MM[0] <= z_mm <= Z_RANGE_MM[1]:
-        raise ValueError(
-            f"z_mm: must lie in {list(Z_RANGE_MM)} mm, the kernels' range (got {z_mm})"
-        )
+    check_heights(z_mm, height_map)
     if height_map is not None:
         hm = np.asarray(height_map, dtype=np.float64)
-        if not np.all(np.isfinite(hm)) or hm.min() < Z_RANGE_MM[0] or hm.max() > Z_RANGE_MM[1]:
-            raise ValueError(f"height_map: heights must be finite and lie in {list(Z_RANGE_MM)} mm")
     levels = scan_levels(z_mm, height_map, st.z_step_mm)
-    kern = kernels_for(design, levels, st, seed=seed, ghosts=ghosts)
+    kern = kernels_for(design, levels, st, seed=seed, ghosts=ghosts, kernels=kernels)
     out = np.zeros_like(g)
     metas = []
     if height_map is not None:

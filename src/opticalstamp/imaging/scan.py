@@ -31,15 +31,15 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from scipy import ndimage, signal
 
 from ..defaults import RAYS_MAP
-from ..design import AnyDesign, Design, RodLensDesign
+from ..design import AnyDesign, Design
 from ..raytrace.launch import progress_bar
 from ..raytrace.pixel import PixelTracer
-from ..raytrace.stack import lattice_of, output_pitch
 from ..units import dpi_of_pitch, pitch_of_dpi
 from ..validate import check_seed
-from .heightmap import Z_RANGE_MM, check_range
+from .heightmap import check_heights
 from .heightmap import sample as sample_height
 from .kernels import KernelCache, ScanKernel, kernel_cache, scan_kernels
+from .kinds import PixelGroup, scanner_of
 from .sensor import SensorModel, expose, fixed_pattern, signal_budget
 from .separable import box_taps, inside, x_pass, y_pass
 
@@ -192,23 +192,10 @@ def _ghost_signal(blocks: np.ndarray, kern: ScanKernel, centers, x_pix, surround
     return ndimage.map_coordinates(r, [yy, xx], order=1, mode="constant", cval=surround * g.sum())
 
 
-@dataclass(frozen=True)
-class PixelGroup:
-    """Pixels that share one kernel: their x centres, the sensor y of their row, the line
-    delay of their row, and the index of their kernels in ``scan_kernels``' output."""
-
-    x_um: np.ndarray
-    y_um: float
-    delay: int
-    kernel: int
-
-
 def scan_pitch(design: AnyDesign) -> float:
     """Output pixel pitch (um) of a scan: the merged pitch of a stamp, a rod-lens array's
     sensor pitch."""
-    if isinstance(design, RodLensDesign):
-        return design.output_pitch_um
-    return output_pitch(design)
+    return scanner_of(design).pitch(design)
 
 
 def pixel_groups(design: AnyDesign, n_cols: int) -> list[PixelGroup]:
@@ -218,22 +205,7 @@ def pixel_groups(design: AnyDesign, n_cols: int) -> list[PixelGroup]:
     rod-lens array: its pixels' phase classes on the rod lattice (one sensor row);
     classes without a pixel are left out.
     """
-    pitch = scan_pitch(design)
-    if isinstance(design, RodLensDesign):
-        from .rodkernels import phase_of
-
-        x = (np.arange(n_cols) + 0.5) * pitch
-        cls = phase_of(design, x)
-        return [PixelGroup(x[cls == g], 0.0, 0, int(g)) for g in np.unique(cls)]
-    lat = lattice_of(design)
-    n_rows = design.sensor.rows
-    delay = int(round(lat.row_y[1] / pitch)) if n_rows == 2 else 0
-    out = []
-    for r in range(n_rows):
-        n_k = n_cols // n_rows + 1
-        x_pix = lat.row_x[r] % lat.pitch + np.arange(n_k) * lat.pitch + pitch / 2
-        out.append(PixelGroup(x_pix[x_pix < n_cols * pitch], lat.row_y[r], delay * r, r))
-    return out
+    return scanner_of(design).groups(design, n_cols)
 
 
 def scan_levels(z_mm: float | None, height_map: np.ndarray | None, z_step_mm: float) -> list[float]:
@@ -245,11 +217,6 @@ def scan_levels(z_mm: float | None, height_map: np.ndarray | None, z_step_mm: fl
     lo = np.floor(hm.min() / z_step_mm) * z_step_mm
     hi = np.ceil(hm.max() / z_step_mm) * z_step_mm
     return [float(v) for v in np.round(np.arange(lo, hi + z_step_mm / 2, z_step_mm), 6)]
-
-
-def _check_z(z_mm: float | None) -> None:
-    if z_mm is None or not Z_RANGE_MM[0] <= z_mm <= Z_RANGE_MM[1]:
-        raise ValueError(f"z_mm must lie in {list(Z_RANGE_MM)} (got {z_mm})")
 
 
 def prepare_kernels(
@@ -285,10 +252,10 @@ def prepare_kernels(
     st = settings or ScanSettings()
     sets = []
     for z in z_mm:
-        _check_z(z)
+        check_heights(z, None)
         sets.append(scan_levels(z, None, st.z_step_mm))
     for hm in height_maps:
-        check_range(np.asarray(hm), "height_map")
+        check_heights(None, hm)
         sets.append(scan_levels(None, hm, st.z_step_mm))
     return kernel_cache(
         design,
@@ -368,10 +335,7 @@ def simulate_scan(
         doc = np.repeat(doc, 3, axis=2)
     if not color and doc.shape[2] == 3:
         doc = (doc @ np.array([0.2126, 0.7152, 0.0722], np.float32))[..., None]
-    if height_map is None:
-        _check_z(z_mm)
-    else:
-        check_range(np.asarray(height_map), "height_map")
+    check_heights(None if height_map is not None else z_mm, height_map)
     p = pitch_of_dpi(doc_dpi)
     h_um, w_um = doc.shape[0] * p, doc.shape[1] * p
     pitch = scan_pitch(design)
