@@ -42,8 +42,6 @@ import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy import fft as sfft
-from scipy.linalg import blas
 
 from ..design import Design
 from ..raytrace.stack import lattice_of, output_pitch
@@ -54,7 +52,6 @@ from .wavebase import (
     gauss_legendre,
     kernel,
     mask_field,
-    object_grid,
     point_sources,
     propagate,
     response_summary,
@@ -62,8 +59,9 @@ from .wavebase import (
     stack_grid,
     wave_sampling,
 )
+from .waveobject import ObjectSide, lsf_x_at, object_side, responses_at
 
-__all__ = ["WaveResponse", "WaveSampling", "wave_response", "wave_sampling"]
+__all__ = ["WaveResponse", "WaveSampling", "wave_lsf_x", "wave_response", "wave_sampling"]
 
 
 # -- the separable engine ------------------------------------------------------------------
@@ -118,30 +116,6 @@ def _compress(fields: list[np.ndarray], tol: float) -> list[np.ndarray]:
 
 
 @dataclass(frozen=True)
-class _ObjectSide:
-    """The in-band terms leaving the stack, as spectra on the object grids: per axis the
-    grid (n,), the spectra (J, n, m) and the reduced height of the object-side mask."""
-
-    grids: tuple[np.ndarray, np.ndarray]
-    spectra: tuple[np.ndarray, np.ndarray]
-    planes: tuple[Plane, Plane]
-    sampling: WaveSampling
-
-    def fields(self, z_mm: float) -> list[np.ndarray]:
-        """The terms' fields u_j on the object plane z_mm, per axis (J, n, m)."""
-        smp, out = self.sampling, []
-        for g, spec, pl in zip(self.grids, self.spectra, self.planes, strict=True):
-            d = pl.reduced(z_mm) - pl.heights[-1]
-            h = kernel(g.size, smp.step_um, smp.wavelength_um, d, smp.band)[None, :, None]
-            out.append(sfft.ifft(spec * h, axis=1, workers=-1))
-        return out
-
-    def terms(self, z_mm: float) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per axis (x, X) with X_jl(x) (J, J, n) where the light is (:func:`_crop`)."""
-        return [_crop(g, u) for g, u in zip(self.grids, self.fields(z_mm), strict=True)]
-
-
-@dataclass(frozen=True)
 class WaveResponse:
     """A pixel's responsivity on the object plane by the wave engine.
 
@@ -175,7 +149,7 @@ class WaveResponse:
     center_cell_fraction: np.ndarray
     budget: list[dict]
     sampling: WaveSampling
-    fields: _ObjectSide | None = field(default=None, repr=False)
+    fields: ObjectSide | None = field(default=None, repr=False)
     meta: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
@@ -262,9 +236,55 @@ def wave_response(
     spectrum (the design's one wavelength).
     """
     smp = wave_sampling(design) if sampling is None else sampling
+    zs = _heights(z_mm)
+    terms, axes, budget = _stack(design, pixel, smp)
+    return _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um)
+
+
+def wave_lsf_x(
+    design: Design,
+    z_mm=(0.0, 1.0, 2.0, 3.0),
+    *,
+    pixel: tuple[int, int] = (0, 0),
+    sampling: WaveSampling | None = None,
+) -> tuple[np.ndarray, np.ndarray, float, dict]:
+    """The x line-spread functions of a used pixel alone (what a chart varying along x
+    needs), by the object side's x-only path (:func:`~.waveobject.lsf_x_at`): the same
+    LSFs as :func:`wave_response` gives (to the compression tolerance ``mode_tol`` in
+    L1), without the y marginals and the central-cell shares.
+
+    Returns
+    -------
+    (x_um (nx,), lsf_x (nz, nx) um sr per um, light um^2 sr, meta {"modes", "sequences"})
+    """
+    smp = wave_sampling(design) if sampling is None else sampling
+    zs = _heights(z_mm)
+    terms, axes, _ = _stack(design, pixel, smp)
+    keys = list(terms)
+    terms = _band_only(terms, axes, smp)
+    side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, zs.max())
+    lsf, light, modes = lsf_x_at(side, zs)
+    return side.grids[0], lsf, light, {"modes": modes, "sequences": _names(keys)}
+
+
+def _heights(z_mm) -> np.ndarray:
     zs = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
     if zs.size == 0 or not np.all(np.isfinite(zs)) or zs.min() < 0:
         raise InputError("z_mm: object distances must be finite and >= 0")
+    return zs
+
+
+def _names(keys) -> list[str]:
+    return ["".join("AB"[r] for r in k) for k in keys]
+
+
+def _planes(axes) -> tuple[Plane, Plane]:
+    return (axes[0].plane, axes[1].plane)
+
+
+def _stack(design: Design, pixel, smp: WaveSampling):
+    """The source points stepped up through the stack: (terms {row sequence: (ux, uy)}
+    just above the object-side mask, the axes, the budget mask by mask)."""
     lam, b, step = smp.wavelength_um, smp.band, smp.step_um
     if step > lam / (6 * b) * (1 + 1e-9):
         raise InputError(
@@ -300,10 +320,10 @@ def wave_response(
         cy = _compress([new[k][1] for k in keys], smp.mode_tol)
         terms = {k: (cx[j], cy[j]) for j, k in enumerate(keys)}
         rec["in_band"] = _power(_band_only(terms, axes, smp), step)
-        rec["sequences"] = ["".join("AB"[r] for r in k) for k in keys]
+        rec["sequences"] = _names(keys)
         rec["modes"] = (int(cx[0].shape[1]), int(cy[0].shape[1])) if keys else (0, 0)
         budget.append(rec)
-    return _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um)
+    return terms, axes, budget
 
 
 def _step_terms(terms: dict, axes: list[_Axis], smp: WaveSampling, d: float) -> dict:
@@ -346,32 +366,11 @@ def _prune(new: dict, step: float, tol: float) -> dict:
 
 def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveResponse:
     """From the object-side mask through the reference gap and object medium to every Z."""
-    step = smp.step_um
     cell = output_pitch(design) if cell_um is None else float(cell_um)
     keys = list(terms)
-    grids, spectra = [], []
     terms = _band_only(terms, axes, smp)  # the in-band light leaving the stack grid
-    for a, ax in enumerate(axes):
-        d_max = ax.plane.reduced(float(zs.max())) - ax.plane.heights[-1]
-        xf, off = object_grid(ax.x, d_max, smp)
-        u = np.zeros((len(keys), xf.size, terms[keys[0]][a].shape[1]), dtype=np.complex128)
-        for j, k in enumerate(keys):
-            u[j, off : off + ax.x.size] = terms[k][a]
-        grids.append(xf)
-        spectra.append(sfft.fft(u, axis=1, workers=-1))  # (J, n, m)
-    side = _ObjectSide(tuple(grids), tuple(spectra), tuple(ax.plane for ax in axes), smp)
-    n_z = zs.size
-    lsf = [np.zeros((n_z, g.size)) for g in grids]
-    etendue, cells = np.zeros(n_z), np.zeros(n_z)
-    win = [_cell_weights(g, cell) for g in grids]
-    for iz, z in enumerate(zs):
-        us = side.fields(float(z))  # (J, n, m) per axis
-        tot = [_gram_flat(u) * step for u in us]  # X_jl, Y_jl integrated
-        inc = [_gram_flat(u, w) for u, w in zip(us, win, strict=True)]
-        for a in (0, 1):
-            lsf[a][iz] = _weighted_sum(us[a], tot[1 - a])
-        etendue[iz] = e = float(np.sum(tot[0] * tot[1]).real)
-        cells[iz] = float(np.sum(inc[0] * inc[1]).real) / e if e > 0 else 0.0
+    side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, zs.max())
+    lsf_x, lsf_y, etendue, cells = responses_at(side, zs, cell)
     lat = lattice_of(design)
     px, py = (float(v) for v in lat.centers(*pixel))
     for rec in budget:
@@ -381,10 +380,10 @@ def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveRe
         design.fingerprint(),
         {"row": "AB"[pixel[0]], "k": pixel[1], "x_um": px, "y_um": py},
         zs,
-        grids[0],
-        grids[1],
-        lsf[0],
-        lsf[1],
+        side.grids[0],
+        side.grids[1],
+        lsf_x,
+        lsf_y,
         etendue,
         cells,
         budget,
@@ -394,62 +393,6 @@ def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveRe
             "propagator": "paraxial",
             "path": "separable",
             "cell_um": cell,
-            "sequences": ["".join("AB"[r] for r in k) for k in keys],
+            "sequences": _names(keys),
         },
     )
-
-
-def _gram_flat(u: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
-    """G[j, l] = sum_n sum_m u[j, n, m] conj(u[l, n, m]) (times weight[n]) for u (J, n, m),
-    in one BLAS call without a conjugated copy."""
-    b = u.reshape(u.shape[0], -1).T  # (n m, J), Fortran-ordered view
-    a = b if weight is None else (u * weight[None, :, None]).reshape(u.shape[0], -1).T
-    return blas.zgemm(1.0, b, a, trans_a=2).T  # (b^H a)[l, j] = G[j, l]
-
-
-def _weighted_sum(u: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """sum_jl T_jl X_jl(x) for X_jl = sum_m u_j conj(u_l) and a Hermitian positive
-    semi-definite T (the other axis's integrated terms), without forming X_jl: with
-    T = V diag(p) V^H it is sum_k p_k sum_m |sum_j V_jk u_j|^2 (n,), over the k with
-    p_k > 1e-15 max p (the rest adds nothing at double precision)."""
-    p, v = np.linalg.eigh(t)
-    keep = p > 1e-15 * max(p.max(), 1e-300)
-    w = np.tensordot(v[:, keep], u, axes=([0], [0]))  # (k, n, m)
-    out = np.zeros(u.shape[1])
-    for pk, wk in zip(p[keep], w, strict=True):
-        out += pk * (np.square(wk.real) + np.square(wk.imag)).sum(axis=1)
-    return out
-
-
-def _cell_weights(x: np.ndarray, cell: float) -> np.ndarray:
-    """Weights w with sum_n g_n w_n = the integral of g over |x| <= cell / 2, exact for
-    band-limited periodic samples g (:func:`~.wavebase.band_integral` as a vector: the
-    intensities' band 2B is below the grid's Nyquist rate 3B; real, as the Nyquist bin
-    of such g is 0)."""
-    n = x.size
-    nu = sfft.fftfreq(n, x[1] - x[0])
-    a, b = -cell / 2 - x[0], cell / 2 - x[0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        k = (np.exp(2j * np.pi * nu * b) - np.exp(2j * np.pi * nu * a)) / (2j * np.pi * nu)
-    k = np.where(nu == 0, b - a, k)
-    return (sfft.fft(k, workers=-1) / n).real  # sum_k ghat_k K_k = sum_n g_n w_n
-
-
-def _crop(x: np.ndarray, u: np.ndarray, tail: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
-    """(x, X) with X_jl(x) = sum_m u_j conj(u_l) on the part of x where the diagonal terms
-    hold all but ``tail`` of their sum (the cross terms are bounded by them:
-    |X_jl|^2 <= X_jj X_ll)."""
-    env = (u.real**2 + u.imag**2).sum(axis=(0, 2))
-    c = np.cumsum(env)
-    if c[-1] <= 0:
-        return x[:2], _cross(u[:, :2])
-    c /= c[-1]
-    i0 = max(int(np.searchsorted(c, tail)) - 1, 0)
-    i1 = min(int(np.searchsorted(c, 1 - tail)) + 2, x.size)
-    return x[i0:i1], _cross(u[:, i0:i1])
-
-
-def _cross(u: np.ndarray) -> np.ndarray:
-    """X[j, l, n] = sum_m u[j, n, m] conj(u[l, n, m]) for u (J, n, m): shape (J, J, n)."""
-    t = np.ascontiguousarray(u.transpose(1, 0, 2))  # (n, J, m)
-    return np.moveaxis(t @ t.conj().transpose(0, 2, 1), 0, -1)

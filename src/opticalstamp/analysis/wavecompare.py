@@ -29,8 +29,10 @@ from ..units import period_of_dpi
 from .lsf import FOLD_BIN_UM, FoldedLSF
 from .own_etendue import own_etendue, rectangular_holes
 from .rmtf import rmtf_curves
+from .spectrum import Spectrum
 from .wave import WaveResponse, wave_response
 from .wavebase import WaveSampling, fresnel_numbers, fwhm_of, wave_sampling
+from .wavespectral import mirror_twin, spectral_lsf_x
 
 #: bin of the traced line-spread functions (um)
 RAY_BIN_UM = 1.0
@@ -172,20 +174,38 @@ def _rmtf(design: Design, zs, per: float, folded_rows: list[np.ndarray], method:
 
 
 def wave_folded_lsf(
-    design: Design, z_mm, periods_um, *, sampling: WaveSampling | None = None
+    design: Design,
+    z_mm,
+    periods_um,
+    *,
+    sampling: WaveSampling | None = None,
+    spectrum: str | Spectrum | None = None,
 ) -> FoldedLSF:
     """The wave engine's line-spread functions of rows A and B folded onto each chart
-    period, as :func:`~opticalstamp.analysis.lsf.paraxial_folded_lsf` gives the ray
+    period, as :func:`~opticalstamp.analysis.paraxial.paraxial_folded_lsf` gives the ray
     ones (method "wave", one batch): what :func:`~opticalstamp.analysis.rmtf.
-    rmtf_from_lsf` turns into RMTF curves and a depth of field."""
-    smp = wave_sampling(design) if sampling is None else sampling
+    rmtf_from_lsf` turns into RMTF curves and a depth of field.
+
+    ``spectrum``: the light (:func:`~.wavespectral.spectral_lsf_x`; default the design's
+    ``electronics.illumination``, one channel; "mono" is the design's wavelength alone).
+    ``sampling``: a sampling at one wavelength, carried to each of the light's. The LSFs
+    come from the x-only path (:func:`~.wave.wave_lsf_x`); a row whose pixel sees the
+    stack as row A's mirrored in y (:func:`~.wavespectral.mirror_twin`, the nominal
+    staggered lattice) takes row A's LSFs."""
     zs = np.asarray(z_mm, dtype=np.float64)
     per = np.asarray(periods_um, dtype=np.float64)
     lat = lattice_of(design)
     rows = [(float(lat.row_x[r]), float(lat.row_y[r])) for r in range(design.sensor.rows)]
-    ws = [wave_response(design, zs, pixel=(r, 0), sampling=smp) for r in range(len(rows))]
+    lsfs: list[tuple[np.ndarray, np.ndarray]] = []
+    for r in range(len(rows)):
+        twin = next((q for q in range(r) if mirror_twin(design, (q, 0), (r, 0))), None)
+        if twin is not None:
+            lsfs.append(lsfs[twin])
+            continue
+        x, lsf, _ = spectral_lsf_x(design, zs, spectrum=spectrum, pixel=(r, 0), sampling=sampling)
+        lsfs.append((x, lsf))
     h = [
-        np.stack([[fold(w.x_um, p, q, _n_bins(q)) for p in w.lsf_x] for w in ws])[:, None]
+        np.stack([[fold(x, p, q, _n_bins(q)) for p in lsf] for x, lsf in lsfs])[:, None]
         for q in per
     ]
     return FoldedLSF(zs, per, rows, h, "wave", 0, False, False)

@@ -1,0 +1,327 @@
+"""The wave engine over a spectrum: a pixel's responsivity under the design's light.
+
+The responsivity under a light (:mod:`.spectrum`: an illumination's spectrum times the
+sensor's QE, sampled at wavelengths lambda_i with weights w_i summing to 1) is
+sum_i w_i R(lambda_i), each R(lambda_i) the separable wave engine's
+(:func:`~.wave.wave_response`) for the design at lambda_i: every medium named from the
+catalogue takes its index at lambda_i (dispersion; a plain number stays a number), and
+the band, margin and source points follow lambda_i by :func:`~.wavebase.wave_sampling`'s
+rules, each on its own grid; the line-spread functions (band-limited below 2B / lambda)
+are summed on one grid, the union of theirs at the finest step, by exact band-limited
+(Fourier series) interpolation. A light of one
+wavelength ("mono", the design's ``wavelength_um``) gives :func:`~.wave.wave_response`'s
+figures exactly.
+
+R, G and B LEDs lit in turn ("rgb") are three channels, one responsivity each
+(:func:`wave_response_channels`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy import fft as sfft
+from scipy.signal import czt
+
+from ..design import Design
+from ..raytrace.stack import lattice_of
+from .spectrum import Spectrum, channels, one_channel
+from .wave import WaveResponse, wave_lsf_x, wave_response
+from .wavebase import SOURCE_EXTRA, WaveSampling, response_summary, wave_sampling
+
+__all__ = [
+    "SpectralWaveResponse",
+    "at_wavelength",
+    "mirror_twin",
+    "spectral_lsf_x",
+    "spectral_samplings",
+    "wave_response_channels",
+    "wave_response_spectral",
+]
+
+
+#: The loosest compression tolerance a wavelength of small weight gets.
+MAX_MODE_TOL = 1e-6
+
+
+def at_wavelength(design: Design, wavelength_um: float) -> Design:
+    """``design`` lit at ``wavelength_um`` (its media's indices follow; a
+    :class:`~.spectrum.Spectrum` has checked the wavelength's range)."""
+    if wavelength_um == design.wavelength_um:
+        return design
+    return design.model_copy(update={"wavelength_um": float(wavelength_um)})
+
+
+def spectral_samplings(
+    design: Design, spectrum: Spectrum, sampling: WaveSampling | None = None
+) -> list[WaveSampling]:
+    """The wave engine's sampling at each of the spectrum's wavelengths.
+
+    Without ``sampling``: :func:`~.wavebase.wave_sampling` of the design at each
+    wavelength. With it (a sampling at ``sampling.wavelength_um``): its band at every
+    wavelength, its step, margin and source points scaled with the wavelength as the
+    default rules scale them. The compression tolerance of each is ``mode_tol / w_i``
+    (at most :data:`MAX_MODE_TOL`), so that the weighted sum's is ``mode_tol``.
+    """
+    lams = spectrum.wavelengths_um
+    if sampling is None:
+        smps = [wave_sampling(at_wavelength(design, lam)) for lam in lams]
+    else:
+        l0 = sampling.wavelength_um
+        smps = [
+            replace(
+                sampling,
+                wavelength_um=lam,
+                step_um=sampling.step_um * (lam / l0),
+                margin_um=sampling.margin_um * (lam / l0),
+                source_points=tuple(
+                    max(1, math.ceil((p - SOURCE_EXTRA) * (l0 / lam) - 1e-9) + SOURCE_EXTRA)
+                    for p in sampling.source_points
+                ),
+            )
+            if lam != l0
+            else sampling
+            for lam in lams
+        ]
+    # each wavelength may drop mode_tol / w_i of its power to compression: the weighted
+    # sum then drops at most mode_tol of its own (one wavelength: as it is)
+    return [
+        replace(s, mode_tol=min(MAX_MODE_TOL, s.mode_tol / w)) if w < 1.0 else s
+        for s, w in zip(smps, spectrum.weights, strict=True)
+    ]
+
+
+def resample(x: np.ndarray, y: np.ndarray, x_out: np.ndarray, cycles_per_um: float):
+    """Real periodic samples ``y`` (..., n) on the uniform grid ``x`` (period n dx),
+    band-limited below ``cycles_per_um``, evaluated on the uniform grid ``x_out`` by their
+    Fourier series (exact band-limited interpolation, a chirp-z transform: Rabiner,
+    Schafer and Rader, IEEE Trans. Audio Electroacoust. 17, 86 (1969)); 0 outside
+    [x[0], x[-1]] (the periodic copies are not light)."""
+    n, dx = x.size, x[1] - x[0]
+    period = n * dx
+    q = min(n // 2 - 1, int(np.ceil(cycles_per_um * period)) + 1)
+    c = sfft.fft(y, axis=-1, workers=-1) / n
+    coef = np.concatenate([c[..., n - q :], c[..., : q + 1]], axis=-1)  # k = -q .. q
+    s, shift = x_out[1] - x_out[0], x_out[0] - x[0]
+    a = np.exp(-2j * np.pi * shift / period)
+    w = np.exp(2j * np.pi * s / period)
+    v = czt(coef, x_out.size, w, a, axis=-1)
+    ramp = np.exp(-2j * np.pi * q * (shift + np.arange(x_out.size) * s) / period)
+    out = (v * ramp).real
+    out[..., (x_out < x[0] - 1e-9 * dx) | (x_out > x[-1] + 1e-9 * dx)] = 0.0
+    return out
+
+
+def _weighted_sum(xs: list[np.ndarray], ys: list[np.ndarray], w, cycles: list[float]):
+    """sum_i w_i y_i (..., n_i) of band-limited samples on grids x_i, on one grid: the
+    union of the grids' spans at the finest of their steps, each evaluated there by
+    :func:`resample` (one grid: as it is)."""
+    if len(xs) == 1:
+        return xs[0], ys[0] * w[0] if w[0] != 1.0 else ys[0]
+    step = min(x[1] - x[0] for x in xs)
+    lo, hi = min(x[0] for x in xs), max(x[-1] for x in xs)
+    x_out = lo + np.arange(int(np.ceil((hi - lo) / step)) + 1) * step
+    out = np.zeros(ys[0].shape[:-1] + (x_out.size,))
+    for xi, yi, wi, ci in zip(xs, ys, w, cycles, strict=True):
+        out += wi * resample(xi, yi, x_out, ci)
+    return x_out, out
+
+
+@dataclass(frozen=True)
+class SpectralWaveResponse:
+    """A pixel's responsivity under a light, the weighted sum of the wave engine's
+    responses at the light's wavelengths (the attributes of
+    :class:`~.wave.WaveResponse` where they mean the same).
+
+    Attributes
+    ----------
+    design, fingerprint, pixel, z_mm : as :class:`~.wave.WaveResponse`
+    x_um, y_um : (nx,), (ny,) the union of the wavelengths' grids at the finest step
+    lsf_x, lsf_y : (nz, nx), (nz, ny) weighted line-spread functions (um sr per um)
+    etendue_um2sr : (nz,) weighted light (um^2 sr)
+    center_cell_fraction : (nz,) share of the weighted light within the central cell
+    spectrum : the :class:`~.spectrum.Spectrum`
+    parts : one :class:`~.wave.WaveResponse` per wavelength
+    """
+
+    design: str
+    fingerprint: str
+    pixel: dict
+    z_mm: np.ndarray
+    x_um: np.ndarray
+    y_um: np.ndarray
+    lsf_x: np.ndarray
+    lsf_y: np.ndarray
+    etendue_um2sr: np.ndarray
+    center_cell_fraction: np.ndarray
+    spectrum: Spectrum
+    parts: list[WaveResponse] = field(repr=False)
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def budget(self) -> list[dict]:
+        """The mask-by-mask budget, weighted over the wavelengths (um^2 sr)."""
+        out = []
+        for i, rec in enumerate(self.parts[0].budget):
+            agg = {"mask": rec["mask"]}
+            for key in ("incoming", "transmitted", "in_band", "lost_to_band"):
+                agg[key] = float(
+                    sum(
+                        w * p.budget[i][key]
+                        for w, p in zip(self.spectrum.weights, self.parts, strict=True)
+                    )
+                )
+            out.append(agg)
+        return out
+
+    def to_dict(self) -> dict:
+        """Summary as plain data (no fine arrays)."""
+        return response_summary(self) | {
+            "spectrum": self.spectrum.to_dict(),
+            "budget": self.budget,
+            "bands": [p.sampling.band for p in self.parts],
+            "meta": self.meta,
+        }
+
+    def spot(self, iz: int, bin_um: float = 2.0, half_um: float | None = None):
+        """The weighted responsivity map at ``z_mm[iz]`` on square bins (sr): (edges,
+        map[y, x]), as :meth:`~.wave.WaveResponse.spot`."""
+        if half_um is None:
+            from .wave import _half_width
+
+            half_um = max(
+                _half_width(self.x_um, self.lsf_x[iz]), _half_width(self.y_um, self.lsf_y[iz])
+            )
+        edges, total = None, None
+        for w, p in zip(self.spectrum.weights, self.parts, strict=True):
+            edges, m = p.spot(iz, bin_um, half_um)
+            total = w * m if total is None else total + w * m
+        return edges, total
+
+
+def wave_response_spectral(
+    design: Design,
+    z_mm=(0.0, 1.0, 2.0, 3.0),
+    *,
+    spectrum: str | Spectrum | None = None,
+    pixel: tuple[int, int] = (0, 0),
+    sampling: WaveSampling | None = None,
+    cell_um: float | None = None,
+) -> SpectralWaveResponse:
+    """A used pixel's responsivity under a light of one channel.
+
+    Parameters
+    ----------
+    design, z_mm, pixel, cell_um : as :func:`~.wave.wave_response`
+    spectrum : a :class:`~.spectrum.Spectrum`, a light's name ("mono", "white", "red",
+        "green", "blue") or None: the design's ``electronics.illumination`` ("rgb" has
+        three channels: :func:`wave_response_channels`)
+    sampling : a :class:`~.wavebase.WaveSampling` at one wavelength, carried to each
+        (:func:`spectral_samplings`); default the design's rules at each wavelength
+    """
+    spec = one_channel(design, spectrum)
+    smps = spectral_samplings(design, spec, sampling)
+    parts = [
+        wave_response(at_wavelength(design, lam), z_mm, pixel=pixel, sampling=s, cell_um=cell_um)
+        for lam, s in zip(spec.wavelengths_um, smps, strict=True)
+    ]
+    w = spec.weights
+    cyc = [2 * s.band / s.wavelength_um for s in smps]
+    x, lx = _weighted_sum([p.x_um for p in parts], [p.lsf_x for p in parts], w, cyc)
+    y, ly = _weighted_sum([p.y_um for p in parts], [p.lsf_y for p in parts], w, cyc)
+    e = [p.etendue_um2sr for p in parts]
+    light = sum(wi * ei for wi, ei in zip(w, e, strict=True))
+    inside = sum(wi * ei * p.center_cell_fraction for wi, ei, p in zip(w, e, parts, strict=True))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cells = np.where(light > 0, inside / np.where(light > 0, light, 1.0), 0.0)
+    first = parts[0]
+    return SpectralWaveResponse(
+        design.name,
+        design.fingerprint(),
+        first.pixel,
+        first.z_mm,
+        x,
+        y,
+        lx,
+        ly,
+        np.asarray(light, dtype=np.float64),
+        cells,
+        spec,
+        parts,
+        {"path": "separable", "propagator": "paraxial", "cell_um": first.meta["cell_um"]},
+    )
+
+
+def wave_response_channels(
+    design: Design,
+    z_mm=(0.0, 1.0, 2.0, 3.0),
+    *,
+    illumination: str | Spectrum | None = None,
+    pixel: tuple[int, int] = (0, 0),
+    sampling: WaveSampling | None = None,
+    cell_um: float | None = None,
+) -> dict[str, SpectralWaveResponse]:
+    """One responsivity per channel of the light (default: the design's illumination;
+    "rgb" gives "red", "green" and "blue", any other light one channel)."""
+    return {
+        name: wave_response_spectral(
+            design, z_mm, spectrum=spec, pixel=pixel, sampling=sampling, cell_um=cell_um
+        )
+        for name, spec in channels(design, illumination).items()
+    }
+
+
+def spectral_lsf_x(
+    design: Design,
+    z_mm,
+    *,
+    spectrum: str | Spectrum | None = None,
+    pixel: tuple[int, int] = (0, 0),
+    sampling: WaveSampling | None = None,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """The x line-spread functions alone under a light of one channel (the x-only path,
+    :func:`~.wave.wave_lsf_x`, at each wavelength, weighted): (x_um, lsf_x (nz, nx),
+    light um^2 sr)."""
+    spec = one_channel(design, spectrum)
+    smps = spectral_samplings(design, spec, sampling)
+    runs = [
+        wave_lsf_x(at_wavelength(design, lam), z_mm, pixel=pixel, sampling=s)
+        for lam, s in zip(spec.wavelengths_um, smps, strict=True)
+    ]
+    cyc = [2 * s.band / s.wavelength_um for s in smps]
+    x, lsf = _weighted_sum([r[0] for r in runs], [r[1] for r in runs], spec.weights, cyc)
+    light = float(sum(w * r[2] for w, r in zip(spec.weights, runs, strict=True)))
+    return x, lsf, light
+
+
+def mirror_twin(design: Design, pixel: tuple[int, int], other: tuple[int, int]) -> bool:
+    """Whether the pixel ``other`` sees the stack as ``pixel`` does mirrored in y with
+    the rows' roles exchanged (the nominal staggered lattice: row B's pixel sees row A's
+    view mirrored), so that its x line-spread functions are ``pixel``'s exactly: at
+    every mask the holes of each row lie at the same x offsets modulo the pitch as the
+    other row's from ``other``, and at the opposite y offset (the sensitive area is
+    symmetric in y). Both pixels are taken far from the line's ends."""
+    if pixel[0] == other[0]:
+        return True
+    lat = lattice_of(design)
+    p = lat.pitch
+    pa, pb = (np.asarray(lat.centers(*q), dtype=np.float64) for q in (pixel, other))
+    ra, rb = pixel[0], other[0]
+    tol = 1e-9 * max(1.0, p)
+    for sl in design.slabs:
+        m = sl.mask_top
+        if m is None:
+            continue
+        for r, rr in ((ra, rb), (rb, ra)):
+            dxa = lat.row_x[r] + m.offset_x_um - pa[0]
+            dxb = lat.row_x[rr] + m.offset_x_um - pb[0]
+            d = (dxa - dxb) / p
+            if abs(d - round(d)) * p > tol:
+                return False
+            dya = lat.row_y[r] + m.offset_y_um - pa[1]
+            dyb = lat.row_y[rr] + m.offset_y_um - pb[1]
+            if abs(dya + dyb) > tol:
+                return False
+    return True
