@@ -122,7 +122,7 @@ def _weighted_sum(xs: list[np.ndarray], ys: list[np.ndarray], w, cycles: list[fl
         return xs[0], ys[0] * w[0] if w[0] != 1.0 else ys[0]
     step = min(x[1] - x[0] for x in xs)
     lo, hi = min(x[0] for x in xs), max(x[-1] for x in xs)
-    x_out = lo + np.arange(int(np.ceil((hi - lo) / step)) + 1) * step
+    x_out = lo + np.arange(int(np.floor((hi - lo) / step + 1e-6)) + 1) * step
     out = np.zeros(ys[0].shape[:-1] + (x_out.size,))
     for xi, yi, wi, ci in zip(xs, ys, w, cycles, strict=True):
         out += wi * resample(xi, yi, x_out, ci)
