@@ -276,7 +276,6 @@ MAX_LINES = 600
 #: for any other module that grows past MAX_LINES
 LONG_MODULES = MappingProxyType(
     {
-        "studies.search": "issue 22: the search's evaluation and its front to split",
         "analysis.wave": "the wave-optics engine, in progress",
     }
 )

@@ -14,16 +14,17 @@ The optimiser is Optuna's NSGA-II (multi-objective, constraint-aware), seeded, d
 batches of ``population`` designs that are evaluated in parallel (:mod:`execute`); the
 result is the Pareto front of the feasible designs. Seeds belong to the evaluations, so
 the front is the same for any number of workers.
+
+This module is the optimisation loop and the study of a design's variants; the space and
+its constraints are in :mod:`.searchspace`, the result, its records and the merged front in
+:mod:`.searchresult`, the exact re-verification of a front and its export as designs in
+:mod:`.front` (their names are importable from here too).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
-import math
-from dataclasses import dataclass, field
 from pathlib import Path
-from types import MappingProxyType
 
 import numpy as np
 
@@ -31,7 +32,6 @@ from ..defaults import SEARCH_BUDGET_MM, SEARCH_GENERATIONS, SEARCH_NEAR_MM, SEA
 from ..design import (
     Design,
     design_from_dict,
-    replace,
     scale_to_dpi,
     stack_params,
     structural_variants,
@@ -43,61 +43,24 @@ from ..io.journal import journal_lock
 from ..raytrace.stack import output_pitch
 from ..units import pitch_of_dpi
 from ..validate import InputError, check_number, check_seed
-from .evaluate import SURROGATE, check_figures
+from .evaluate import check_figures
+from .front import front_designs, verify_front
 from .runner import run_tasks, task_key
-from .verify import (
-    ESTIMATORS,
-    EXACT,
-    EXACT_GHOST_RAYS,
-    EXACT_LSF_RAYS,
-    SURROGATE_ACCURACY,
-    check_estimator,
-    disagreements,
-    evaluate_with,
-    exact_figures,
+from .searchresult import (
+    FIGURES,
+    OBJECTIVES,
+    SearchResult,
+    depth_key,
+    merged_front,
+    pareto_front,
+    record_row,
+    search_dataset,
 )
+from .searchspace import CONSTRAINTS, SearchSpace, constraint_values, default_space, on_grid
+from .verify import ESTIMATORS, check_estimator, evaluate_with
 
 #: a base whose output pitch is within this of 25.4 mm / dpi is searched as it is
 SAME_RESOLUTION = 0.01
-
-
-@dataclass(frozen=True)
-class SearchSpace:
-    hole_bounds_um: tuple[float, float]
-    thickness_bounds_um: list[tuple[float, float]]
-    thickness_step_um: float
-    pinned: dict = field(default_factory=dict)  # "hole1".., "slab1".. -> value
-
-    def names(self, n_holes: int, n_slabs: int) -> list[str]:
-        """The variables: ``hole1``.. (layer 1 = object side) and ``slab1``.. (slab 1 = the
-        object side's), object side first as every list of the stack."""
-        return [f"hole{i + 1}" for i in range(n_holes)] + [f"slab{i + 1}" for i in range(n_slabs)]
-
-
-def default_space(
-    design: Design,
-    budget_um: float,
-    min_hole_um: float = 10.0,
-    min_wall_um: float = 10.0,
-    thickness_step_um: float = 50.0,
-) -> SearchSpace:
-    s = design.sensor
-    dx = s.row_b_offset_x_um % s.row_pitch_um if s.rows == 2 else s.row_pitch_um
-    dx = min(dx, s.row_pitch_um - dx) if s.rows == 2 else s.row_pitch_um
-    hole_max = min(dx, s.row_pitch_um) - min_wall_um
-    lo = max(thickness_step_um, 100.0)
-    hi = lo + math.floor((min(budget_um, 2000.0) - lo) / thickness_step_um) * thickness_step_um
-    bounds = [(lo, hi) for _ in design.slabs]
-    return SearchSpace((min_hole_um, float(math.floor(hole_max))), bounds, thickness_step_um)
-
-
-def _on_grid(dist, value: float):
-    """``value`` at the nearest point of an optuna distribution (int or stepped float)."""
-    lo, hi = dist.low, dist.high
-    step = getattr(dist, "step", None) or 1
-    v = min(max(value, lo), hi)
-    v = lo + round((v - lo) / step) * step
-    return int(round(v)) if isinstance(lo, int) else float(v)
 
 
 def _evaluate_payload(payload: dict) -> dict:
@@ -108,62 +71,6 @@ def _evaluate_payload(payload: dict) -> dict:
     d = with_stack(base, holes_um=payload["holes_um"], thicknesses_um=payload["thicknesses_um"])
     with using_device(payload.get("device", "cpu")):
         return evaluate_with(d, payload["options"])
-
-
-@dataclass(frozen=True)
-class SearchResult:
-    base: str
-    dpi: float
-    seed: int
-    records: list[dict]  # every evaluation: params, metrics, feasible
-    pareto: list[dict]
-    reference: dict | None  # the base design's own evaluation
-    meta: dict = field(default_factory=dict)
-    design: Design | None = field(default=None, repr=False)  # the searched base
-
-    def to_dict(self) -> dict:
-        target = self.reference["dof_mm"] if self.reference else None
-        deep = [
-            r
-            for r in self.records
-            if r["feasible"] and target is not None and r["dof_mm"] >= target
-        ]
-        thinnest = min(deep, key=lambda r: (r["stack_um"], -r["efficiency_ratio"]), default=None)
-        return {
-            "base": self.base,
-            "dpi": self.dpi,
-            "seed": self.seed,
-            "pareto": self.pareto,
-            "thinnest_with_base_dof": thinnest,
-            "reference": self.reference,
-            "n_evaluations": len(self.records),
-            "n_feasible": sum(r["feasible"] for r in self.records),
-            "n_failed": sum(not r["ok"] for r in self.records),
-            "meta": self.meta,
-        }
-
-
-def pareto_front(points: np.ndarray) -> np.ndarray:
-    """Indices of the non-dominated rows of ``points`` (maximise every column)."""
-    keep = []
-    for i, p in enumerate(points):
-        dominated = np.any(np.all(points >= p, axis=1) & np.any(points > p, axis=1))
-        if not dominated:
-            keep.append(i)
-    return np.array(keep, dtype=np.int64)
-
-
-CONSTRAINTS = ("near_ghost", "ghost_fraction", "stack_budget", "diffraction_spill")
-
-
-def _feasible(m: dict, budget_um: float, max_ghost: float | None, max_spill: float) -> list:
-    """Constraint values (<= 0 feasible) for NSGA-II."""
-    return [
-        1.0 if m["near_ghost"] else 0.0,
-        (m["ghost_fraction"] - max_ghost) if max_ghost is not None else 0.0,
-        (m["stack_um"] - budget_um) / 1000.0,
-        m["diffraction_spill"] - max_spill,
-    ]
 
 
 def _optuna_warnings_only(fn):
@@ -297,7 +204,7 @@ def search(
     if warm_start:  # the base design joins the first generation (NSGA-II breeds from it),
         # at its nearest point of the search's grid (a base off the grid, a half-scale
         # 225-um gap on the 50-um steps, is evaluated exactly for reference below)
-        start = {k: _on_grid(dists[k], v) for k, v in base_params.items() if k not in pins}
+        start = {k: on_grid(dists[k], v) for k, v in base_params.items() if k not in pins}
         study.enqueue_trial(start, skip_if_exists=True)
     with journal_lock(journal):  # one lock for every generation of this run
         # the base design itself, for reference on the front
@@ -335,14 +242,14 @@ def search(
                 rec = recs.get(key)
                 if rec is None or not rec["ok"]:
                     study.tell(t, state=optuna.trial.TrialState.FAIL)
-                    records.append(_row(params, rec, None, False, n_h, n_t))
+                    records.append(record_row(params, rec, None, False, n_h, n_t))
                     continue
                 m = rec["result"]
-                cons = _feasible(m, budget_um, max_ghost, max_spill)
+                cons = constraint_values(m, budget_um, max_ghost, max_spill)
                 for name, c in zip(CONSTRAINTS, cons, strict=True):
                     t.set_constraint(name, c)  # <= 0: satisfied (NSGA-II's constrained domination)
                 study.tell(t, [m["efficiency_ratio"], m[depth]])
-                records.append(_row(params, rec, m, all(c <= 0 for c in cons), n_h, n_t))
+                records.append(record_row(params, rec, m, all(c <= 0 for c in cons), n_h, n_t))
     ok = [r for r in records if r["feasible"]]
     # one entry per distinct design on the front
     uniq = {}
@@ -356,11 +263,11 @@ def search(
     reference = None
     if ref_rec["ok"]:
         m = ref_rec["result"]
-        reference = _row(
+        reference = record_row(
             base_params,
             ref_rec,
             m,
-            all(c <= 0 for c in _feasible(m, budget_um, max_ghost, max_spill)),
+            all(c <= 0 for c in constraint_values(m, budget_um, max_ghost, max_spill)),
             n_h,
             n_t,
         )
@@ -391,84 +298,6 @@ def search(
             "ghost_rays": ghost_rays,
             "hole_bounds_um": list(sp.hole_bounds_um),
             "thickness_bounds_um": [list(b) for b in sp.thickness_bounds_um],
-        },
-    )
-
-
-#: The figures of a search record (besides its parameters).
-FIGURES = (
-    "efficiency_ratio",
-    "dof_mm",
-    "restored_dof_mm",
-    "ghost_fraction",
-    "nearest_ghost_mm",
-    "diffraction_spill",
-    "stack_um",
-)
-#: the depth objective of a search: the depth of field, or the depth of field after
-#: Wiener restoration with the known blur (co-design of optics and computation)
-OBJECTIVES = MappingProxyType({"dof": "dof_mm", "restored-dof": "restored_dof_mm"})
-
-
-def depth_key(res) -> str:
-    """The record key of a search's depth objective (``dof_mm`` unless it searched for
-    the restored depth of field)."""
-    return res.meta.get("objective", "dof_mm")
-
-
-def _row(
-    params: dict, rec: dict | None, m: dict | None, feasible: bool, n_h: int, n_t: int
-) -> dict:
-    row = {
-        "holes_um": [float(params[f"hole{j + 1}"]) for j in range(n_h)],
-        "thicknesses_um": [float(params[f"slab{j + 1}"]) for j in range(n_t)],
-        "ok": m is not None,
-        "feasible": feasible,
-        "error": None if rec is None or rec["ok"] else rec.get("error", "not run"),
-    }
-    row["rmtf_at"] = None if m is None else dict(m["rmtf_at"])
-    for k in FIGURES:
-        v = None if m is None else m.get(k)
-        # JSON (the journal) has no infinity: a missing nearest ghost means none at all
-        row[k] = (
-            float(v)
-            if v is not None
-            else (math.inf if m is not None and k == "nearest_ghost_mm" else math.nan)
-        )
-    return row
-
-
-def search_dataset(res: SearchResult, design: Design, seed: int):
-    """Every evaluation of a search as an xarray Dataset (dims: evaluation, layer, slab)."""
-    import xarray as xr
-
-    from .. import __version__
-
-    recs = res.records
-    front = {(tuple(r["holes_um"]), tuple(r["thicknesses_um"])) for r in res.pareto}
-    key = [(tuple(r["holes_um"]), tuple(r["thicknesses_um"])) for r in recs]
-    data = {
-        "hole_um": (("evaluation", "layer"), np.array([r["holes_um"] for r in recs])),
-        "thickness_um": (("evaluation", "slab"), np.array([r["thicknesses_um"] for r in recs])),
-        "feasible": ("evaluation", np.array([r["feasible"] for r in recs], dtype=np.int8)),
-        "on_front": ("evaluation", np.array([k in front for k in key], dtype=np.int8)),
-    }
-    for k in FIGURES:
-        v = np.array([r[k] for r in recs], dtype=np.float64)
-        data[k] = ("evaluation", np.where(np.isfinite(v), v, np.nan))
-    return xr.Dataset(
-        data,
-        coords={"evaluation": np.arange(len(recs))},
-        attrs={
-            "kind": "opticalstamp search",
-            "design": design.name,
-            "design_fingerprint": design.fingerprint(),
-            "seed": seed,
-            "opticalstamp_version": __version__,
-            "dpi": res.dpi,
-            "reference": res.reference,
-            "meta": res.meta,
-            "layer_order": "holes and slabs: object side first (layer 1 faces the document)",
         },
     )
 
@@ -541,176 +370,24 @@ def search_variants(
     return out
 
 
-def merged_front(results: dict[str, SearchResult]) -> list[dict]:
-    """The Pareto front over several searches, each entry tagged with its variant."""
-    rows = [r | {"variant": name} for name, res in results.items() for r in res.pareto]
-    if not rows:
-        return []
-    depth = depth_key(next(iter(results.values())))
-    pts = np.array([[r["efficiency_ratio"], r[depth]] for r in rows])
-    return sorted((rows[i] for i in pareto_front(pts)), key=lambda r: -r[depth])
-
-
-def _exact_payload(payload: dict) -> dict:
-    """Worker entry: the exact tracer's figures of a candidate built from plain data, its
-    rays on the payload's device."""
-    base = design_from_dict(payload["base"], "search base")
-    d = with_stack(base, holes_um=payload["holes_um"], thicknesses_um=payload["thicknesses_um"])
-    with using_device(payload.get("device", "cpu")):
-        return exact_figures(d, **payload["options"])
-
-
-def _verified(row: dict, exact: dict | None) -> dict:
-    """A record with the exact tracer's figures as its figures of record: the surrogate's
-    kept under ``surrogate``, the exact ones under ``exact``, and ``disagrees`` naming the
-    figures that differ by more than the surrogate's stated accuracy."""
-    if exact is None:
-        return row | {"estimator": SURROGATE, "exact": None, "disagrees": None}
-    sur = {k: row[k] for k in (*FIGURES, "rmtf_at")}
-    out = row | {
-        "estimator": EXACT,
-        "surrogate": sur,
-        "exact": exact,
-        "disagrees": disagreements(sur, exact),
-    }
-    for k in ("efficiency_ratio", "dof_mm", "ghost_fraction", "nearest_ghost_mm", "rmtf_at"):
-        out[k] = exact[k]
-    return out
-
-
-def verify_front(
-    res: SearchResult,
-    *,
-    ghost_rays: int = EXACT_GHOST_RAYS,
-    lsf_rays: int = EXACT_LSF_RAYS,
-    workers: int | None = None,
-    dask_address: str | None = None,
-    journal: Path | None = None,
-    progress: bool = False,
-    device: str | None = None,
-) -> SearchResult:
-    """The search's front and base design re-verified by the exact tracer.
-
-    Each point of the front (and the base design) is traced exactly
-    (:func:`~opticalstamp.studies.verify.exact_figures`, the search's seed and chart):
-    its exact figures become the figures of record, the surrogate's are kept beside them,
-    and ``disagrees`` names the figures where the two differ by more than
-    ``SURROGATE_ACCURACY``. ``exact_dominated_by``: how many other points of the front
-    dominate it in the exact figures (the surrogate ranked it on the front; 0 where the
-    exact tracer agrees). Runs on the search's workers and journal, so it resumes;
-    ``device`` as in :func:`search`.
-    """
-    if res.design is None:
-        raise ValueError("verify_front: the search result carries no design")
-    base_json = res.design.model_dump(mode="json", exclude_none=True)
-    options = {
-        "dpi": res.meta["dof_dpi"],
-        "near_mm": res.meta["near_mm"],
-        "ghost_rays": ghost_rays,
-        "lsf_rays": lsf_rays,
-        "seed": res.seed,
-    }
-    rows = list(res.pareto) + ([res.reference] if res.reference else [])
-    where = run_device(device)
-    tasks = []
-    for r in rows:
-        p = {
-            "base": base_json,
-            "holes_um": r["holes_um"],
-            "thicknesses_um": r["thicknesses_um"],
-            "options": options,
-            "exact": True,
-            "device": where,
-        }
-        tasks.append((task_key(p), p))
-    recs = run_tasks(
-        _exact_payload,
-        tasks,
-        workers=workers,
-        dask_address=dask_address,
-        journal=journal,
-        progress=progress,
-        desc="exact re-verification",
-        check=check_figures,
-    )
-
-    def exact_of(i: int) -> dict | None:
-        rec = recs.get(tasks[i][0])
-        return rec["result"] if rec is not None and rec["ok"] else None
-
-    front = [_verified(r, exact_of(i)) for i, r in enumerate(res.pareto)]
-    depth = depth_key(res)
-    pts = np.array([[r["efficiency_ratio"], r[depth]] for r in front]).reshape(-1, 2)
-    for r, p in zip(front, pts, strict=True):
-        r["exact_dominated_by"] = int((np.all(pts >= p, axis=1) & np.any(pts > p, axis=1)).sum())
-    reference = res.reference
-    if reference is not None:
-        reference = _verified(reference, exact_of(len(rows) - 1))
-    meta = res.meta | {
-        "verified_by": EXACT,
-        "surrogate_accuracy": dict(SURROGATE_ACCURACY),
-        "exact_ghost_rays": ghost_rays,
-        "exact_lsf_rays": lsf_rays,
-    }
-    return dataclasses.replace(res, pareto=front, reference=reference, meta=meta)
-
-
-def front_designs(results: dict[str, SearchResult], front: list[dict]) -> list[dict]:
-    """Every point of ``front`` (rows of :func:`merged_front` or of one search's
-    ``pareto``) as a design of its own: ``{"name", "file", "design", "row", "provenance"}``.
-
-    The design is the searched base (of the point's variant) with the point's holes and
-    slabs; its name is the base's with ``-pNN`` (NN: the point's rank by depth of field,
-    from 01), its description says where it comes from; ``file`` is the name of the file
-    it is written to, ``STEM-pNN.toml`` with STEM the base's name as a file stem without
-    spaces (:func:`~opticalstamp.io.files.file_stem`: ``paper2016-p01.toml``,
-    ``paper2016-600dpi-p01.toml`` for the base ``paper2016 at 600 dpi``; unique, as NN
-    is); ``provenance`` lists the search's settings and the point's surrogate and exact
-    figures (the lines a design file writes as comments).
-    """
-    from .. import __version__
-    from ..io.files import file_stem
-
-    out = []
-    for i, row in enumerate(front, start=1):
-        res = results[row["variant"]] if "variant" in row else next(iter(results.values()))
-        base = res.design
-        name = f"{base.name}-p{i:02d}"
-        desc = (
-            f"Pareto point {i} of {len(front)} of a design search of {base.name} "
-            f"(seed {res.seed}, {res.dpi:g} dpi, depth of field at "
-            f"{res.meta['dof_dpi']:g} dpi): holes {row['holes_um']} um (layer 1 first), "
-            f"slabs {row['thicknesses_um']} um (object side first)"
-        )
-        d = with_stack(base, holes_um=row["holes_um"], thicknesses_um=row["thicknesses_um"])
-        d = replace(d, name=name, description=desc)
-        sur = row.get("surrogate") or {k: row[k] for k in (*FIGURES, "rmtf_at")}
-        prov = [
-            f"exported by opticalstamp {__version__} search --export-designs",
-            f"search: base {base.name} (fingerprint {base.fingerprint()}), seed {res.seed}, "
-            f"{res.dpi:g} dpi, {len(res.records)} designs, constraints near_mm "
-            f"{res.meta['near_mm']:g}, budget_mm {res.meta['budget_mm']:g}, max_spill "
-            f"{res.meta['max_spill']:g}"
-            + (f", max_ghost {res.meta['max_ghost']:g}" if res.meta["max_ghost"] else ""),
-            f"point {i} of {len(front)}"
-            + (f" (variant {row['variant']})" if "variant" in row else ""),
-            "surrogate: efficiency {:.5f}, DOF {:.3f} mm, ghost fraction {:.4f}".format(
-                sur["efficiency_ratio"], sur["dof_mm"], sur["ghost_fraction"]
-            ),
-        ]
-        if row.get("exact"):
-            e = row["exact"]
-            prov.append(
-                "exact tracer (figure of record): efficiency {:.5f}, DOF {:.3f} mm, ghost "
-                "fraction {:.4f}{}".format(
-                    e["efficiency_ratio"],
-                    e["dof_mm"],
-                    e["ghost_fraction"],
-                    f"; differs from the surrogate in {', '.join(row['disagrees'])}"
-                    if row["disagrees"]
-                    else "",
-                )
-            )
-        file = f"{file_stem(base.name)}-p{i:02d}.toml"
-        out.append({"name": name, "file": file, "design": d, "row": row, "provenance": prov})
-    return out
+#: what the search's modules offer, importable from here as before the split
+__all__ = [
+    "CONSTRAINTS",
+    "FIGURES",
+    "OBJECTIVES",
+    "SAME_RESOLUTION",
+    "SearchResult",
+    "SearchSpace",
+    "default_space",
+    "depth_key",
+    "front_designs",
+    "journal_of",
+    "merged_front",
+    "pareto_front",
+    "search",
+    "search_base",
+    "search_dataset",
+    "search_variants",
+    "variant_path",
+    "verify_front",
+]
