@@ -1,0 +1,198 @@
+"""The forward model of a fit (issue 24): a design's parameters -> its images of charts.
+
+Physical parameters (names as the search's ``--pin`` names them: layers and slabs
+numbered from the object side, from 1):
+
+* ``layerN.x``, ``layerN.y``: mask N's misregistration (um) against the sensor's pixels;
+* ``slabN``: slab N's thickness (um);
+* ``holeN`` (square holes) or ``holeN.x``, ``holeN.y`` (rectangles): hole size (um);
+* ``pixel.x``, ``pixel.y``: the pixel's sensitive width and height (um);
+* ``ref``: where Z = 0 really is, um above the reference plane as drawn (the light guide
+  thicker than drawn: > 0); the fitted design's reference gap is the drawn one plus it.
+
+A chart varying along x at height Z gives the merged line's column at x the value
+b + (w - b) F(x), F the fraction of the pixel's own-path responsivity that falls on white
+(the chart's white reflectance w and black b as the scanner's shading correction scales
+them, ghost light's near-uniform background included); a straight edge likewise, with the
+responsivity's spread along the edge's normal. The responsivity is the paraxial closed
+form of the own path (:mod:`opticalstamp.analysis.paraxial`: separable, exact for
+rectangular holes; what ``scan --kernel auto`` uses for them), its cumulative tabulated
+at 0.25 um; along y it is smeared by the document's motion over the exposure (the box of
+``exposure_duty`` x the line pitch, as the scan simulation does).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..analysis.paraxial import paraxial_cumulative, paraxial_support
+from ..design import Design
+from ..design.model import MIN_LENGTH_UM
+from ..design.variants import replace
+from ..raytrace.stack import output_pitch
+
+#: Step (um) of the tabulated cumulative responsivity.
+TABLE_UM = 0.25
+#: Sub-positions of the motion smear (the scan simulation's midpoint rule).
+SMEAR_SUBS = 9
+#: Step (um) of the nodes of the cross spread of a slanted edge (times its slope).
+CROSS_UM = 6.0
+
+
+@dataclass(frozen=True)
+class Param:
+    """One physical parameter: its name, the design path it writes, the nominal value,
+    its bounds and a typical scale (um) of assembly errors (multi-start spread, degeneracy
+    scaling)."""
+
+    name: str
+    path: str
+    nominal: float
+    lo: float
+    hi: float
+    scale: float
+    offset: bool = False  # the design's value is base + x (``ref``), else x
+    base: float = 0.0
+
+
+def design_params(design: Design) -> list[Param]:
+    """Every physical parameter of a stamp with rectangular holes (see the module doc)."""
+    s = design.sensor
+    out = []
+    masks = [i for i, sl in enumerate(design.slabs) if sl.mask_top is not None][::-1]
+    for n, i in enumerate(masks, 1):
+        m = design.slabs[i].mask_top
+        base = f"slabs.{i}.mask_top"
+        for ax in ("x", "y"):
+            v = getattr(m, f"offset_{ax}_um")
+            out.append(Param(f"layer{n}.{ax}", f"{base}.offset_{ax}_um", v, v - 40, v + 40, 3.0))
+    nsl = len(design.slabs)
+    for n in range(1, nsl + 1):
+        t = design.slabs[nsl - n].thickness_um
+        path = f"slabs.{nsl - n}.thickness_um"
+        out.append(Param(f"slab{n}", path, t, MIN_LENGTH_UM, 3 * t, max(0.03 * t, 5.0)))
+    for n, i in enumerate(masks, 1):
+        m = design.slabs[i].mask_top
+        base = f"slabs.{i}.mask_top"
+        hi = s.row_pitch_um * 0.999
+        if m.shape == "square":
+            out.append(Param(f"hole{n}", f"{base}.size_um", m.size_um, 1.0, hi, 3.0))
+        else:
+            out.append(Param(f"hole{n}.x", f"{base}.width_um", m.width_um, 1.0, hi, 3.0))
+            out.append(Param(f"hole{n}.y", f"{base}.height_um", m.height_um, 1.0, hi, 3.0))
+    for ax, key in (("x", "sensitive_width_um"), ("y", "sensitive_height_um")):
+        v = getattr(s, key)
+        out.append(Param(f"pixel.{ax}", f"sensor.{key}", v, 1.0, s.pixel_pitch_um, 3.0))
+    g = design.reference_gap.thickness_um
+    out.append(
+        Param("ref", "reference_gap.thickness_um", 0.0, -g, 5000.0, 200.0, offset=True, base=g)
+    )
+    return out
+
+
+def with_params(design: Design, params: list[Param], values) -> Design:
+    """The design with the parameters set (validated: DesignError names a bad field)."""
+    changes = {}
+    for p, v in zip(params, values, strict=True):
+        changes[p.path] = float(p.base + v if p.offset else v)
+    if "reference_gap.thickness_um" in changes:
+        changes["reference_gap.thickness_um"] = max(changes["reference_gap.thickness_um"], 0.0)
+    return replace(design, changes)
+
+
+@dataclass(frozen=True)
+class Spread:
+    """The own path's responsivity at one Z, normalised, in the forms the charts need.
+
+    ``u``: grid (um from the pixel's axis) of ``cx`` (cumulative along x, 0 to 1) and
+    ``cy`` (cumulative along y of the motion-smeared spread of Y' = Y - sub, 0 to 1: the
+    document point a pixel sees is y - Y'); ``half_um``: half width of the support.
+    """
+
+    u: np.ndarray
+    cx: np.ndarray
+    cy: np.ndarray
+    half_um: float
+
+    def nodes(self, cum: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(positions, weights) of a distribution from its cumulative on ``u``, on
+        CROSS_UM bins."""
+        k0 = np.floor(self.u[0] / CROSS_UM)  # a fixed grid, as the table's
+        edges = (k0 + np.arange(int(np.ceil((self.u[-1] - self.u[0]) / CROSS_UM)) + 2)) * CROSS_UM
+        c = np.interp(edges, self.u, cum)
+        w = np.diff(c)
+        mid = (edges[1:] + edges[:-1]) / 2
+        keep = w > 1e-9
+        return mid[keep], w[keep] / w[keep].sum()
+
+
+def spread(design: Design, z_mm: float, smear_um: float) -> Spread:
+    """The own path's spread of ``design`` at ``z_mm`` above its reference plane."""
+    half = 0.0
+    for axis in (0, 1):
+        lo, hi = paraxial_support(design, z_mm, axis)
+        half = max(half, abs(lo), abs(hi))
+    half = half + smear_um / 2 + 2 * TABLE_UM
+    n = int(np.ceil(half / TABLE_UM))
+    u = np.arange(-n, n + 1) * TABLE_UM  # on a fixed grid: no jump as the support moves
+    cx = paraxial_cumulative(design, z_mm, u, 0)
+    subs = ((np.arange(SMEAR_SUBS) + 0.5) / SMEAR_SUBS - 0.5) * smear_um
+    # P(Y - sub <= v) = mean over sub of C_y(v + sub); C_y is exact on the table's grid
+    # and linear between its points (0.25 um apart)
+    pad = int(np.ceil(smear_um / 2 / TABLE_UM)) + 1
+    uy = np.arange(-n - pad, n + pad + 1) * TABLE_UM
+    cy_grid = paraxial_cumulative(design, z_mm, uy, 1)
+    cy = np.mean([np.interp(u + s, uy, cy_grid) for s in subs], axis=0)
+    gx, gy = cx[-1], cy[-1]
+    if not (gx > 0 and gy > 0):
+        raise ValueError(f"no own-path light reaches the pixel at Z = {z_mm:g} mm")
+    return Spread(u, cx / gx, cy / gy, half)
+
+
+def smear_of(design: Design) -> float:
+    """The motion smear (um) along y over one exposure: duty x the merged line pitch."""
+    return design.electronics.exposure_duty * output_pitch(design)
+
+
+# -- charts -------------------------------------------------------------------------------
+def bar_fraction(sp: Spread, x_um: np.ndarray, period_um: float, phase_um: float):
+    """White fraction seen by the columns at ``x_um`` of bars of ``period_um``, black on
+    [phase + k P, phase + k P + P/2), white on the rest (a periodic chart)."""
+    x = np.asarray(x_um, dtype=np.float64)
+    p = float(period_um)
+    lo, hi = sp.u[0], sp.u[-1]
+    k0 = np.floor((x + lo - phase_um) / p) - 1
+    n_k = int(np.ceil((hi - lo) / p)) + 3
+    k = k0[:, None] + np.arange(n_k)[None, :]
+    a = phase_um + k * p + p / 2 - x[:, None]  # white from a to a + P/2 (in U)
+    c1 = np.interp(a + p / 2, sp.u, sp.cx, left=0.0, right=1.0)
+    c0 = np.interp(a, sp.u, sp.cx, left=0.0, right=1.0)
+    return (c1 - c0).sum(axis=1)
+
+
+def edge_fraction(sp: Spread, edge, pos_um: float, slope: float) -> np.ndarray:
+    """White fraction seen by the pixels of an :class:`~.fitdata.EdgeRegion` whose line is
+    across = pos + slope (along - ref).
+
+    Axis 0 (x): a pixel at (x, y) sees the document at (x + X, y - Y'); white lies before
+    the edge (x' < x_e(y')) when the dark side is after it: P(X + slope Y' < d),
+    d = x_e(y) - x. Axis 1 (y): white where y' < y_e(x'): P(-Y' - slope X < d),
+    d = y_e(x) - y.
+    """
+    if edge.axis == 0:
+        d = pos_um + slope * (edge.y_um - edge.ref_um) - edge.x_um
+        vals, w = sp.nodes(sp.cy)  # Y' nodes
+        main_u, main_c = sp.u, sp.cx
+        cross = slope * vals  # P(X < d - slope Y')
+    else:
+        d = pos_um + slope * (edge.x_um - edge.ref_um) - edge.y_um
+        vals, w = sp.nodes(sp.cx)  # X nodes
+        # -Y' has the cumulative 1 - C_y'(-m)
+        main_u, main_c = -sp.u[::-1], 1.0 - sp.cy[::-1]
+        cross = -slope * vals
+    f = np.zeros(d.size)
+    for c, wt in zip(cross, w, strict=True):
+        f += wt * np.interp(d - c, main_u, main_c, left=0.0, right=1.0)
+    return f if edge.dark_after else 1.0 - f
