@@ -7,9 +7,12 @@ the catalogue, the mirror-twin shortcut against row B computed."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
+from edges import assert_clean_refusal, run
 from opticalstamp.analysis import spectrum as sp
 from opticalstamp.analysis.wave import wave_lsf_x, wave_response
 from opticalstamp.analysis.wavebase import band_integral, stack_axes, wave_sampling
@@ -252,3 +255,22 @@ def test_row_b_is_row_a_mirrored_on_the_nominal_lattice(stamp):
     shifted = _stamp(offsets=[(0.0, 0.0), (0.0, 1.5), (0.0, 0.0)])
     assert not mirror_twin(shifted, (0, 0), (1, 0))
     assert mirror_twin(_stamp(offsets=[(0.0, 0.0), (1.5, 0.0), (0.0, 0.0)]), (0, 0), (1, 0))
+
+
+def test_the_wave_command_takes_a_spectrum():
+    """opticalstamp wave --spectrum red: both engines weighted over the red LED's three
+    wavelengths (JSON names them); an unknown light and --plot with three channels are
+    refused naming the option, exit 2."""
+    res = run(
+        ["wave", "--design", "paper2016", "--z", "0", "--rays", "65536"]
+        + ["--spectrum", "red", "--json"]
+    )
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    spec = out["meta"]["spectrum"]
+    assert spec["name"] == "red" and len(spec["wavelengths_um"]) == 3
+    assert abs(sum(spec["weights"]) - 1) < 1e-12
+    assert out["sampling"]["wavelength_um"] == pytest.approx(0.630, abs=0.01)
+    assert 0.5 < out["wave"]["light_um2sr"] / out["ray"]["light_um2sr"] < 2
+    assert_clean_refusal(run(["wave", "--spectrum", "purple"]), "--spectrum")
+    assert_clean_refusal(run(["wave", "--spectrum", "rgb", "--plot", "w.png"]), "--plot")

@@ -29,10 +29,16 @@ from ..units import period_of_dpi
 from .lsf import FOLD_BIN_UM, FoldedLSF
 from .own_etendue import own_etendue, rectangular_holes
 from .rmtf import rmtf_curves
-from .spectrum import Spectrum
-from .wave import WaveResponse, wave_response
+from .spectrum import Spectrum, one_channel
+from .wave import wave_response
 from .wavebase import WaveSampling, fresnel_numbers, fwhm_of, wave_sampling
-from .wavespectral import mirror_twin, spectral_lsf_x
+from .wavespectral import (
+    at_wavelength,
+    mirror_twin,
+    spectral_lsf_x,
+    spectral_samplings,
+    wave_response_spectral,
+)
 
 #: bin of the traced line-spread functions (um)
 RAY_BIN_UM = 1.0
@@ -211,6 +217,33 @@ def wave_folded_lsf(
     return FoldedLSF(zs, per, rows, h, "wave", 0, False, False)
 
 
+def _weighted_rays(parts: list[RayInBand], weights) -> RayInBand:
+    """sum_i w_i of the tracer's in-band figures at the light's wavelengths (their LSF
+    bins are centred on the pixel's axis: the shorter ones are padded)."""
+    if len(parts) == 1:
+        return parts[0]
+    n = max(p.x_um.size for p in parts)
+    lsf = np.zeros((parts[0].lsf_x.shape[0], n))
+    for w, p in zip(weights, parts, strict=True):
+        o = (n - p.x_um.size) // 2
+        lsf[:, o : o + p.x_um.size] += w * p.lsf_x
+    light = [p.own_um2sr + p.near_um2sr for p in parts]
+    tot = sum(w * li for w, li in zip(weights, light, strict=True))
+    inside = sum(
+        w * li * p.center_cell_fraction for w, li, p in zip(weights, light, parts, strict=True)
+    )
+    return RayInBand(
+        max(p.band for p in parts),
+        float(sum(w * p.own_um2sr for w, p in zip(weights, parts, strict=True))),
+        float(sum(w * p.near_um2sr for w, p in zip(weights, parts, strict=True))),
+        float(sum(w * p.traced_um2sr for w, p in zip(weights, parts, strict=True))),
+        max(parts, key=lambda p: p.x_um.size).x_um,
+        lsf,
+        inside / tot if tot > 0 else np.zeros_like(parts[0].center_cell_fraction),
+        sum(w * p.folded for w, p in zip(weights, parts, strict=True)),
+    )
+
+
 def compare_wave_ray(
     design: Design,
     z_mm=(0.0, 1.0, 2.0, 3.0),
@@ -219,6 +252,7 @@ def compare_wave_ray(
     n_rays: int = RAYS_LSF,
     seed: int = 0,
     dof_dpi: float | None = None,
+    spectrum: str | Spectrum | None = None,
 ) -> WaveRayComparison:
     """Ray against wave for ``design`` at the object distances ``z_mm`` (mm).
 
@@ -226,24 +260,46 @@ def compare_wave_ray(
     pixel of each row (rectangular holes), the ray figures from :func:`ray_in_band`
     with ``n_rays`` per row. Differences are wave / ray - 1 for the light and the FWHM,
     wave - ray for the centre-cell share and the RMTF.
+
+    ``spectrum``: the light, one channel (default the design's illumination). Over
+    several wavelengths both sides are the weighted sums: the wave side
+    :func:`~.wavespectral.wave_response_spectral`, the ray side the tracer at each
+    wavelength (the design's indices there) in that wavelength's band, ``n_rays`` each.
     """
-    smp = wave_sampling(design) if sampling is None else sampling
+    spec = one_channel(design, spectrum)
+    mono = spec.wavelengths_um == (design.wavelength_um,)
+    smps = [wave_sampling(design) if sampling is None else sampling]
+    if not mono:
+        smps = spectral_samplings(design, spec, sampling)
+    smp = smps[int(np.argmax(spec.weights))]
     zs = [float(z) for z in z_mm]
     dpi = float(dof_chart_dpi(design) if dof_dpi is None else dof_dpi)
     per = period_of_dpi(dpi)
     nb = _n_bins(per)
     rows = range(design.sensor.rows)
     t0 = time.perf_counter()
-    waves: list[WaveResponse] = [
-        wave_response(design, zs, pixel=(r, 0), sampling=smp) for r in rows
-    ]
+    if mono:
+        waves: list = [wave_response(design, zs, pixel=(r, 0), sampling=smps[0]) for r in rows]
+    else:
+        waves = [
+            wave_response_spectral(design, zs, spectrum=spec, pixel=(r, 0), sampling=sampling)
+            for r in rows
+        ]
     t_wave = time.perf_counter() - t0
     t0 = time.perf_counter()
-    tr = PixelTracer(design, Sampling(n_rays, seed))
-    rays = [
-        ray_in_band(design, zs, smp.band, pixel=(r, 0), period_um=per, n_rays=n_rays, tracer=tr)
-        for r in rows
-    ]
+    by_lam = []
+    for lam, s_i in zip(spec.wavelengths_um, smps, strict=True):
+        d_i = at_wavelength(design, lam)
+        tr = PixelTracer(d_i, Sampling(n_rays, seed))
+        by_lam.append(
+            [
+                ray_in_band(
+                    d_i, zs, s_i.band, pixel=(r, 0), period_um=per, n_rays=n_rays, tracer=tr
+                )
+                for r in rows
+            ]
+        )
+    rays = [_weighted_rays([b[r] for b in by_lam], spec.weights) for r in rows]
     t_ray = time.perf_counter() - t0
     wa, ra = waves[0], rays[0]
     w_fold = [np.array([fold(w.x_um, p, per, nb) for p in w.lsf_x]) for w in waves]
@@ -265,7 +321,14 @@ def compare_wave_ray(
         "n_rays": n_rays,
         "seed": seed,
     }
-    own = own_etendue(design) if rectangular_holes(design) else None
+    own = None
+    if rectangular_holes(design):
+        own = float(
+            sum(
+                w * own_etendue(at_wavelength(design, lam))
+                for lam, w in zip(spec.wavelengths_um, spec.weights, strict=True)
+            )
+        )
     diff = {
         "light": wave["light_um2sr"] / ray["light_um2sr"] - 1,
         "light_vs_own_exact": None if own is None else wave["light_um2sr"] / own - 1,
@@ -280,7 +343,7 @@ def compare_wave_ray(
         design.name,
         design.fingerprint(),
         zs,
-        fresnel_numbers(design, smp.wavelength_um),
+        fresnel_numbers(design, smp.wavelength_um if mono else spec.mean_um),
         asdict(smp),
         dpi,
         per,
@@ -294,6 +357,7 @@ def compare_wave_ray(
             "seconds_ray": t_ray,
             "rows": len(rows),
             "acceptance_half_angle_deg": design.sensor.acceptance_half_angle_deg,
+            "spectrum": spec.to_dict(),
         },
         {"wave_x_um": wa.x_um, "wave_lsf": wa.lsf_x, "ray_x_um": ra.x_um, "ray_lsf": ra.lsf_x},
     )
@@ -302,6 +366,15 @@ def compare_wave_ray(
 def comparison_lines(c: WaveRayComparison) -> list[str]:
     """The comparison as lines of text for the terminal."""
     s = c.sampling
+    spec = c.meta.get("spectrum")
+    light = ""
+    if spec and len(spec["wavelengths_um"]) > 1:
+        lams = ", ".join(f"{x:.3f}" for x in spec["wavelengths_um"])
+        light = (
+            f"light: {spec['name']} ({len(spec['wavelengths_um'])} wavelengths {lams} µm, "
+            f"weights {', '.join(f'{w:.3f}' for w in spec['weights'])}); ray and wave "
+            "figures are the weighted sums, each wavelength in its own band; "
+        )
     out = [
         f"{c.design}: ray vs wave at {s['wavelength_um']:g} µm, band |s_x|, |s_y| < "
         f"{s['band']:.3f} (grid {s['step_um']:.3f} µm, {s['source_points'][0]}×"
@@ -309,6 +382,13 @@ def comparison_lines(c: WaveRayComparison) -> list[str]:
         "Fresnel numbers a²/(λd): "
         + ", ".join(f"{f['layer']}→{f['towards']} {f['fresnel_number']:.2f}" for f in c.fresnel),
     ]
+    if light:
+        mean = sum(x * w for x, w in zip(spec["wavelengths_um"], spec["weights"], strict=True))
+        out.insert(
+            1,
+            light + f"sampling shown at the heaviest wavelength, Fresnel numbers at the "
+            f"mean {mean:.3f} µm",
+        )
     r, w, d = c.ray, c.wave, c.difference
     own = "" if c.own_exact_um2sr is None else f"; own path exact {c.own_exact_um2sr:.4f}"
     out.append(

@@ -485,12 +485,20 @@ def wave(
     z: Annotated[str, typer.Option(help="object distances (mm), comma-separated")] = "0,1,2,3",
     rays: RaysOpt = None,
     seed: SeedOpt = 0,
+    spectrum: Annotated[
+        str | None,
+        typer.Option(
+            help="the light: mono (the design's wavelength), white, red, green, blue or rgb "
+            "(one comparison per LED); default the design's electronics.illumination"
+        ),
+    ] = None,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:
     """Ray against wave optics (issue 23): light, spot and RMTF of the own path and near
     crosstalk by the wave engine and by the tracer in the same band, and the layers'
-    Fresnel numbers."""
+    Fresnel numbers; under a spectrum, both weighted over its wavelengths."""
+    from ..analysis.spectrum import CHANNELS, channels
     from ..analysis.wavebase import rectangular
     from ..analysis.wavecompare import compare_wave_ray, comparison_lines
 
@@ -500,10 +508,21 @@ def wave(
             "wave: the separable wave path needs square or rectangular holes; circular holes "
             "take the 2-D path (opticalstamp.analysis.wave2d.wave_response_2d)"
         )
+    if spectrum is not None and spectrum not in CHANNELS:
+        fail(f"--spectrum: must be one of {', '.join(CHANNELS)} (got {spectrum!r})")
+    lights = channels(d, spectrum)
+    if plot and len(lights) > 1:
+        fail(f"--plot: draws one light; {', '.join(lights)} are {len(lights)}: pass one of them")
     zs = float_list(z, "--z", 0.0, 100.0)
-    c = compare_wave_ray(d, zs, n_rays=ray_count(rays, RAYS_LSF), seed=seed)
-    emit(c.to_dict(), as_json, comparison_lines(c))
+    n = ray_count(rays, RAYS_LSF)
+    cs = {k: compare_wave_ray(d, zs, n_rays=n, seed=seed, spectrum=v) for k, v in lights.items()}
+    if len(cs) == 1:
+        c = next(iter(cs.values()))
+        emit(c.to_dict(), as_json, comparison_lines(c))
+    else:
+        lines = [f"{k}: " + "\n".join(comparison_lines(c)) for k, c in cs.items()]
+        emit({k: c.to_dict() for k, c in cs.items()}, as_json, lines)
     if plot:
         from ..report.plotting.wave import plot_wave_ray
 
-        save_plot(plot_wave_ray(c), plot)
+        save_plot(plot_wave_ray(next(iter(cs.values()))), plot)
