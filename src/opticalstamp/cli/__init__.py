@@ -3,7 +3,7 @@
 ``app`` is the ``opticalstamp`` entry point; each module registers its commands on it.
 """
 
-from . import design, metrics, restore, scan, studies  # noqa: F401  (register their commands)
+from . import design, fit, metrics, restore, scan, studies  # noqa: F401  (register their commands)
 from .common import app, main
 
 __all__ = ["app", "main"]

@@ -170,7 +170,7 @@ def bar_observation(
     r0, r1 = img.shape[0] // 4, max(img.shape[0] * 3 // 4, 1)
     rows = img[r0:r1]
     n_lines = rows.shape[0]
-    cols, means, vars_ = [], [], []
+    kept, cols, means, vars_ = [], [], [], []
     for b in found:
         lo = b["start_px"] + (margin_um + b["period_um"]) / pitch
         hi = b["stop_px"] - (margin_um + b["period_um"]) / pitch
@@ -178,6 +178,7 @@ def bar_observation(
         c = c[(c >= 0) & (c < img.shape[1])]
         if c.size * pitch < 3 * b["period_um"]:  # too short a block to tell its shape
             continue
+        kept.append(b)
         cols.append(c)
         means.append(rows[:, c].mean(axis=0))
         vars_.append(rows[:, c].var(axis=0, ddof=1) if n_lines > 1 else np.zeros(c.size))
@@ -186,7 +187,7 @@ def bar_observation(
     allm, allv = np.concatenate(means), np.concatenate(vars_)
     noise = _noise_line(allm, allv) if n_lines > 1 else (1e-8, 0.0)
     blocks = []
-    for b, c, m in zip(found, cols, means, strict=False):
+    for b, c, m in zip(kept, cols, means, strict=True):
         x = (c + 0.5) * pitch
         var = (noise[0] + noise[1] * m) / n_lines + _calibration_var(m, noise, calibration_lines)
         _, phase, per = _fundamental(x, m, b["period_um"])

@@ -1,0 +1,222 @@
+"""`opticalstamp fit`: fit a design to a prototype's scans of the project's charts
+(issue 24)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..validate import InputError
+from .common import (
+    DesignOpt,
+    JsonOpt,
+    SeedOpt,
+    command,
+    emit,
+    fail,
+    number,
+    open_design,
+    writable,
+)
+from .metrics import DpiOpt, LinearOpt, read_scan_image
+
+
+def _image_spec(text: str) -> tuple[Path, float]:
+    """IMAGE:Z_MM, the height in the modelled range."""
+    from ..imaging.heightmap import Z_RANGE_MM
+
+    path, sep, z = text.rpartition(":")
+    if not sep or not path:
+        fail(f"{text}: expected IMAGE:Z_MM (the chart's height above the scanner's top, mm)")
+    try:
+        zv = float(z)
+    except ValueError:
+        fail(f"{text}: the height {z!r} is not a number (IMAGE:Z_MM)")
+    lo, hi = Z_RANGE_MM
+    if not lo <= zv <= hi:
+        fail(f"{text}: height {zv:g} mm outside the modelled range [{lo:g}, {hi:g}] mm")
+    return Path(path), zv
+
+
+def _names(text: str | None, option: str) -> list[str] | None:
+    if text is None:
+        return None
+    out = [t.strip() for t in text.split(",") if t.strip()]
+    if not out:
+        fail(f"{option}: expected comma-separated parameter names")
+    return out
+
+
+def _pins(text: str | None) -> dict[str, float]:
+    out = {}
+    for item in _names(text, "--pin") or []:
+        name, sep, value = item.partition("=")
+        try:
+            out[name.strip()] = float(value) if sep else float("nan")
+        except ValueError:
+            fail(f"--pin {item}: expected NAME=VALUE (um)")
+        if not sep or out[name.strip()] != out[name.strip()]:
+            fail(f"--pin {item}: expected NAME=VALUE (um)")
+    return out
+
+
+def _observations(specs, dpi, linear, calibration_lines):
+    """Each image read and its chart found; one dpi, the design's merged line's, and one
+    design (where the images carry scan sidecars)."""
+    from ..imaging.heightmap import Z_RANGE_MM
+    from ..io.sidecar import read_sidecar
+    from ..studies.fitdata import observation
+
+    obs, seen_dpi, designs = [], None, {}
+    for text in specs:
+        path, z = _image_spec(text)
+        img, use = read_scan_image(path, dpi, linear, min_px=16)
+        if seen_dpi is not None and abs(use - seen_dpi) > 1e-6 * seen_dpi:
+            fail(f"{text}: {use:g} dpi, the images before it {seen_dpi:g} dpi (one scanner)")
+        seen_dpi = use
+        try:
+            side = read_sidecar(path, z_range_mm=Z_RANGE_MM)
+        except InputError as err:
+            fail(f"{text}: {err}")
+        if side and side.get("design_fingerprint"):
+            designs[text] = side["design_fingerprint"]
+        try:
+            obs.append(
+                observation(img, use, z, name=path.name, calibration_lines=calibration_lines)
+            )
+        except ValueError as err:
+            fail(f"{text}: {err}")
+    if len(set(designs.values())) > 1:
+        listed = ", ".join(f"{k} ({v})" for k, v in designs.items())
+        fail(f"IMAGE: the images are scans of different designs: {listed}")
+    return obs, seen_dpi
+
+
+def _write_report(folder: Path, res, obs, specs, dpi, linear, data: dict) -> None:
+    """fit.json, rmtf.png (measured points, nominal and fitted curves) and residuals.png."""
+    from ..io.atomic import write_atomic
+    from ..io.files import save_figure, to_json
+    from ..report.plotting.fit import plot_fit_residuals, plot_fit_rmtf
+    from ..studies.fitcompare import residuals, rmtf_comparison
+
+    folder.mkdir(parents=True, exist_ok=True)
+    imgs = {}
+    for text in specs:
+        path, _ = _image_spec(text)
+        imgs[path.name] = read_scan_image(path, dpi, linear, min_px=16)[0]
+    comp = rmtf_comparison(res, obs, imgs)
+    data = data | {"rmtf": comp}
+    write_atomic(folder / "fit.json", to_json(data) + "\n")
+    if comp["points"]:
+        save_figure(plot_fit_rmtf(comp), folder / "rmtf.png")
+    save_figure(plot_fit_residuals(residuals(res, obs)), folder / "residuals.png")
+    typer.echo(f"wrote {folder}/fit.json and its figures", err=True)
+
+
+def result_lines(res) -> list[str]:
+    """The fit as text: estimates with errors, chi2, starts, degeneracies."""
+    lines = [
+        f"fit of {res.design.name}: chi2 {res.chi2:.1f} for {res.dof} degrees of freedom "
+        f"(reduced {res.chi2 / max(res.dof, 1):.2f}; errors scaled by {res.error_scale:.2f})",
+        f"{'parameter':12s} {'nominal':>10s} {'fitted':>10s} {'error':>9s}",
+    ]
+    for n, v, e, m in zip(res.names, res.values, res.errors, res.nominal, strict=True):
+        err = "undet." if e is None else f"{e:9.3g}"
+        lines.append(f"{n:12s} {m:10.3f} {v:10.3f} {err:>9s}")
+    for n, v in res.pinned.items():
+        lines.append(f"{n:12s} pinned at {v:g}")
+    good = sum(1 for s in res.starts if s["delta_chi2"] < 1.0)
+    lines.append(f"{good} of {len(res.starts)} starts reached the best minimum (delta chi2 < 1)")
+    lines += [f"warning: {m}" for m in res.degeneracies]
+    return lines
+
+
+@command("fit", traces=False)
+def fit_cmd(
+    images: Annotated[
+        list[str],
+        typer.Argument(
+            help="IMAGE:Z_MM, a scan of a bar chart (chart bars) or a slanted square "
+            "(chart edge) and its height above the scanner's top surface (mm)",
+            show_default=False,
+        ),
+    ],
+    output: Annotated[
+        Path,
+        typer.Option("--output", "-o", help="fitted design file", callback=writable(".toml")),
+    ],
+    design: DesignOpt = "paper2016",
+    free: Annotated[
+        str | None,
+        typer.Option(help="parameters to fit, comma-separated [default: every one not pinned]"),
+    ] = None,
+    pin: Annotated[
+        str | None, typer.Option(help="parameters held, NAME=VALUE (um), comma-separated")
+    ] = None,
+    starts: Annotated[
+        int, typer.Option(help="local fits (the nominal first)", callback=number(1, 50))
+    ] = 3,
+    calibration_lines: Annotated[
+        int,
+        typer.Option(
+            help="lines of the scanner's white and dark references", callback=number(1, 1e6)
+        ),
+    ] = 32,
+    seed: SeedOpt = 0,
+    dpi: DpiOpt = None,
+    linear: LinearOpt = None,
+    as_json: JsonOpt = False,
+    report: Annotated[
+        Path | None,
+        typer.Option(
+            help="folder for the figures and fit.json",
+            callback=writable(directory=True),
+        ),
+    ] = None,
+) -> None:
+    """Fit the design to scans of charts: misregistration, thicknesses, holes, sensitive
+    area and the true reference plane, with errors and the degeneracies named."""
+    from ..design.files import design_toml
+    from ..design.model import Design
+    from ..imaging.kernels import kernel_source
+    from ..io.atomic import write_atomic
+    from ..studies.fit import FitError, fit
+
+    d = open_design(design)
+    if not isinstance(d, Design):  # pragma: no cover - open_design refuses others
+        fail(f"--design {design}: not a stamp")
+    try:
+        src = kernel_source(d, "auto")
+    except ValueError as err:
+        fail(f"--design {design}: {err}")
+    if src != "paraxial":
+        fail(
+            f"--design {design}: fit uses the paraxial closed form of the own path, which "
+            "this design does not admit (circular holes, or own-path rays steeper than "
+            "the paraxial limit); make its holes square (opticalstamp.design.square_holes)"
+        )
+    obs, use = _observations(images, dpi, linear, calibration_lines)
+    from ..imaging.scan import scan_pitch
+    from ..units import dpi_of_pitch
+
+    want = dpi_of_pitch(scan_pitch(d))
+    if abs(use - want) > 0.01 * want:
+        fail(f"IMAGE: {use:g} dpi, the design's merged line is {want:g} dpi (--design {design})")
+    try:
+        res = fit(d, obs, free=_names(free, "--free"), pinned=_pins(pin), starts=starts, seed=seed)
+    except FitError as err:
+        fail(str(err))
+    text = design_toml(
+        res.fitted,
+        comments=(
+            f"fitted by opticalstamp fit to {len(obs)} images from {d.name} "
+            f"({d.fingerprint()}); errors in the JSON (--json, --report)",
+        ),
+    )
+    write_atomic(output, text)
+    data = res.to_dict() | {"output": str(output), "images": list(images)}
+    if report is not None:
+        _write_report(report, res, obs, images, dpi, linear, data)
+    emit(data, as_json, result_lines(res) + [f"wrote {output}"])

@@ -1,0 +1,56 @@
+"""A fit's model against its measurement (issue 24): measured RMTF points beside the
+nominal and the fitted design's curves (paper Fig. 11 with its dots), and residuals."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..imaging.measure import measure_rmtf
+from .fit import FitResult, Problem, layout_for
+from .fitdata import Observation
+
+
+def rmtf_comparison(res: FitResult, observations: list[Observation], images: dict) -> dict:
+    """Measured RMTF of each bar block (``images``: {name: image array}) and the nominal
+    and fitted designs' RMTF curves (paraxial own path, as the fit's model) at those
+    periods over 0 to 1.2 x the highest height; depth of field of each."""
+    from ..analysis.rmtf import rmtf
+
+    points = []
+    for o in observations:
+        if o.kind != "bars" or o.name not in images:
+            continue
+        for b in measure_rmtf(images[o.name], o.dpi):
+            points.append({"z_mm": o.z_mm, "period_um": b["period_um"], "rmtf": b["rmtf"]})
+    top = max([o.z_mm for o in observations] + [1.0])
+    zs = np.round(np.linspace(0.0, 1.2 * top, 25), 4)
+    periods = sorted({round(p["period_um"], 0) for p in points}) or [254.0]
+    dpis = [50800.0 / p for p in periods]
+    curves = {}
+    for key, d in (("nominal", res.design), ("fitted", res.fitted)):
+        r = rmtf(d, dpi=dpis, z_mm=zs, method="paraxial", ghosts=False)
+        curves[key] = {"z_mm": r.z_mm, "rmtf": r.rmtf_max, "dof_mm": r.dof_mm}
+    return {"points": points, "curves": curves, "dpi": dpis}
+
+
+def residuals(res: FitResult, observations: list[Observation]) -> list[dict]:
+    """Per image: its data, the fitted model and the normalised residuals."""
+    lay = layout_for(res.design, observations, res.names, res.pinned)
+    prob = Problem(res.design, observations, lay)
+    r = prob.residuals(res.theta)
+    out, at = [], 0
+    for i, o in enumerate(observations):
+        v, s = prob.data[i]
+        n = v.size
+        out.append(
+            {
+                "name": o.name,
+                "kind": o.kind,
+                "z_mm": o.z_mm,
+                "data": v,
+                "model": v + r[at : at + n] * s,
+                "residual": r[at : at + n],
+            }
+        )
+        at += n
+    return out
