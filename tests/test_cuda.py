@@ -17,236 +17,6 @@ from opticalstamp.device import DeviceUnavailable, resolve_device
 
 ROOT = Path(__file__).resolve().parents[1]
 
-SIMULATED = """
-import os
-
-import numpy as np
-from opticalstamp.design import load_design
-from opticalstamp.device import DeviceUnavailable
-from opticalstamp.raytrace import cuda
-from opticalstamp.raytrace.kernel import seed_key
-from opticalstamp.raytrace.launch import _kernel_args, launch
-from opticalstamp.raytrace.pixel import pixel_source
-from opticalstamp.raytrace.stack import reverse_path
-
-N = int(os.environ.get("RAYS_LOG2", "12"))  # 2^N samples (the simulator is slow)
-d = load_design("paper2016")
-path, src = reverse_path(d), pixel_source(d, 0, 0)
-FIELDS = ("ids", "x", "y", "sx", "sy", "w", "hole_row", "hole_k")
-
-
-def joined(batches):  # the chunks as one (a GPU deals rays into larger chunks)
-    out = {f: np.concatenate([getattr(b, f) for b in batches]) for f in FIELDS}
-    out["ledger"] = sum(b.ledger for b in batches)
-    out["n_launched"] = sum(b.n_launched for b in batches)
-    return out
-
-
-def same(a, b, exact=False):
-    assert np.array_equal(a["ids"], b["ids"]), (a["ids"].size, b["ids"].size)
-    for f in ("x", "y", "sx", "sy", "w"):
-        if exact:
-            assert np.array_equal(a[f], b[f]), f
-        np.testing.assert_allclose(a[f], b[f], rtol=1e-12, atol=1e-9)
-    for f in ("hole_row", "hole_k", "ledger"):
-        assert np.array_equal(a[f], b[f]), f
-    assert a["n_launched"] == b["n_launched"]
-
-
-cases = [(False, False, 1 << N), (True, True, 1 << (N - 1))]  # (importance, fresnel, rays)
-for importance, fresnel, n in cases:
-    kw = dict(importance=importance, fresnel=fresnel, chunk=1 << 12, first_id=123)
-    cpu = joined(list(launch(path, src, n, 7, device="cpu", **kw)))
-    same(cpu, joined(list(launch(path, src, n, 7, device="cuda", **kw))))
-    print(importance, fresnel, cpu["ids"].size, int(cpu["ledger"].sum()))
-# plain sampling queued per block, per warp (on a GPU) and not at all: the same rays, exactly
-n0 = float(path.slabs[0, 1])
-args = np.array([src.x, src.y, src.width, src.height, 4 * n0 * n0 * src.area, n0, n0, 0.0])
-n_pre = path.first_mask_slab + 1
-simulated = os.environ.get("NUMBA_ENABLE_CUDASIM") == "1"
-queues = ("block",) if simulated else ("block", "warp")
-
-runs = [
-    cuda.run(123, 1 << N, seed_key(7), args, _kernel_args(path), True, n_pre, None, queue=q)
-    for q in ("none", *queues)
-]
-a, *others = ({**r.host(), "ledger": r.ledger, "n_launched": r.n_launched} for r in runs)
-for b in others:
-    same(a, b, exact=True)
-kw = dict(importance=False, fresnel=True, chunk=1 << 12, first_id=123, device="cpu")
-same(a, joined(list(launch(path, src, 1 << N, 7, **kw))))
-# each queue filled and drained many times: one block, and a first mask opened so wide
-# that most rays from the pixel's centre pass it
-cuda.QUEUE_BLOCKS = 1
-kargs = list(_kernel_args(path))
-kargs[2] = kargs[2].copy()
-kargs[2][int(path.slabs[n_pre - 1, 2]), 1:3] = 80.0  # half width and height (um)
-point = np.array([src.x, src.y, 1e-3, 1e-3, args[4], n0, n0, 0.0])
-runs = [
-    cuda.run(5, 1 << 13, seed_key(3), point, tuple(kargs), True, n_pre, None, queue=q)
-    for q in ("none", *queues)
-]
-passed = runs[0].n_launched - int(runs[0].ledger[:n_pre].sum())
-assert passed > 8 * cuda.THREADS, passed
-a, *others = ({**r.host(), "ledger": r.ledger, "n_launched": r.n_launched} for r in runs)
-assert a["ids"].size > 5, a["ids"].size  # survivors through the rest of the stack
-for b in others:
-    same(a, b, exact=True)
-# a stack beyond the kernels' fixed-size arrays: refused, naming the way out
-big = list(_kernel_args(path))
-big[2] = np.repeat(big[2], 6, axis=0)  # 18 masks
-try:
-    cuda.run(0, 256, seed_key(1), args, tuple(big), False, n_pre)
-    raise SystemExit("18 masks not refused")
-except DeviceUnavailable as err:
-    assert "--device cpu" in str(err), err
-# the device of a run: named, or scoped, in the provenance
-from opticalstamp.device import using_device
-from opticalstamp.io.files import provenance
-
-assert provenance(d, 0, device="cuda")["device"] == "cuda"
-with using_device("cuda"):
-    assert provenance(d, 0)["device"] == "cuda"
-    assert provenance(load_design("sla-1row-12deg"), 0)["device"] == "cpu"
-assert provenance(d, 0)["device"] == "cpu"
-print("same")
-"""
-
-TALLIES = """
-import os
-import numpy as np
-from opticalstamp.analysis import cuda_tallies as ct
-from opticalstamp.analysis.cuda_tallies import ghost_tallies
-from opticalstamp.analysis.ghosts import analyse_ghosts
-from opticalstamp.analysis.lsf import traced_folded_lsf_pair
-from opticalstamp.analysis.maps import traced_map_sets
-from opticalstamp.design import load_design
-from opticalstamp.raytrace import cuda
-from opticalstamp.raytrace.pixel import PixelTracer, Sampling
-
-d = load_design("paper2016")
-N = int(os.environ.get("RAYS_LOG2", "12"))  # 2^(N+1) rays (the simulator is slow)
-s = Sampling(n_rays=1 << (N + 1), seed=5, chunk=1 << N)  # two chunks (one on a GPU)
-res = {}
-for dev in ("cpu", "cuda"):
-    tr = PixelTracer(d, s, replay=True, device="cpu")  # each chunk traced once
-    for px in [(0, 0), (1, 0)]:
-        tr.hole_weights(px)  # the pilots (2^18 rays) on the CPU
-    tr = tr.with_device(dev)  # the same pilots; the rays, tallied by all three, on dev
-    g = analyse_ghosts(d, z_mm=(0.0, 2.0), sampling=s, tracer=tr)
-    f = traced_folded_lsf_pair(
-        d, z_mm=[0.5, 3.0], periods_um=[169.3, 254.0], sampling=s, tracer=tr, n_batches=4
-    )
-    m = traced_map_sets(d, z_sets=[[0.5], [1.0, 2.5]], sampling=s, tracer=tr)
-    res[dev] = (g, f, m)
-    if dev == "cuda":  # every tally was taken on the device: no survivor was copied back
-        assert tr._replays and all("_host" not in vars(pb.rays) for pb in tr._replays.values())
-
-
-def same(x, y, where=""):
-    if isinstance(x, dict):
-        assert x.keys() == y.keys(), where
-        for k in x:
-            same(x[k], y[k], f"{where}/{k}")
-    elif isinstance(x, list | tuple):
-        assert len(x) == len(y), where
-        for i, (p, q) in enumerate(zip(x, y)):
-            same(p, q, f"{where}[{i}]")
-    elif isinstance(x, float):
-        assert np.isclose(x, y, rtol=1e-12, atol=0), (where, x, y)
-    else:
-        assert x == y, (where, x, y)
-
-
-(gc, fc, mc), (gg, fg, mg) = res["cpu"], res["cuda"]
-a, b = gc.to_dict(), gg.to_dict()
-assert len(gc.paths) > 10
-same(a, b)
-for u, v in zip(fc, fg, strict=True):
-    for hu, hv in zip(u.h, v.h, strict=True):
-        np.testing.assert_allclose(hv, hu, rtol=1e-12, atol=1e-12 * hu.max())
-for u, v in zip(mc, mg, strict=True):
-    assert u.own.sum() > 0 and u.ghost.sum() > 0
-    np.testing.assert_allclose(v.own, u.own, rtol=1e-12, atol=1e-12 * u.own.max())
-    np.testing.assert_allclose(v.ghost, u.ghost, rtol=1e-12, atol=1e-12 * u.ghost.max())
-print("same")
-lat = tr.path.lattice
-args = (next(tr.trace((0, 0))), lat.k_lo, lat.k_hi, tr.n0, [0.0], 84.6, 400, 500.0)
-whole = ghost_tallies(*args)
-assert len(whole.sequences) > 10
-assert ghost_tallies(*args, capacity=2, max_capacity=2) is None  # full: back to the host
-assert ghost_tallies(args[0], -(2**40), 2**40, *args[3:]) is None  # keys beyond int64
-grown = ghost_tallies(*args, capacity=2)  # the table doubled until the sequences fit
-assert grown.sequences == whole.sequences and np.array_equal(grown.count, whole.count)
-np.testing.assert_allclose(grown.s1, whole.s1, rtol=1e-12)
-# some chunks handed back to the host (every other one): the CPU's analysis again
-calls = []
-
-
-def every_other(*a, **kw):
-    calls.append(1)
-    return None if len(calls) % 2 else ghost_tallies(*a, **kw)
-
-
-ct.ghost_tallies = every_other
-same(a, analyse_ghosts(d, z_mm=(0.0, 2.0), sampling=s, tracer=tr).to_dict())
-assert calls
-print("full")
-"""
-
-RECORD = """
-import os
-import pickle
-import sys
-
-import numpy as np
-from opticalstamp.analysis import cuda_tallies as ct
-from opticalstamp.analysis.ghosts import analyse_ghosts
-from opticalstamp.analysis.lsf import traced_folded_lsf_pair
-from opticalstamp.analysis.maps import traced_map_sets
-from opticalstamp.design import load_design
-from opticalstamp.raytrace import cuda as rc
-from opticalstamp.raytrace.kernel import seed_key
-from opticalstamp.raytrace.launch import _kernel_args
-from opticalstamp.raytrace.pixel import PixelTracer, Sampling, pixel_source
-
-seen = {}
-
-
-class Recorder:  # each kernel's arguments as launched (host copies), then the launch
-    def __init__(self, name, kernel):
-        self.name, self.kernel = name, kernel
-
-    def __getitem__(self, config):
-        def call(*args):
-            host = [a.copy_to_host() if hasattr(a, "copy_to_host") else a for a in args]
-            seen.setdefault(self.name, host)
-            return self.kernel[config](*args)
-
-        return call
-
-
-for mod in (rc, ct):
-    for name in [n for n in dir(mod) if n.endswith("_kernel")]:
-        setattr(mod, name, Recorder(name, getattr(mod, name)))
-d = load_design("paper2016")
-tr = PixelTracer(d, Sampling(n_rays=1 << 12, seed=1, chunk=1 << 12), replay=True, device="cpu")
-tr.hole_weights((0, 0))  # the pilot (2^18 rays) on the CPU
-tr = tr.with_device("cuda")  # the same pilot, the rays on the (simulated) device
-analyse_ghosts(d, z_mm=(0.0,), sampling=tr.sampling, tracer=tr)
-traced_map_sets(d, z_sets=[[1.0]], sampling=tr.sampling, tracer=tr)
-path, src = tr.path, pixel_source(d, 0, 0)
-n0 = float(path.slabs[0, 1])
-v = np.array([src.x, src.y, src.width, src.height, 4 * n0 * n0 * src.area, n0, n0, 0.0])
-for queue in ("block", "none"):
-    rc.run(0, 256, seed_key(1), v, _kernel_args(path), True, path.first_mask_slab + 1, queue=queue)
-pb = next(tr.trace((0, 0)))
-res = ct.zeros((1, 1, 1, 338))
-ct.fold(pb, False, [1000.0], 1.0, [169.3], [338], 1, res)
-pickle.dump(seen, open(sys.argv[1], "wb"))
-print(sorted(seen))
-"""
-
 COMPILE = """
 import pickle
 import re
@@ -292,26 +62,39 @@ def _python(code: str, **env) -> subprocess.CompletedProcess:
     )
 
 
-def test_cuda_kernels_under_the_simulator_trace_the_cpu_rays():
-    """Plain sampling (4,096 samples) and importance sampling with Fresnel losses (2,048
-    rays): the same survivors (ids), positions, directions and weights (to 1e-12), holes,
-    ledger and launched counts as the CPU kernel, for the same seed; the plain kernel
-    queued per block (the default) and the one-thread-per-ray one give identical rays (and
-    the one queued per warp, on a GPU)."""
-    res = _python(SIMULATED, NUMBA_ENABLE_CUDASIM="1")
-    assert res.returncode == 0, res.stderr[-3000:]
-    assert res.stdout.strip().endswith("same")
+#: the simulator's tests: one module, one session (tests/cuda/sim_device.py)
+SIM = ROOT / "tests" / "cuda"
 
 
-def test_device_tallies_under_the_simulator_equal_the_cpu_tallies():
-    """With the rays kept on the (simulated) device and tallied there: the ghost analysis
-    (every etendue, path, angle range, landing histogram and nearest landing, over two
-    chunks), the folded LSFs (all light and own path) and the responsivity maps equal the
-    CPU's to rounding for the same seed; the hash table of hole sequences grows while it
-    fills, and a batch it cannot take goes back to the host, with the same analysis."""
-    res = _python(TALLIES, NUMBA_ENABLE_CUDASIM="1")
-    assert res.returncode == 0, res.stderr[-3000:]
-    assert res.stdout.split()[-2:] == ["same", "full"], res.stdout
+def _session(**env) -> subprocess.CompletedProcess:
+    """tests/cuda/sim_device.py run by pytest in a process of its own."""
+    args = ["-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:warnings"]
+    return subprocess.run(
+        [sys.executable, *args, "-o", "python_files=sim_*.py", str(SIM)],
+        capture_output=True, text=True, cwd=ROOT, timeout=900,
+        env=os.environ | {"PYTHONPATH": str(ROOT / "src")} | env,
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def simulated_session(tmp_path_factory):
+    """The simulator's session, run once: its result and the kernels' arguments it
+    recorded."""
+    rec = tmp_path_factory.mktemp("cuda") / "args.pkl"
+    res = _session(NUMBA_ENABLE_CUDASIM="1", OPTICALSTAMP_TEST_RECORD=str(rec))
+    return res, rec
+
+
+def test_cuda_kernels_and_tallies_under_the_simulator(simulated_session):
+    """tests/cuda/sim_device.py under numba's CUDA simulator, in one session: the device
+    kernels give the CPU kernel's rays ray for ray (plain and importance sampling, with
+    Fresnel losses; hundreds of survivors through opened stacks), the plain kernels queued
+    per block or not at all give identical rays, the tallies on the device (ghost
+    analysis, folded LSFs, maps) equal the CPU's to rounding, the ghost hash table grows
+    and hands back what it cannot take, and provenance names the device."""
+    res, _ = simulated_session
+    assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-2000:]
+    assert " passed" in res.stdout and "failed" not in res.stdout, res.stdout[-2000:]
 
 
 def _compiler_missing() -> str:
@@ -327,7 +110,7 @@ def _compiler_missing() -> str:
     return "" if res.returncode == 0 else (res.stderr.strip().splitlines() or ["?"])[-1]
 
 
-def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path):
+def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path, simulated_session):
     """What the simulator cannot check: each kernel, with the argument types it is
     launched with, compiles to PTX for an H100 (sm_90) with numba-cuda; and the kernels
     free of transcendental functions contain no fused multiply-add, so that their
@@ -339,15 +122,8 @@ def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path):
     why = _compiler_missing()
     if why:
         pytest.skip(f"numba-cuda cannot compile for a GPU here: {why}")
-    rec = tmp_path / "args.pkl"
-    script = tmp_path / "record.py"
-    script.write_text(RECORD)
-    res = subprocess.run(
-        [sys.executable, str(script), str(rec)], capture_output=True, text=True, cwd=ROOT,
-        env=os.environ | {"PYTHONPATH": str(ROOT / "src"), "NUMBA_ENABLE_CUDASIM": "1"},
-        timeout=600,
-    )  # fmt: skip
-    assert res.returncode == 0, res.stderr[-3000:]
+    res, rec = simulated_session  # the kernels' arguments, as the simulator launched them
+    assert res.returncode == 0 and rec.exists(), res.stdout[-3000:]
     script = tmp_path / "compile.py"
     script.write_text(COMPILE)
     res = subprocess.run(
@@ -367,7 +143,7 @@ def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path):
 
 def test_provenance_says_where_the_rays_were_traced():
     """A stamp's results say the device they were traced on (the CPU outside a run that
-    chose one; cuda under the simulator: SIMULATED); a rod-lens array's say cpu whatever
+    chose one; cuda under the simulator: tests/cuda/sim_device.py); a rod-lens array's say cpu whatever
     the device (its GRIN tracer has no GPU kernel), e.g. side by side in a comparison."""
     from opticalstamp.design import load_design
     from opticalstamp.device import using_device
@@ -453,13 +229,12 @@ def test_the_cpu_path_imports_nothing_of_numba_cuda(device):
 
 
 @pytest.mark.skipif(resolve_device("auto") != "cuda", reason="needs a CUDA GPU")
-@pytest.mark.parametrize("script", ["SIMULATED", "TALLIES"])
-def test_on_the_gpu_the_same_rays_and_tallies(script):  # pragma: no cover - GPU machines
-    """The simulator tests above on a real GPU, with 2^20 rays: the CPU's survivors ray for
-    ray, the queued and per-thread kernels identical, the tallies equal to rounding."""
-    res = _python(globals()[script], RAYS_LOG2="20")
-    assert res.returncode == 0, res.stderr[-3000:]
-    assert "same" in res.stdout.split(), res.stdout
+def test_on_the_gpu_the_same_rays_and_tallies():  # pragma: no cover - GPU machines
+    """The simulator's session on a real GPU, with 2^20 rays: the CPU's survivors ray for
+    ray, the queued (per block and per warp) and per-thread kernels identical, the
+    tallies equal to rounding."""
+    res = _session(RAYS_LOG2="20")
+    assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-2000:]
 
 
 @pytest.mark.skipif(resolve_device("auto") != "cuda", reason="needs a CUDA GPU")
