@@ -90,8 +90,9 @@ def plot_wave_report(c, verdict: dict):
         ax.axvline(v, color=col, lw=0.8, ls=ls)
         ax.annotate(
             f"DOF {eng} {'≥ ' if verdict['dof_open_ended'][eng] else ''}{v:.2f} mm",
-            (v, thr), xytext=(3, 6 if eng == "wave" else -12), textcoords="offset points",
-            fontsize=7, color=col,
+            (v, thr), xytext=(3, 6) if eng == "wave" else (-3, -12),
+            textcoords="offset points", fontsize=7, color=col,
+            ha="left" if eng == "wave" else "right",
         )  # fmt: skip
     ax.set_ylim(0, 1.05)
     ax.set_xlabel("Z above the reference plane (mm)")
