@@ -119,6 +119,7 @@ def test_ray_optics_holds_in_the_geometric_limit():
     assert v["dof_mm"]["wave"] == pytest.approx(v["dof_mm"]["ray"], abs=0.05)
     assert 2.0 < v["dof_mm"]["ray"] < 3.0  # the RMTF crossed 0.3 between the heights
     assert s.to_dict()["verdict"] == v and "profiles" not in s.to_dict()
+    assert s.prediction is None  # the validity rule reads the design's own wavelength
 
 
 def test_diffraction_dominates_for_20um_holes():
@@ -140,6 +141,9 @@ def test_diffraction_dominates_for_20um_holes():
     assert f"by up to {abs(v['rmtf_difference_max']):.2f}" in v["text"]
     page = wave_html(s.to_dict())
     assert "Diffraction dominates" in page and "5 % in light" in page and "0.05 (absolute)" in page
+    # the validity rule, from the geometry alone, predicts the same
+    assert s.prediction["engine"] == "wave" and s.prediction["fresnel_min"] == v["fresnel_min"]
+    assert "predicts <b>wave optics</b>" in page and "agrees with the measurement" in page
 
 
 def test_circular_holes_are_not_measurable_and_say_why():

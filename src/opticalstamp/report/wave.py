@@ -7,7 +7,7 @@ differences against stated tolerances)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ..analysis.raywave import NEEDS_RECTANGLES
 from ..design import Design
@@ -23,14 +23,22 @@ class WaveSection:
     comparison : the :class:`~opticalstamp.analysis.wavecompare.WaveRayComparison`
         (its ``profiles``, row A's x LSFs by both engines, feed the figure)
     verdict : :func:`~opticalstamp.analysis.raywave.judge`'s verdict
+    prediction : what the validity rule predicts from the geometry alone, at the same
+        tolerances (:func:`~opticalstamp.analysis.validity.choose_optics`, ``auto``);
+        None where the comparison ran at another wavelength than the design's
     """
 
     comparison: object
     verdict: dict
+    prediction: dict | None = field(default=None)
 
     def to_dict(self) -> dict:
-        """report.json's "ray_vs_wave": the comparison's numbers and the verdict."""
-        return self.comparison.to_dict() | {"verdict": self.verdict}
+        """report.json's "ray_vs_wave": the comparison's numbers, the verdict and the
+        validity rule's prediction."""
+        return self.comparison.to_dict() | {
+            "verdict": self.verdict,
+            "prediction": self.prediction,
+        }
 
 
 def wave_heights(work: Work) -> tuple[float, ...]:
@@ -55,7 +63,8 @@ def wave_section(
     the ``dof_dpi`` chart, ``work.wave_rays`` rays per pixel row; ``sampling``: the wave
     engine's (:func:`~opticalstamp.analysis.wavebase.wave_sampling`; default from the
     design). ValueError (not measurable) for circular holes."""
-    from ..analysis.raywave import judge
+    from ..analysis.raywave import LIGHT_TOLERANCE, RMTF_TOLERANCE, judge
+    from ..analysis.validity import choose_optics
     from ..analysis.wavebase import rectangular
     from ..analysis.wavecompare import compare_wave_ray
 
@@ -69,4 +78,8 @@ def wave_section(
         seed=seed,
         dof_dpi=dof_dpi,
     )
-    return WaveSection(c, judge(c))
+    pred = None
+    if c.sampling["wavelength_um"] == design.wavelength_um:  # the rule reads the design's
+        choice = choose_optics(design, light_tol=LIGHT_TOLERANCE, rmtf_tol=RMTF_TOLERANCE)
+        pred = choice.to_dict()
+    return WaveSection(c, judge(c), pred)

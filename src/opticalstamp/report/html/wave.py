@@ -91,6 +91,7 @@ the {w["dof_dpi"]:g}-dpi chart at every height compared; here light wave/ray {dl
 wave − ray largest {_signed(v["rmtf_difference_max"])} at Z = {_z(v)}. Depth of field
 (first Z where that RMTF falls below {v["dof_threshold"]:g}, interpolated between the
 heights below): wave {_dof(v, "wave")}, ray {_dof(v, "ray")}.</p>
+{prediction_html(w.get("prediction"), v["holds"])}
 <h3>Fresnel numbers</h3>
 <p>Each mask's holes over the gap below it (reduced distance Σ t/n) and the object-side
 mask over the reference gap; a is half the hole's smaller side. Smallest:
@@ -114,3 +115,17 @@ def _signed(x) -> str:
 def _z(v: dict) -> str:
     z = v["rmtf_difference_at_z_mm"]
     return "-" if z is None else f"{z:g} mm"
+
+
+def prediction_html(pred: dict | None, holds: str) -> str:
+    """The validity rule's prediction (from the geometry alone) beside the measured
+    verdict."""
+    if not pred:
+        return ""
+    same = "agrees with" if pred["engine"] == holds else "differs from"
+    return (
+        f"<p>The validity rule (docs/wave-validity.md), from the geometry alone without a "
+        f"wave run, predicts <b>{html.escape(pred['engine'])} optics</b>: "
+        f"{html.escape(pred['reason'])}. It {same} the measurement above (its RMTF bound "
+        "covers Z = 0-3 mm).</p>"
+    )
