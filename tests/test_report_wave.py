@@ -155,3 +155,13 @@ def test_circular_holes_are_not_measurable_and_say_why():
     assert row["wave"] == {"not_measurable": NEEDS_RECTANGLES}
     # a circle's Fresnel number takes its radius: 24 um over the 1 mm gap
     assert row["fresnel_min"] == pytest.approx(24.0**2 / (0.55 * 1000.0))
+
+
+def test_a_stack_that_blocks_its_own_path_says_why():
+    """The middle mask shifted by half the row pitch: no ray reaches the pixel through
+    its own holes (the wave engine still finds diffracted light), so there is no ray
+    figure to compare with; the section says so instead of dividing by zero."""
+    d = with_stack(load_design("paper2016"), offsets_um=[(0.0, 0.0), (84.6, 0.0), (0.0, 0.0)])
+    res = measure(wave_section, d, _work((0.0, 1.0)), seed=0, dof_dpi=200.0)
+    assert isinstance(res, NotMeasurable)
+    assert "the rays find no light through the pixel's own holes" in res.reason

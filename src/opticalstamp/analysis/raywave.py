@@ -48,6 +48,29 @@ def sub_grid(grid_mm, step_mm: float, max_heights: int) -> tuple[float, ...]:
         step *= 2
 
 
+def compare_and_judge(design, z_mm, **kwargs):
+    """:func:`~opticalstamp.analysis.wavecompare.compare_wave_ray` (``kwargs`` passed on)
+    and its :func:`judge`: (comparison, verdict).
+
+    Raises
+    ------
+    ValueError
+        Where the rays find no light in the band (a stack that blocks its own path: the
+        comparison's ratios divide by zero), or neither engine finds any.
+    """
+    from .wavecompare import compare_wave_ray
+
+    try:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            c = compare_wave_ray(design, z_mm, **kwargs)
+    except ZeroDivisionError:
+        raise ValueError(
+            "the rays find no light through the pixel's own holes, so there is no ray figure "
+            "to compare the wave figures with"
+        ) from None
+    return c, judge(c)
+
+
 def _dof(z: np.ndarray, r: np.ndarray) -> tuple[float, bool]:
     """Depth of field (mm) of a curve and whether the curve never fell below the
     threshold within the heights (then the figure is a lower bound)."""

@@ -63,14 +63,13 @@ def wave_section(
     the ``dof_dpi`` chart, ``work.wave_rays`` rays per pixel row; ``sampling``: the wave
     engine's (:func:`~opticalstamp.analysis.wavebase.wave_sampling`; default from the
     design). ValueError (not measurable) for circular holes."""
-    from ..analysis.raywave import LIGHT_TOLERANCE, RMTF_TOLERANCE, judge
+    from ..analysis.raywave import LIGHT_TOLERANCE, RMTF_TOLERANCE, compare_and_judge
     from ..analysis.validity import choose_optics
     from ..analysis.wavebase import rectangular
-    from ..analysis.wavecompare import compare_wave_ray
 
     if not rectangular(design):
         raise ValueError(NEEDS_RECTANGLES)
-    c = compare_wave_ray(
+    c, verdict = compare_and_judge(
         design,
         wave_heights(work),
         sampling=sampling,
@@ -82,4 +81,4 @@ def wave_section(
     if c.sampling["wavelength_um"] == design.wavelength_um:  # the rule reads the design's
         choice = choose_optics(design, light_tol=LIGHT_TOLERANCE, rmtf_tol=RMTF_TOLERANCE)
         pred = choice.to_dict()
-    return WaveSection(c, judge(c), pred)
+    return WaveSection(c, verdict, pred)

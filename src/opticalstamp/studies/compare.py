@@ -36,7 +36,7 @@ import math
 import numpy as np
 
 from ..analysis.efficiency import efficiency
-from ..analysis.raywave import NEEDS_RECTANGLES, judge
+from ..analysis.raywave import NEEDS_RECTANGLES, compare_and_judge
 from ..analysis.rmtf import rmtf
 from ..analysis.rodlens import RAYS_CONTRAST, rod_contrast, rod_efficiency
 from ..defaults import Z_GRID_MM
@@ -91,14 +91,17 @@ def wave_figures(design: Design, *, seed: int = 0, dof_dpi: float | None = None)
     engine against the tracer in its band at :data:`WAVE_HEIGHTS_MM`, ``WAVE_RAYS`` rays
     per pixel row, on the ``dof_dpi`` chart (default the design's)."""
     from ..analysis.wavebase import fresnel_numbers, rectangular
-    from ..analysis.wavecompare import compare_wave_ray
 
     fres = fresnel_numbers(design)
     out: dict = {"fresnel_min": min(f["fresnel_number"] for f in fres) if fres else None}
     if not rectangular(design):
         return out | {"wave": {"not_measurable": NEEDS_RECTANGLES}}
-    c = compare_wave_ray(design, WAVE_HEIGHTS_MM, n_rays=WAVE_RAYS, seed=seed, dof_dpi=dof_dpi)
-    v = judge(c)
+    try:
+        c, v = compare_and_judge(
+            design, WAVE_HEIGHTS_MM, n_rays=WAVE_RAYS, seed=seed, dof_dpi=dof_dpi
+        )
+    except ValueError as err:  # no ray light to compare with
+        return out | {"wave": {"not_measurable": str(err)}}
     light = v["light_difference"]
     return out | {
         "wave": {
