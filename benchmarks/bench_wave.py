@@ -1,4 +1,5 @@
-"""Speed of the wave engine (run on demand: python benchmarks/bench_wave.py [--quick]).
+"""Speed of the wave engine (run on demand: python benchmarks/bench_wave.py [--quick]
+[--spectral-only]).
 
 1. The separable path: one pixel's responsivity at 19 heights (0-4.5 mm), for the
    prototype, its half-scale 600-dpi copy (plates 500/200/225 um) and the prototype's
@@ -9,40 +10,94 @@
    rows by both engines (2^21 rays a row).
 4. The 2-D path (exact angular spectrum): the test's small stamp, and the prototype with
    square and with circular holes at a band of 0.1.
-Medians of several runs after a warm-up; the machine's load is printed with them (the
-2-core test machine is shared: a loaded run is several times slower).
+5. White light (issue 23, "light as it is": a white phosphor LED times a silicon QE at 7
+   wavelengths, :mod:`opticalstamp.analysis.spectrum`): the RMTF table (responsivity of
+   rows A and B at 19 heights, the x-only path, 4 charts, depth of field) and one pixel's
+   full responsivity (both marginals, centre-cell shares) at 19 heights, for the
+   prototype and the 600-dpi copy.
+Medians of several runs after a warm-up, wall-clock and CPU seconds; the machine's load
+is printed with them (the 2-core test machine is shared: a loaded run is several times
+slower). OpenBLAS runs single-threaded here (OPENBLAS_NUM_THREADS=1, set before numpy is
+imported unless already set): on the shared machine its spinning threads made every
+BLAS call 5-10x slower under load; the FFTs use both cores.
 """
 
 from __future__ import annotations
 
-import json
 import os
-import statistics
-import sys
-import time
-from pathlib import Path
 
-from opticalstamp.analysis.rmtf import rmtf_from_lsf
-from opticalstamp.analysis.wave import wave_response
-from opticalstamp.analysis.wave2d import wave_response_2d
-from opticalstamp.analysis.wavebase import wave_sampling
-from opticalstamp.analysis.wavecompare import compare_wave_ray, wave_folded_lsf
-from opticalstamp.design import load_design
-from opticalstamp.design.resolution import chart_dpis
-from opticalstamp.design.variants import scale_to_dpi, with_hole_shape, with_stack
-from opticalstamp.units import period_of_dpi
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import json  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from opticalstamp.analysis.rmtf import rmtf_from_lsf  # noqa: E402
+from opticalstamp.analysis.wave import wave_response  # noqa: E402
+from opticalstamp.analysis.wave2d import wave_response_2d  # noqa: E402
+from opticalstamp.analysis.wavebase import wave_sampling  # noqa: E402
+from opticalstamp.analysis.wavecompare import compare_wave_ray, wave_folded_lsf  # noqa: E402
+from opticalstamp.analysis.wavespectral import wave_response_spectral  # noqa: E402
+from opticalstamp.design import load_design  # noqa: E402
+from opticalstamp.design.resolution import chart_dpis  # noqa: E402
+from opticalstamp.design.variants import scale_to_dpi, with_hole_shape, with_stack  # noqa: E402
+from opticalstamp.units import period_of_dpi  # noqa: E402
 
 Z19 = tuple(0.25 * i for i in range(19))
 
 
-def median_time(fn, repeats: int) -> tuple[float, object]:
+def median_time(fn, repeats: int, cpu: list | None = None) -> tuple[float, object]:
+    """Median wall-clock seconds of ``repeats`` runs after a warm-up (and their median
+    CPU seconds appended to ``cpu``)."""
     fn()
-    times, out = [], None
+    times, cpus, out = [], [], None
     for _ in range(repeats):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         out = fn()
         times.append(time.perf_counter() - t)
+        cpus.append(time.process_time() - c)
+    if cpu is not None:
+        cpu.append(statistics.median(cpus))
     return statistics.median(times), out
+
+
+def spectral(out: dict, reps: int) -> None:
+    """White light (7 wavelengths): the RMTF table and one pixel's full responsivity at
+    19 heights, against the same at the design's one wavelength."""
+    for name, d in list(designs().items())[:2]:
+        dpis = list(chart_dpis(d))
+        pers = [period_of_dpi(x) for x in dpis]
+        rec = {}
+        for light in ("mono", "white"):
+            cpu: list = []
+            t, res = median_time(
+                lambda d=d, pers=pers, light=light, dpis=dpis: rmtf_from_lsf(
+                    wave_folded_lsf(d, Z19, pers, spectrum=light), d, dpi=dpis
+                ),
+                reps,
+                cpu,
+            )
+            t2, r = median_time(
+                lambda d=d, light=light: wave_response_spectral(d, Z19, spectrum=light), 1, cpu
+            )
+            print(
+                f"{name}, {light}: RMTF table {t:.2f} s (CPU {cpu[0]:.2f} s); one pixel's "
+                f"full responsivity at 19 heights {t2:.2f} s (CPU {cpu[1]:.2f} s)",
+                flush=True,
+            )
+            rec[light] = {
+                "rmtf_table_s": t,
+                "rmtf_table_cpu_s": cpu[0],
+                "responsivity_19z_s": t2,
+                "responsivity_19z_cpu_s": cpu[1],
+                "wave_dof_mm": res.dof_mm,
+                "wavelengths_um": list(r.spectrum.wavelengths_um),
+                "weights": list(r.spectrum.weights),
+                "light_um2sr": float(r.etendue_um2sr[0]),
+            }
+        out[f"{name} spectral"] = rec
 
 
 def designs() -> dict:
@@ -64,7 +119,21 @@ def small():
 if __name__ == "__main__":
     quick = "--quick" in sys.argv
     reps = 1 if quick else 3
-    out = {"load_average": os.getloadavg(), "cpus": os.cpu_count()}
+    out = {
+        "load_average": os.getloadavg(),
+        "cpus": os.cpu_count(),
+        "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
+    }
+    spectral(out, reps)
+    if "--spectral-only" in sys.argv:  # update the white-light entries of the results
+        path = Path(__file__).with_name("bench_wave.json")
+        old = json.loads(path.read_text()) if path.exists() else {}
+        keys = [k for k in out if k.endswith(" spectral")]
+        old.update({k: out[k] for k in keys})
+        old["spectral_load_average"] = [out["load_average"], os.getloadavg()]
+        old["spectral_openblas_threads"] = out["openblas_threads"]
+        path.write_text(json.dumps(old, indent=1, default=str))
+        sys.exit(0)
     for name, d in designs().items():
         t, r = median_time(lambda d=d: wave_response(d, Z19), reps)
         print(f"{name}: responsivity at 19 heights, one pixel: {t:.2f} s", flush=True)
