@@ -41,7 +41,9 @@ spectrum, the wave engine's figures at that wavelength exactly.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
@@ -64,18 +66,20 @@ __all__ = [
 
 #: Typical LED spectra: per name the Gaussian bands (peak um, FWHM um, relative height)
 #: of the relative spectral power (see the module's docstring for the sources).
-LEDS: dict[str, tuple[tuple[float, float, float], ...]] = {
-    "white": ((0.450, 0.020, 1.0), (0.560, 0.120, 0.55)),
-    "red": ((0.630, 0.018, 1.0),),
-    "green": ((0.525, 0.032, 1.0),),
-    "blue": ((0.465, 0.024, 1.0),),
-}
+LEDS: Mapping[str, tuple[tuple[float, float, float], ...]] = MappingProxyType(
+    {
+        "white": ((0.450, 0.020, 1.0), (0.560, 0.120, 0.55)),
+        "red": ((0.630, 0.018, 1.0),),
+        "green": ((0.525, 0.032, 1.0),),
+        "blue": ((0.465, 0.024, 1.0),),
+    }
+)
 #: Wavelengths sampled by default for each light.
-DEFAULT_POINTS = {"white": 7, "red": 3, "green": 3, "blue": 3}
+DEFAULT_POINTS: Mapping[str, int] = MappingProxyType({"white": 7, "red": 3, "green": 3, "blue": 3})
 #: The channels of each illumination (LEDs lit in turn give one responsivity each).
-CHANNELS = {name: (name,) for name in ILLUMINATIONS if name != "rgb"} | {
-    "rgb": ("red", "green", "blue")
-}
+CHANNELS: Mapping[str, tuple[str, ...]] = MappingProxyType(
+    {name: (name,) for name in ILLUMINATIONS if name != "rgb"} | {"rgb": ("red", "green", "blue")}
+)
 #: A typical front-illuminated silicon photodiode's quantum efficiency (um, electrons
 #: per photon), see the module's docstring.
 SILICON_QE_TABLE = (

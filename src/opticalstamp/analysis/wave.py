@@ -167,7 +167,7 @@ class WaveResponse:
         (x, gx), (y, gy) = self.fields.terms(float(self.z_mm[iz]))
         if half_um is None:
             half_um = max(
-                _half_width(self.x_um, self.lsf_x[iz]), _half_width(self.y_um, self.lsf_y[iz])
+                half_width(self.x_um, self.lsf_x[iz]), half_width(self.y_um, self.lsf_y[iz])
             )
         n = int(math.ceil(half_um / bin_um))
         edges = np.arange(-n, n + 1) * bin_um
@@ -177,7 +177,9 @@ class WaveResponse:
         return edges, m
 
 
-def _half_width(x: np.ndarray, p: np.ndarray, tail: float = 1e-4) -> float:
+def half_width(x: np.ndarray, p: np.ndarray, tail: float = 1e-4) -> float:
+    """Half width about the pixel's axis (um) that holds all but ``tail`` of the
+    marginal ``p`` on ``x`` (the default extent of a spot map)."""
     c = np.cumsum(p)
     c = c / c[-1]
     lo = x[np.searchsorted(c, tail / 2)]

@@ -28,7 +28,7 @@ from scipy.signal import czt
 from ..design import Design
 from ..raytrace.stack import lattice_of
 from .spectrum import Spectrum, channels, one_channel
-from .wave import WaveResponse, wave_lsf_x, wave_response
+from .wave import WaveResponse, half_width, wave_lsf_x, wave_response
 from .wavebase import SOURCE_EXTRA, WaveSampling, response_summary, wave_sampling
 
 __all__ = [
@@ -189,10 +189,8 @@ class SpectralWaveResponse:
         """The weighted responsivity map at ``z_mm[iz]`` on square bins (sr): (edges,
         map[y, x]), as :meth:`~.wave.WaveResponse.spot`."""
         if half_um is None:
-            from .wave import _half_width
-
             half_um = max(
-                _half_width(self.x_um, self.lsf_x[iz]), _half_width(self.y_um, self.lsf_y[iz])
+                half_width(self.x_um, self.lsf_x[iz]), half_width(self.y_um, self.lsf_y[iz])
             )
         edges, total = None, None
         for w, p in zip(self.spectrum.weights, self.parts, strict=True):
