@@ -224,7 +224,7 @@ def _modes(a: np.ndarray, tol: float) -> np.ndarray:
     piv: list[int] = []
     while len(piv) < r and d.sum() > tol * total:
         i, k = int(np.argmax(d)), len(piv)
-        col = (g[:, i] - low[:, :k] @ low[i, :k].conj()) / np.sqrt(d[i])
+        col = (g[:, i] - (low[:, :k] * low[i, :k].conj()).sum(axis=1)) / np.sqrt(d[i])
         low[:, k] = col
         d = np.clip(d - np.abs(col) ** 2, 0.0, None)
         d[i] = 0.0
