@@ -32,6 +32,7 @@ from .common import (
     save_plot,
     writable,
 )
+from .optics import OpticsOpt
 
 DaskOpt = Annotated[
     str | None, typer.Option("--dask", help="Dask scheduler address, tcp://HOST:PORT")
@@ -189,6 +190,7 @@ def search(
         ),
     ] = True,
     estimator: EstimatorOpt = "surrogate",
+    optics: OpticsOpt = "auto",
     objective: Annotated[
         str,
         typer.Option(
@@ -220,6 +222,8 @@ def search(
         variant_path,
         verify_front,
     )
+    from ..studies.searchspace import rejection_text, rejections
+    from ..studies.waveestimate import optics_used_text
 
     if objective not in OBJECTIVES:
         fail(f"--objective: must be one of {', '.join(OBJECTIVES)} (got {objective!r})")
@@ -247,6 +251,7 @@ def search(
             progress=not as_json,
             objective=objective,
             estimator=estimator,
+            optics=optics,
         )
         if verify:
             results = {
@@ -281,20 +286,22 @@ def search(
         + (
             "; every design traced exactly (--estimator trace):"
             if estimator == "trace"
-            else "; figures from the exact tracer, the surrogate's in brackets:"
+            else "; figures of record from the exact tracer or, for designs judged by wave "
+            "optics, the exact wave figures; the estimate's in brackets:"
             if verify
             else "; figures from the surrogate (--no-verify):"
         )
     ]
+    lines.append("  " + optics_used_text(results))
     if not data["pareto"]:
-        recs = [x for v in results.values() for x in v.records if x["ok"]]
-        near = sum(x["nearest_ghost_mm"] < near_mm for x in recs)
-        over = sum(x["stack_um"] > budget_mm * 1000.0 for x in recs)
+        recs = [x for v in results.values() for x in v.records]
+        counts = rejections(recs, budget_mm * 1000.0, max_ghost)
+        data["rejected_by"] = counts
         lines.append(
-            f"  no design met every constraint: of {len(recs)} evaluated, {near} had ghost light "
-            f"within --near-mm {near_mm:g}, {over} exceeded --budget-mm {budget_mm:g}"
-            + ("" if max_ghost is None else ", or the ghost fraction exceeded --max-ghost")
-            + "; relax a constraint or a --pin"
+            "  "
+            + rejection_text(
+                counts, len(recs), near_mm=near_mm, budget_mm=budget_mm, max_ghost=max_ghost
+            )
         )
     for i, p in enumerate(data["pareto"], start=1):
         tag = f" [{p['variant']}]" if "variant" in p else ""

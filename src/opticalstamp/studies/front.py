@@ -1,5 +1,5 @@
-"""A search's front re-verified by the exact tracer, and its points exported as
-designs of their own."""
+"""A search's front re-verified by the exact tracer (or, for the points judged by wave
+optics, by the exact wave figures), and its points exported as designs of their own."""
 
 from __future__ import annotations
 
@@ -21,6 +21,15 @@ from .verify import (
     disagreements,
     exact_figures,
 )
+from .waveestimate import (
+    EXACT_WAVE,
+    EXACT_WAVE_GHOST_RAYS,
+    EXACT_WAVE_LSF_RAYS,
+    WAVE_ACCURACY,
+    WAVE_ESTIMATE,
+    exact_wave_figures,
+    wave_disagreements,
+)
 
 
 def _exact_payload(payload: dict) -> dict:
@@ -28,22 +37,33 @@ def _exact_payload(payload: dict) -> dict:
     rays on the payload's device."""
     base = design_from_dict(payload["base"], "search base")
     d = with_stack(base, holes_um=payload["holes_um"], thicknesses_um=payload["thicknesses_um"])
+    opts = dict(payload["options"])
+    if opts.pop("optics", "ray") == "wave":
+        opts["ghost_rays"] = opts.pop("wave_ghost_rays")
+        opts["lsf_rays"] = opts.pop("wave_lsf_rays")
+        return exact_wave_figures(d, **opts)
+    opts.pop("wave_ghost_rays", None)
+    opts.pop("wave_lsf_rays", None)
     with using_device(payload.get("device", "cpu")):
-        return exact_figures(d, **payload["options"])
+        return exact_figures(d, **opts) | {"optics": "ray"}
 
 
 def _verified(row: dict, exact: dict | None) -> dict:
-    """A record with the exact tracer's figures as its figures of record: the surrogate's
-    kept under ``surrogate``, the exact ones under ``exact``, and ``disagrees`` naming the
-    figures that differ by more than the surrogate's stated accuracy."""
+    """A record with the exact figures as its figures of record (the exact tracer's, or
+    for a point judged by wave optics the exact wave figures): the estimate's kept under
+    ``surrogate``, the exact ones under ``exact``, and ``disagrees`` naming the figures
+    that differ by more than the estimator's stated accuracy (``SURROGATE_ACCURACY``, or
+    ``WAVE_ACCURACY`` for the wave estimator)."""
+    wave = row.get("optics") == "wave"
     if exact is None:
-        return row | {"estimator": SURROGATE, "exact": None, "disagrees": None}
+        est = WAVE_ESTIMATE if wave else SURROGATE
+        return row | {"estimator": est, "exact": None, "disagrees": None}
     sur = {k: row[k] for k in (*FIGURES, "rmtf_at")}
     out = row | {
-        "estimator": EXACT,
+        "estimator": EXACT_WAVE if wave else EXACT,
         "surrogate": sur,
         "exact": exact,
-        "disagrees": disagreements(sur, exact),
+        "disagrees": wave_disagreements(sur, exact) if wave else disagreements(sur, exact),
     }
     for k in ("efficiency_ratio", "dof_mm", "ghost_fraction", "nearest_ghost_mm", "rmtf_at"):
         out[k] = exact[k]
@@ -60,8 +80,14 @@ def verify_front(
     journal: Path | None = None,
     progress: bool = False,
     device: str | None = None,
+    wave_ghost_rays: int = EXACT_WAVE_GHOST_RAYS,
+    wave_lsf_rays: int = EXACT_WAVE_LSF_RAYS,
 ) -> SearchResult:
-    """The search's front and base design re-verified by the exact tracer.
+    """The search's front and base design re-verified by the exact tracer, or where a
+    point was judged by wave optics (its ``optics``) by the exact wave figures
+    (:func:`~opticalstamp.studies.waveestimate.exact_wave_figures`: efficiency and rmtf
+    with optics wave, ``wave_ghost_rays`` and ``wave_lsf_rays`` for their traced part;
+    the wave estimator's accuracy ``WAVE_ACCURACY`` flags its points).
 
     Each point of the front (and the base design) is traced exactly
     (:func:`~opticalstamp.studies.verify.exact_figures`, the search's seed and chart):
@@ -85,12 +111,17 @@ def verify_front(
     rows = list(res.pareto) + ([res.reference] if res.reference else [])
     where = run_device(device)
     tasks = []
+    wave_options = options | {
+        "optics": "wave",
+        "wave_ghost_rays": wave_ghost_rays,
+        "wave_lsf_rays": wave_lsf_rays,
+    }
     for r in rows:
         p = {
             "base": base_json,
             "holes_um": r["holes_um"],
             "thicknesses_um": r["thicknesses_um"],
-            "options": options,
+            "options": wave_options if r.get("optics") == "wave" else options,
             "exact": True,
             "device": where,
         }
@@ -121,6 +152,8 @@ def verify_front(
     meta = res.meta | {
         "verified_by": EXACT,
         "surrogate_accuracy": dict(SURROGATE_ACCURACY),
+        "wave_verified_by": EXACT_WAVE,
+        "wave_accuracy": dict(WAVE_ACCURACY),
         "exact_ghost_rays": ghost_rays,
         "exact_lsf_rays": lsf_rays,
     }
@@ -157,28 +190,31 @@ def front_designs(results: dict[str, SearchResult], front: list[dict]) -> list[d
         d = with_stack(base, holes_um=row["holes_um"], thicknesses_um=row["thicknesses_um"])
         d = replace(d, name=name, description=desc)
         sur = row.get("surrogate") or {k: row[k] for k in (*FIGURES, "rmtf_at")}
+        wave = row.get("optics") == "wave"
+        est = "wave estimator" if wave else "surrogate"
         prov = [
             f"exported by opticalstamp {__version__} search --export-designs",
             f"search: base {base.name} (fingerprint {base.fingerprint()}), seed {res.seed}, "
-            f"{res.dpi:g} dpi, {len(res.records)} designs, constraints near_mm "
-            f"{res.meta['near_mm']:g}, budget_mm {res.meta['budget_mm']:g}, max_spill "
-            f"{res.meta['max_spill']:g}"
+            f"{res.dpi:g} dpi, {len(res.records)} designs, optics "
+            f"{res.meta.get('optics', 'ray')}, constraints near_mm "
+            f"{res.meta['near_mm']:g}, budget_mm {res.meta['budget_mm']:g}"
             + (f", max_ghost {res.meta['max_ghost']:g}" if res.meta["max_ghost"] else ""),
             f"point {i} of {len(front)}"
             + (f" (variant {row['variant']})" if "variant" in row else ""),
-            "surrogate: efficiency {:.5f}, DOF {:.3f} mm, ghost fraction {:.4f}".format(
-                sur["efficiency_ratio"], sur["dof_mm"], sur["ghost_fraction"]
+            "{}: efficiency {:.5f}, DOF {:.3f} mm, ghost fraction {:.4f}".format(
+                est, sur["efficiency_ratio"], sur["dof_mm"], sur["ghost_fraction"]
             ),
         ]
         if row.get("exact"):
             e = row["exact"]
             prov.append(
-                "exact tracer (figure of record): efficiency {:.5f}, DOF {:.3f} mm, ghost "
+                "{} (figure of record): efficiency {:.5f}, DOF {:.3f} mm, ghost "
                 "fraction {:.4f}{}".format(
+                    "exact wave figures" if wave else "exact tracer",
                     e["efficiency_ratio"],
                     e["dof_mm"],
                     e["ghost_fraction"],
-                    f"; differs from the surrogate in {', '.join(row['disagrees'])}"
+                    f"; differs from the {est} in {', '.join(row['disagrees'])}"
                     if row["disagrees"]
                     else "",
                 )

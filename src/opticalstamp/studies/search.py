@@ -6,7 +6,8 @@ largest that leaves ``min_wall_um`` of mask between the staggered rows) and each
 thickness (``thickness_step_um`` steps; glass plates and air gaps between ``bounds``);
 any of them can be pinned. Constraints: no ghost light within ``near_mm`` of the pixel's
 axis at Z = 0 ... 4 mm (the paper's virtual detector), optionally a ghost-fraction bound,
-a total stack-thickness budget, and a diffraction spill below ``max_spill``. Objectives:
+and a total stack-thickness budget (the diffraction spill is reported, not judged: where
+diffraction matters the candidates are judged by wave optics, ``optics``). Objectives:
 light efficiency (ratio to the paper's reference lens) and depth of field on the chart at
 ``dof_dpi`` (default 2/3 of the design's resolution: 200 dpi for 300, 400 for 600).
 
@@ -24,10 +25,13 @@ its constraints are in :mod:`.searchspace`, the result, its records and the merg
 from __future__ import annotations
 
 import functools
+import math
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
+from ..analysis.responsivity import OPTICS, resolve_optics
 from ..defaults import SEARCH_BUDGET_MM, SEARCH_GENERATIONS, SEARCH_NEAR_MM, SEARCH_POPULATION
 from ..design import (
     Design,
@@ -56,8 +60,16 @@ from .searchresult import (
     record_row,
     search_dataset,
 )
-from .searchspace import CONSTRAINTS, SearchSpace, constraint_values, default_space, on_grid
+from .searchspace import (
+    CONSTRAINTS,
+    SearchSpace,
+    constraint_values,
+    default_space,
+    on_grid,
+    rejections,
+)
 from .verify import ESTIMATORS, check_estimator, evaluate_with
+from .waveestimate import WAVE_ACCURACY, WAVE_ESTIMATE
 
 #: a base whose output pitch is within this of 25.4 mm / dpi is searched as it is
 SAME_RESOLUTION = 0.01
@@ -100,7 +112,6 @@ def search(
     budget_mm: float = SEARCH_BUDGET_MM,
     near_mm: float = SEARCH_NEAR_MM,
     max_ghost: float | None = None,
-    max_spill: float = 0.25,
     population: int = SEARCH_POPULATION,
     generations: int = SEARCH_GENERATIONS,
     seed: int = 0,
@@ -115,6 +126,7 @@ def search(
     objective: str = "dof",
     estimator: str = "surrogate",
     device: str | None = None,
+    optics: str = "ray",
 ) -> SearchResult:
     """NSGA-II search of hole sizes and thicknesses; returns every evaluation and the front.
 
@@ -125,6 +137,12 @@ def search(
     "trace" (every candidate's ghosts, light, RMTF and depth of field from the exact
     tracer, :func:`~opticalstamp.studies.verify.evaluate_exact`; about 0.3 s a design on
     the CPU, on the GPU with ``--device cuda``).
+    ``optics``: "ray", "wave" or "auto": the engine that judges each candidate (a
+    resolved per candidate, so "auto" follows the measured validity rule design by design,
+    :func:`~opticalstamp.analysis.responsivity.resolve_optics`); with wave optics the
+    candidate's figures are the wave estimator's
+    (:func:`~opticalstamp.studies.waveestimate.evaluate_wave`, or the exact wave figures
+    with ``estimator`` "trace"); each record's ``optics`` names the engine.
     ``device``: where the evaluations trace their rays
     (:func:`~opticalstamp.device.run_device`, resolved once here; None: the device of the
     run in progress), handed to the workers in each task's payload.
@@ -167,9 +185,15 @@ def search(
         raise InputError(f"objective: must be one of {', '.join(OBJECTIVES)} (got {objective!r})")
     depth = OBJECTIVES[objective]
     check_estimator(estimator)
+    if optics not in OPTICS:
+        raise InputError(f"optics: must be one of {', '.join(OPTICS)} (got {optics!r})")
+    if optics == "wave":  # refused here, naming why, rather than in every worker
+        resolve_optics(design, "wave")
     options = {"dpi": dof_dpi, "near_mm": near_mm, "ghost_rays": ghost_rays}
     if estimator == "trace":
         options["estimator"] = "trace"
+    if optics != "ray":  # absent for ray optics: the tasks' keys of earlier journals hold
+        options["optics"] = optics
     if depth != "dof_mm":
         options["restored"] = True
     base_json = design.model_dump(mode="json", exclude_none=True)
@@ -245,7 +269,7 @@ def search(
                     records.append(record_row(params, rec, None, False, n_h, n_t))
                     continue
                 m = rec["result"]
-                cons = constraint_values(m, budget_um, max_ghost, max_spill)
+                cons = constraint_values(m, budget_um, max_ghost)
                 for name, c in zip(CONSTRAINTS, cons, strict=True):
                     t.set_constraint(name, c)  # <= 0: satisfied (NSGA-II's constrained domination)
                 study.tell(t, [m["efficiency_ratio"], m[depth]])
@@ -267,7 +291,7 @@ def search(
             base_params,
             ref_rec,
             m,
-            all(c <= 0 for c in constraint_values(m, budget_um, max_ghost, max_spill)),
+            all(c <= 0 for c in constraint_values(m, budget_um, max_ghost)),
             n_h,
             n_t,
         )
@@ -291,7 +315,13 @@ def search(
             "budget_mm": budget_mm,
             "near_mm": near_mm,
             "max_ghost": max_ghost,
-            "max_spill": max_spill,
+            # no spill constraint any more (a reported figure); inf keeps older readers
+            "max_spill": math.inf,
+            "optics": optics,
+            "optics_used": dict(Counter(r["optics"] for r in records if r["ok"])),
+            "wave_estimator": WAVE_ESTIMATE,
+            "wave_accuracy": dict(WAVE_ACCURACY),
+            "rejected_by": rejections(records, budget_um, max_ghost),
             "population": population,
             "generations": generations,
             "pinned": pins,

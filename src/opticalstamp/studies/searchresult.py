@@ -88,6 +88,9 @@ def record_row(
         "error": None if rec is None or rec["ok"] else rec.get("error", "not run"),
     }
     row["rmtf_at"] = None if m is None else dict(m["rmtf_at"])
+    row["near_ghost"] = None if m is None else bool(m["near_ghost"])
+    # the engine that judged it: "ray" or "wave" (records journalled before: ray)
+    row["optics"] = None if m is None else m.get("optics", "ray")
     for k in FIGURES:
         v = None if m is None else m.get(k)
         # JSON (the journal) has no infinity: a missing nearest ghost means none at all

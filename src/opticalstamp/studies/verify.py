@@ -165,15 +165,50 @@ def check_estimator(name: str) -> str:
 
 
 def evaluate_with(design: Design, options: dict) -> dict:
-    """A design's figures by the estimator ``options["estimator"]`` (default surrogate):
-    :func:`~opticalstamp.studies.evaluate.evaluate_design`, or :func:`evaluate_exact`
-    for "trace" (with its own ray counts: the surrogate's ``ghost_rays`` is dropped); the
-    other options go to the evaluation."""
+    """A design's figures by the estimator ``options["estimator"]`` (default surrogate)
+    and the optics ``options["optics"]`` (default "ray"): with ray optics
+    :func:`~opticalstamp.studies.evaluate.evaluate_design`, or :func:`evaluate_exact` for
+    "trace" (with its own ray counts: the surrogate's ``ghost_rays`` is dropped); where
+    ``optics`` is "wave", or "auto" and the validity rule picks wave optics for this
+    design (:func:`~opticalstamp.analysis.responsivity.resolve_optics`), the wave
+    estimator (:func:`~opticalstamp.studies.waveestimate.evaluate_wave`) or, for "trace",
+    the exact wave figures (:func:`~opticalstamp.studies.waveestimate.exact_wave_figures`,
+    with the diffraction spill and the restored depth of field beside them). The result's
+    ``"optics"`` names the engine that gave it; the other options go to the evaluation."""
     opts = dict(options)
-    if check_estimator(opts.pop("estimator", "surrogate")) == "trace":
+    trace = check_estimator(opts.pop("estimator", "surrogate")) == "trace"
+    optics = opts.pop("optics", "ray")
+    if optics != "ray":
+        from ..analysis.responsivity import resolve_optics
+
+        if resolve_optics(design, optics).engine == "wave":
+            return _wave_figures(design, opts, trace)
+    if trace:
         opts.pop("ghost_rays", None)
-        return evaluate_exact(design, **opts)
-    return evaluate_design(design, **opts)
+        return evaluate_exact(design, **opts) | {"optics": "ray"}
+    return evaluate_design(design, **opts) | {"optics": "ray"}
+
+
+def _wave_figures(design: Design, opts: dict, trace: bool) -> dict:
+    """:func:`evaluate_with` by wave optics."""
+    from .evaluate import diffraction_spill
+    from .waveestimate import evaluate_wave, exact_wave_figures
+
+    if not trace:
+        return evaluate_wave(design, **opts)
+    restored = opts.pop("restored", False)
+    wavelength = opts.pop("wavelength_um", None)
+    opts.pop("ghost_rays", None)
+    out = exact_wave_figures(design, **opts)
+    out["diffraction_spill"] = diffraction_spill(design, wavelength)
+    out["restored_dof_mm"] = None
+    if restored:
+        from .restoration import restored_dof_closed_form
+
+        out["restored_dof_mm"] = restored_dof_closed_form(
+            design, dpi=opts.get("dpi", 200.0), ghost_fraction=out["ghost_fraction"]
+        )["dof_mm"]
+    return out
 
 
 def disagreements(surrogate: dict, exact: dict, accuracy=SURROGATE_ACCURACY) -> list[str]:

@@ -1,0 +1,312 @@
+"""A design's search figures by wave optics: a fast estimator and the exact wave figures.
+
+Where the validity rule (:mod:`~opticalstamp.analysis.validity`) says ray optics fails
+(or where the user asks for wave optics), a search judges its candidates on their
+wave-optical light, depth of field and crosstalk. The figures are those of
+:func:`~opticalstamp.studies.evaluate.evaluate_design`, with the same keys, from:
+
+* :func:`evaluate_wave`, the **wave estimator** of the search: the separable wave
+  engine (:func:`~opticalstamp.analysis.wavecompare.wave_folded_lsf`) in a narrower
+  band than the analyses' (``FAST_ORDERS`` diffraction orders of the smallest hole over
+  the own path's slopes instead of 12: the same step rule, lambda / (6 B), so a coarser
+  grid and fewer source points) on the search's Z grid, for the own path with its
+  diffraction and the near crosstalk in that band; the light outside the band (the far
+  ghost paths) traced (importance sampling, ``ghost_rays`` rays, :func:`far_light`) and
+  added as a uniform background, as the ray surrogate adds its ghosts. Its error
+  against the exact wave figures is measured (``benchmarks/wave_estimator_accuracy.py``)
+  and held in :data:`WAVE_ACCURACY`.
+* :func:`exact_wave_figures`, the **exact wave figures** a front is verified with: the
+  analyses' own interface, :func:`~opticalstamp.analysis.efficiency.efficiency` and
+  :func:`~opticalstamp.analysis.rmtf.rmtf` with ``optics="wave"`` (the wave engine in its
+  full band joined with the traced light beyond it, the RMTF with the traced light where
+  it lands, the depth of field at the refined crossing).
+
+The signal is the light in the band (the own path with its diffraction and the near
+crosstalk; :func:`~opticalstamp.analysis.responsivity.pixel_light`), the ghost fraction
+the traced light beyond the band over all the light, and the near-ghost test the
+nearest landing of that traced light (the near crosstalk in the band is in the LSFs, so
+in the RMTF and the depth of field, where it costs contrast).
+"""
+
+from __future__ import annotations
+
+import math
+from types import MappingProxyType
+
+import numpy as np
+
+from ..analysis.efficiency import reference_etendue
+from ..analysis.rmtf import DEFAULT_Z_MM, depth_of_field, period_of_dpi, rmtf_curves
+from ..analysis.wavebase import wave_sampling
+from ..design import Design
+from ..raytrace.pixel import PixelTracer, Sampling
+from ..raytrace.stack import output_pitch
+from .evaluate import GHOST_Z_MM, RMTF_Z_MM, Z_LIMIT_MM, diffraction_spill, extended_z
+
+#: diffraction orders of the smallest hole over the own path's slopes in the estimator's
+#: band (the analyses use 12: :data:`~opticalstamp.analysis.wavebase.ORDERS`)
+FAST_ORDERS = 4.0
+#: how :func:`evaluate_wave` estimates, recorded with every figure it makes
+WAVE_ESTIMATE = (
+    f"wave estimator: separable wave engine in a band of {FAST_ORDERS:g} diffraction orders "
+    "(own path, its diffraction, near crosstalk) + traced light beyond the band as a "
+    "uniform background"
+)
+#: how :func:`exact_wave_figures` estimates
+EXACT_WAVE = (
+    "exact wave figures: wave engine in its full band joined with the traced light beyond "
+    "it (efficiency and rmtf with optics wave), RMTF with that light where it lands"
+)
+#: How far the wave estimator may be from the exact wave figures: the largest |estimate -
+#: exact| over the designs of benchmarks/wave_estimator_accuracy.py (random feasible
+#: designs of the 600-dpi search space and the 600-dpi half-scale prototype, seed 0;
+#: docs/search.md), times 1.2: depth of field in mm, RMTF and ghost fraction in absolute
+#: units, the light as a relative error.
+WAVE_ACCURACY = MappingProxyType(
+    {
+        "dof_mm": 0.10,
+        "rmtf": 0.03,
+        "efficiency_ratio": 0.03,
+        "ghost_fraction": 0.03,
+    }
+)
+
+
+def far_light(
+    design: Design,
+    band: float,
+    *,
+    z_mm=GHOST_Z_MM,
+    n_rays: int = 1 << 17,
+    seed: int = 0,
+    tracer: PixelTracer | None = None,
+) -> dict:
+    """The traced light of used pixel (A, 0) beyond the wave band, |s_x| or |s_y| >=
+    ``band`` (the far ghost paths: the own path lies inside the band), and where it lands.
+
+    Returns
+    -------
+    dict
+        ``far_um2sr`` (um^2 sr), ``nearest_far_mm``: the nearest landing of that light
+        from the pixel's axis on the object planes ``z_mm`` (inf: none lands),
+        ``ray_in_band_um2sr`` (the traced light inside the band, for reference).
+    ``tracer``: a PixelTracer of this design whose pilot runs to reuse.
+    """
+    tr = tracer if tracer is not None else PixelTracer(design, Sampling(n_rays, seed))
+    far = inside = 0.0
+    nearest = math.inf
+    for pb in tr.trace((0, 0), n_rays):
+        b = pb.rays
+        w = pb.w
+        out = ((np.abs(b.sx) >= band) | (np.abs(b.sy) >= band)) & (w > 0)
+        far += float(w[out].sum())
+        inside += float(w[~out].sum())
+        if out.any():
+            for z in z_mm:
+                dx, dy = pb.offsets(float(z) * 1000.0)
+                nearest = min(nearest, float(np.hypot(dx[out], dy[out]).min()))
+    return {
+        "far_um2sr": far / n_rays,
+        "nearest_far_mm": nearest / 1000.0,
+        "ray_in_band_um2sr": inside / n_rays,
+    }
+
+
+def _joined_lsf(design: Design, zs: np.ndarray, per: float, smp, n_rays: int, seed: int, tracer):
+    """The wave engine's folded LSFs in the band of ``smp`` joined with the traced light
+    beyond it where it lands (:func:`~opticalstamp.analysis.responsivity.join`), on the
+    one chart period ``per`` at each of ``zs``."""
+    from ..analysis.lsf import traced_folded_lsf
+    from ..analysis.responsivity import join
+    from ..analysis.wavecompare import wave_folded_lsf
+
+    wave = wave_folded_lsf(design, zs, [per], sampling=smp)
+    far = traced_folded_lsf(
+        design, z_mm=zs, periods_um=[per], n_rays=n_rays, seed=seed, ghosts=True,
+        tracer=tracer, outside_band=smp.band,
+    )  # fmt: skip
+    return wave, join(wave, far, smp.band, float(design.index(design.object_medium)))
+
+
+def evaluate_wave(
+    design: Design,
+    *,
+    dpi: float = 200.0,
+    z_mm=DEFAULT_Z_MM,
+    rmtf_z_mm=RMTF_Z_MM,
+    dof_threshold: float = 0.3,
+    near_mm: float = 1.0,
+    ghost_rays: int = 1 << 17,
+    seed: int = 0,
+    wavelength_um: float | None = None,
+    restored: bool = False,
+    orders: float = FAST_ORDERS,
+) -> dict:
+    """The figures of :func:`~opticalstamp.studies.evaluate.evaluate_design` by the wave
+    estimator (``"estimator"``: :data:`WAVE_ESTIMATE`, ``"optics"``: "wave").
+
+    The wave engine's LSFs of rows A and B folded onto the chart of ``dpi`` at each
+    ``z_mm`` (the grid runs on in its step while the RMTF stays above the threshold, up
+    to 20 mm), in the band of ``orders`` diffraction orders
+    (:func:`~opticalstamp.analysis.wavebase.wave_sampling`); the light beyond the band
+    traced with ``ghost_rays`` rays (:func:`far_light`). The signal (efficiency) is the
+    light in the band at Z = 0, the ghost fraction the light beyond it over all. The
+    diffraction spill (closed form, at ``wavelength_um``) is reported, not judged; the
+    restored depth of field (``restored``) is the closed form at this ghost fraction.
+    """
+    smp = wave_sampling(design, orders=orders)
+    tracer = PixelTracer(design, Sampling(ghost_rays, seed), replay=True)
+    far = far_light(design, smp.band, n_rays=ghost_rays, seed=seed, tracer=tracer)
+    per = period_of_dpi(dpi)
+    zs = np.asarray(z_mm, dtype=np.float64)
+    while True:
+        wave, lsf = _joined_lsf(design, zs, per, smp, ghost_rays, seed, tracer)
+        curve = rmtf_curves(lsf, design)["max"][0]
+        if curve.min() < dof_threshold or zs[-1] >= Z_LIMIT_MM:
+            break
+        zs = extended_z(zs)  # the depth of field is a crossing: go on in the same step
+    own = float(wave.h[0][0, 0, 0].sum())  # row A's in-band light at the first Z
+    ghost = far["far_um2sr"]
+    tot = own + ghost
+    frac = ghost / tot if tot > 0 else 0.0
+    ref = reference_etendue(output_pitch(design))
+    restored_dof = None
+    if restored:
+        from .restoration import restored_dof_closed_form
+
+        restored_dof = restored_dof_closed_form(design, dpi=dpi, ghost_fraction=frac)["dof_mm"]
+    return {
+        "estimator": WAVE_ESTIMATE,
+        "optics": "wave",
+        "band": smp.band,
+        "restored_dof_mm": restored_dof,
+        "etendue_own_um2sr": own,
+        "etendue_ghost_um2sr": ghost,
+        "ghost_fraction": frac,
+        "efficiency_ratio": own / ref,
+        "efficiency_ratio_total": tot / ref,
+        "dof_mm": depth_of_field(zs, curve, dof_threshold),
+        "dof_open_ended": bool(curve.min() >= dof_threshold),
+        "rmtf_at": {f"{z:g}": float(np.interp(z, zs, curve)) for z in rmtf_z_mm},
+        "nearest_ghost_mm": far["nearest_far_mm"],
+        "near_ghost": far["nearest_far_mm"] < near_mm,
+        "diffraction_spill": diffraction_spill(design, wavelength_um),
+        "stack_um": float(sum(sl.thickness_um for sl in design.slabs)),
+    }
+
+
+#: rays of the exact wave figures: the traced light beyond the band and the LSFs' far part
+EXACT_WAVE_GHOST_RAYS = 1 << 20
+EXACT_WAVE_LSF_RAYS = 1 << 19
+
+
+def exact_wave_figures(
+    design: Design,
+    *,
+    dpi: float = 200.0,
+    z_mm=DEFAULT_Z_MM,
+    rmtf_z_mm=RMTF_Z_MM,
+    dof_threshold: float = 0.3,
+    near_mm: float = 1.0,
+    ghost_rays: int = EXACT_WAVE_GHOST_RAYS,
+    lsf_rays: int = EXACT_WAVE_LSF_RAYS,
+    seed: int = 0,
+) -> dict:
+    """The figures of :func:`evaluate_wave` from the analyses' wave optics (``"estimator"``:
+    :data:`EXACT_WAVE`): the light by :func:`~opticalstamp.analysis.efficiency.efficiency`
+    with ``optics="wave"`` (signal: ``ratio_own``, the light in the full band; all light:
+    ``ratio``), the RMTF and depth of field by :func:`~opticalstamp.analysis.rmtf.rmtf`
+    with ``optics="wave"`` on the chart of ``dpi`` (the grid run on past ``z_mm`` until the
+    curve crosses, up to 20 mm), the near-ghost test on the traced light beyond the full
+    band (:func:`far_light`, ``ghost_rays``). No diffraction spill (it is not estimated).
+    """
+    from ..analysis.efficiency import efficiency
+    from ..analysis.ghosts import analyse_ghosts
+    from ..analysis.responsivity import resolve_optics
+    from ..analysis.rmtf import rmtf
+
+    opt = resolve_optics(design, "wave")
+    g = analyse_ghosts(design, z_mm=GHOST_Z_MM, n_rays=ghost_rays, seed=seed)
+    eff = efficiency(design, seed=seed, ghosts=g, area_scales=(1.0,), optics=opt)
+    far = far_light(design, opt.band, n_rays=ghost_rays, seed=seed)
+    zs = np.asarray(z_mm, dtype=np.float64)
+    key = f"{dpi:g}"
+    while True:
+        r = rmtf(
+            design, dpi=(dpi,), z_mm=zs, n_rays=lsf_rays, seed=seed, dof_dpi=dpi,
+            dof_threshold=dof_threshold, optics=opt,
+        )  # fmt: skip
+        curve = np.asarray(r.rmtf_max[key])
+        if curve.min() < dof_threshold or zs[-1] >= Z_LIMIT_MM:
+            break
+        zs = extended_z(zs)
+    tot = eff.ratio
+    return {
+        "estimator": EXACT_WAVE,
+        "optics": "wave",
+        "band": opt.band,
+        "etendue_own_um2sr": eff.etendue_own_um2sr,
+        "etendue_ghost_um2sr": max(eff.etendue_um2sr - eff.etendue_own_um2sr, 0.0),
+        "ghost_fraction": max(1.0 - eff.ratio_own / tot, 0.0) if tot > 0 else 0.0,
+        "efficiency_ratio": eff.ratio_own,
+        "efficiency_ratio_total": tot,
+        "dof_mm": r.dof_mm[key],
+        "dof_open_ended": bool(curve.min() >= dof_threshold),
+        "rmtf_at": {f"{z:g}": float(np.interp(z, zs, curve)) for z in rmtf_z_mm},
+        "rmtf_se_max": float(max(r.rmtf_max_se[key])),
+        "nearest_ghost_mm": far["nearest_far_mm"],
+        "near_ghost": far["nearest_far_mm"] < near_mm,
+        "stack_um": float(sum(sl.thickness_um for sl in design.slabs)),
+    }
+
+
+def wave_errors(estimate: dict, exact: dict) -> dict:
+    """|estimate - exact| of the figures :data:`WAVE_ACCURACY` bounds: ``dof_mm``,
+    ``rmtf`` (the largest over the heights both have), ``efficiency_ratio`` (relative),
+    ``ghost_fraction``."""
+    e_s, e_x = estimate["efficiency_ratio"], exact["efficiency_ratio"]
+    rel = abs(e_s / e_x - 1) if e_x > 0 else (0.0 if e_s == 0 else math.inf)
+    zs = [z for z in estimate.get("rmtf_at", {}) if z in exact.get("rmtf_at", {})]
+    return {
+        "dof_mm": abs(estimate["dof_mm"] - exact["dof_mm"]),
+        "rmtf": max((abs(estimate["rmtf_at"][z] - exact["rmtf_at"][z]) for z in zs), default=0),
+        "efficiency_ratio": rel,
+        "ghost_fraction": abs(estimate["ghost_fraction"] - exact["ghost_fraction"]),
+    }
+
+
+def wave_disagreements(estimate: dict, exact: dict, accuracy=WAVE_ACCURACY) -> list[str]:
+    """The figures where the wave estimator is further from the exact wave figures than
+    its stated accuracy (:data:`WAVE_ACCURACY`), and "near_ghost" where the exact figures
+    find traced light beyond the band near the pixel that the estimator's rays missed."""
+    out = []
+    if exact.get("near_ghost") and not estimate.get("near_ghost", False):
+        out.append("near_ghost")
+    err = wave_errors(estimate, exact)
+    out += [k for k in ("dof_mm", "efficiency_ratio", "ghost_fraction") if err[k] > accuracy[k]]
+    for z, v in estimate.get("rmtf_at", {}).items():
+        if z in exact.get("rmtf_at", {}) and abs(v - exact["rmtf_at"][z]) > accuracy["rmtf"]:
+            out.append(f"rmtf@{z}")
+    return out
+
+
+def optics_used_text(results: dict) -> str:
+    """One line: how many candidates of the searches ``results`` ({name: SearchResult})
+    each engine judged, and the wave estimator's stated accuracy where it judged any."""
+    used: dict[str, int] = {}
+    for res in results.values():
+        for k, v in res.meta.get("optics_used", {}).items():
+            used[k] = used.get(k, 0) + v
+    asked = next(iter(results.values())).meta.get("optics", "ray")
+    text = f"optics {asked}: " + ", ".join(
+        f"{v} judged by {'wave optics' if k == 'wave' else 'ray optics'}"
+        for k, v in sorted(used.items())
+    )
+    if used.get("wave"):
+        a = WAVE_ACCURACY
+        text += (
+            f" (wave estimator, {FAST_ORDERS:g} diffraction orders; stated accuracy against "
+            f"the exact wave figures: depth of field {a['dof_mm']:g} mm, RMTF {a['rmtf']:g}, "
+            f"light {a['efficiency_ratio']:.0%}, ghost fraction {a['ghost_fraction']:g})"
+        )
+    return text
