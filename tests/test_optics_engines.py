@@ -3,14 +3,17 @@ tracer's out-of-band light, behind :func:`opticalstamp.analysis.responsivity.fol
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from opticalstamp.analysis.lsf import FoldedLSF, traced_folded_lsf
+from opticalstamp.analysis.lsf import FoldedLSF, fold_bins, traced_folded_lsf
 from opticalstamp.analysis.responsivity import RAY, Optics, folded_lsf, join, resolve_optics
 from opticalstamp.analysis.rmtf import rmtf, rmtf_from_lsf
+from opticalstamp.analysis.wave import wave_response
 from opticalstamp.analysis.wavebase import wave_sampling
-from opticalstamp.analysis.wavecompare import ray_in_band
+from opticalstamp.analysis.wavecompare import fold, ray_in_band
 from opticalstamp.design import load_design, with_unstated
 from opticalstamp.validate import InputError
 
@@ -88,9 +91,14 @@ def test_geometric_limit_gives_the_ray_figures(paper):
     """At a wavelength shrunk 20x the joined responsivity gives the tracer's RMTF
     (max |difference| 0.0034, the tracer's standard error 0.003) and light (+0.56 %: the
     own path's diffraction excess falls as lambda, tests/test_wave.py)."""
-    w = folded_lsf(
-        paper, z_mm=ZS, periods_um=PER, optics=_wave(paper, wavelength_um=0.55 / 20), n_rays=N
-    )
+    # below the range of a design's light: the wave engine alone at lambda / 20, folded as
+    # wave_folded_lsf folds it, joined with the traced light beyond its band
+    smp = wave_sampling(paper, wavelength_um=paper.wavelength_um / 20)
+    rows = [wave_response(paper, ZS, pixel=(r, 0), sampling=smp) for r in (0, 1)]
+    nb = int(fold_bins(np.array(PER))[0])
+    h = np.stack([[fold(x.x_um, p, PER[0], nb) for p in x.lsf_x] for x in rows])[:, None]
+    far = traced_folded_lsf(paper, z_mm=ZS, periods_um=PER, n_rays=N, outside_band=smp.band)
+    w = join(replace(far, h=[h], method="wave"), far, smp.band, 1.0)
     r = folded_lsf(paper, z_mm=ZS, periods_um=PER, optics=RAY, n_rays=N)
     rw = rmtf_from_lsf(w, paper, dpi=[200.0])
     rr = rmtf_from_lsf(r, paper, dpi=[200.0])

@@ -52,3 +52,10 @@ def test_quick_report_on_every_design(name, tmp_path):
             rw["wave"]["light_um2sr"] / rw["ray"]["light_um2sr"] - 1, rel=1e-12
         )
         assert v["light_difference"] > 0.15 and v["holds"] == "wave"
+        # the headline figures come from the engine that holds (--optics auto, issue 23)
+        assert saved["optics"]["engine"] == "wave" and saved["optics"]["asked"] == "auto"
+        assert saved["rmtf"]["meta"]["optics"]["engine"] == "wave"
+        assert saved["rmtf"]["method"] == "wave"
+        assert saved["efficiency"]["own_method"] == "wave (in band)"
+        assert saved["summary"]["headline_optics"] == saved["optics"]
+        assert "are by wave optics" in page

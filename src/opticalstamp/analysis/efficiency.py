@@ -197,7 +197,7 @@ def efficiency(
                 "gain_own_vs_design": _over(ok, g_own),
             }
         )
-    opt = resolve_optics(design, optics)
+    opt = resolve_optics(design, optics, fresnel=fresnel)
     optics_meta = opt.to_dict()
     own_method = "quadrature" if exact else "trace"
     if opt.engine == "wave":

@@ -76,19 +76,36 @@ class Optics:
 RAY = Optics("ray", "ray", "asked for")
 
 
-def wave_unavailable(design: Design) -> str | None:
-    """Why the wave engine cannot give this design's responsivity yet, or None."""
+def wave_unavailable(design: Design, band: float | None = None) -> str | None:
+    """Why the wave engine cannot give this design's responsivity yet, or None: holes
+    that are not rectangular, or a pixel acceptance cone that cuts into the band (the
+    wave engine emits every direction of its band, |s_x|, |s_y| < B, up to |s| = B sqrt 2;
+    the cone is |s| <= n0 sin(half-angle) in the medium next to the pixel)."""
     if not rectangular(design):
         return "the wave engine feeds the analyses for rectangular holes only (circles: not yet)"
+    cut = design.sensor.acceptance_half_angle_deg
+    if cut < 90.0:
+        b = wave_sampling(design).band if band is None else band
+        s_cut = design.index(design.slabs[0].medium) * np.sin(np.radians(cut))
+        if s_cut < b * np.sqrt(2.0):
+            return (
+                f"the pixel's acceptance cone (sensor.acceptance_half_angle_deg = {cut:g}, "
+                f"|s| <= {s_cut:.3g}) cuts into the wave band (|s| up to {b * np.sqrt(2):.3g}); "
+                "the wave engine has no angular response yet"
+            )
     return None
 
 
-def resolve_optics(design: Design, optics: str | Optics = "ray") -> Optics:
+def resolve_optics(
+    design: Design, optics: str | Optics = "ray", *, fresnel: bool = False, method: str = "trace"
+) -> Optics:
     """The :class:`Optics` for ``design`` from ``"ray"``, ``"wave"`` or ``"auto"``.
 
     ``wave`` for a design the wave engine cannot do raises :class:`InputError` naming
     the reason; ``auto`` picks ray there, and elsewhere follows the measured validity
-    rule (:func:`~opticalstamp.analysis.validity.choose_optics`)."""
+    rule (:func:`~opticalstamp.analysis.validity.choose_optics`). ``fresnel`` (Fresnel
+    losses) and ``method`` "paraxial" (the ray closed form) are ray optics: ``auto``
+    picks ray for them and says so, :func:`folded_lsf` refuses them with ``wave``."""
     if isinstance(optics, Optics):
         return optics
     if optics not in OPTICS:
@@ -100,8 +117,15 @@ def resolve_optics(design: Design, optics: str | Optics = "ray") -> Optics:
         if why is not None:
             raise InputError(f"optics: 'wave' is not available for {design.name}: {why}")
         return Optics("wave", "wave", "asked for", wave_sampling(design))
+    if method == "paraxial":
+        return Optics("auto", "ray", "the paraxial closed form asked for is ray optics")
+    if fresnel:
+        return Optics("auto", "ray", "Fresnel losses asked for: the wave engine has none yet")
     from .validity import choose_optics
 
+    why = wave_unavailable(design)
+    if why is not None:
+        return Optics("auto", "ray", f"ray optics: {why}")
     choice = choose_optics(design, optics="auto")
     rule = {
         "fresnel_min": choice.fresnel_min,
@@ -109,7 +133,7 @@ def resolve_optics(design: Design, optics: str | Optics = "ray") -> Optics:
         "predicted_error": choice.predicted_error,
         "tolerance": choice.tolerance,
     }
-    if choice.engine == "wave" and wave_unavailable(design) is None:
+    if choice.engine == "wave":
         return Optics("auto", "wave", choice.reason, wave_sampling(design), rule)
     return Optics("auto", "ray", choice.reason, None, rule)
 

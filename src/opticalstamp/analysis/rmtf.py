@@ -447,7 +447,7 @@ def rmtf(
     check_rmtf_memory(design, periods.max(), zs.size, window_um, shift_step_um)
     if method not in ("trace", "paraxial"):
         raise ValueError(f"method must be 'trace' or 'paraxial' (got {method!r})")
-    opt = resolve_optics(design, optics)
+    opt = resolve_optics(design, optics, fresnel=fresnel, method=method)
 
     def lsf_at(z: np.ndarray) -> FoldedLSF:
         return folded_lsf(

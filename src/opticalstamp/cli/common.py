@@ -539,7 +539,7 @@ def report(
             "(wave where the measured validity rule says ray optics is off by more than "
             "its tolerance)",
         ),
-    ] = "ray",
+    ] = "auto",
 ) -> None:
     """Run every analysis and write JSON, PNG figures and one HTML page."""
     from ..report.build import build_report

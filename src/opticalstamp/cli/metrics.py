@@ -94,7 +94,7 @@ def rmtf(
         ),
     ] = True,
     fresnel: FresnelOpt = False,
-    optics: OpticsOpt = "ray",
+    optics: OpticsOpt = "auto",
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:
@@ -151,7 +151,7 @@ def efficiency(
         bool, typer.Option("--study", help="also run the study of the unstated parameters")
     ] = False,
     fresnel: FresnelOpt = False,
-    optics: OpticsOpt = "ray",
+    optics: OpticsOpt = "auto",
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:

@@ -94,7 +94,7 @@ def build_report(
     z_mm: tuple[float, ...] | None = None,
     dpi: float | None = None,
     paper_sections: bool | None = None,
-    optics: str = "ray",
+    optics: str = "auto",
 ) -> dict:
     """Run every analysis and write report.json, PNG figures and index.html to out_dir.
 
@@ -138,7 +138,7 @@ def build_report(
     from .summary import parse_report_spec, summary
 
     parse_report_spec(spec)  # a bad spec is refused before any work
-    opt = resolve_optics(design, optics)  # and a bad or impossible optics
+    opt = resolve_optics(design, optics, fresnel=fresnel)  # and a bad or impossible optics
     t0 = time.perf_counter()
     clock = _Clock()
     dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
