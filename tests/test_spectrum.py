@@ -14,7 +14,7 @@ import pytest
 
 from edges import assert_clean_refusal, run
 from opticalstamp.analysis import spectrum as sp
-from opticalstamp.analysis.wave import wave_lsf_x, wave_response
+from opticalstamp.analysis.wave import stack_reach, wave_lsf_x, wave_response
 from opticalstamp.analysis.wavebase import band_integral, stack_axes, wave_sampling
 from opticalstamp.analysis.wavecompare import fold, wave_folded_lsf
 from opticalstamp.analysis.wavespectral import (
@@ -247,14 +247,19 @@ def test_rgb_gives_one_responsivity_per_channel():
 
 def test_row_b_is_row_a_mirrored_on_the_nominal_lattice(stamp):
     """mirror_twin holds on the nominal lattice (and row B computed gives row A's
-    LSFs, 1e-6) and fails where a mask is misregistered in y."""
-    assert mirror_twin(stamp, (0, 0), (1, 0))
+    LSFs, 1e-6); it fails where a mask is misregistered in y and where the line is so
+    short that its ends lie within the holes the engine takes."""
+    reach = stack_reach(stamp, wave_sampling(stamp))
+    assert mirror_twin(stamp, (0, 0), (1, 0), reach)
     _, a, _, _ = wave_lsf_x(stamp, Z, pixel=(0, 0))
     _, b, _, _ = wave_lsf_x(stamp, Z, pixel=(1, 0))
     np.testing.assert_allclose(b, a, rtol=0, atol=1e-6 * a.max())
     shifted = _stamp(offsets=[(0.0, 0.0), (0.0, 1.5), (0.0, 0.0)])
-    assert not mirror_twin(shifted, (0, 0), (1, 0))
-    assert mirror_twin(_stamp(offsets=[(0.0, 0.0), (1.5, 0.0), (0.0, 0.0)]), (0, 0), (1, 0))
+    assert not mirror_twin(shifted, (0, 0), (1, 0), reach)
+    along_x = _stamp(offsets=[(0.0, 0.0), (1.5, 0.0), (0.0, 0.0)])
+    assert mirror_twin(along_x, (0, 0), (1, 0), reach)
+    short = replace(stamp, {"sensor.pixels_per_row": 3})
+    assert not mirror_twin(short, (0, 0), (1, 0), reach)
 
 
 def test_the_wave_command_takes_a_spectrum():

@@ -284,6 +284,12 @@ def _planes(axes) -> tuple[Plane, Plane]:
     return (axes[0].plane, axes[1].plane)
 
 
+def stack_reach(design: Design, smp: WaveSampling) -> float:
+    """How far along x from the pixel's axis the separable path takes holes (um): two
+    pitches beyond four times the band's reach through the stack and the margin."""
+    return 2 * lattice_of(design).pitch + 4 * (smp.margin_um + design.reference_plane_um * smp.band)
+
+
 def _stack(design: Design, pixel, smp: WaveSampling):
     """The source points stepped up through the stack: (terms {row sequence: (ux, uy)}
     just above the object-side mask, the axes, the budget mask by mask)."""
@@ -292,8 +298,7 @@ def _stack(design: Design, pixel, smp: WaveSampling):
         raise InputError(
             f"sampling: step {step:g} um is coarser than lambda / (6 band) = {lam / (6 * b):g} um"
         )
-    reach = 2 * lattice_of(design).pitch + 4 * (smp.margin_um + design.reference_plane_um * b)
-    planes = stack_axes(design, pixel, reach_um=reach)
+    planes = stack_axes(design, pixel, reach_um=stack_reach(design, smp))
     axes = [_axis(p, smp) for p in planes]
     n_rows = design.sensor.rows
     # source points through the first slab(s) to the first mask

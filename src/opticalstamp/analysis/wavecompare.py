@@ -30,7 +30,7 @@ from .lsf import FOLD_BIN_UM, FoldedLSF
 from .own_etendue import own_etendue, rectangular_holes
 from .rmtf import rmtf_curves
 from .spectrum import Spectrum, one_channel
-from .wave import wave_response
+from .wave import stack_reach, wave_response
 from .wavebase import WaveSampling, fresnel_numbers, fwhm_of, wave_sampling
 from .wavespectral import (
     at_wavelength,
@@ -202,13 +202,20 @@ def wave_folded_lsf(
     per = np.asarray(periods_um, dtype=np.float64)
     lat = lattice_of(design)
     rows = [(float(lat.row_x[r]), float(lat.row_y[r])) for r in range(design.sensor.rows)]
+    spec = one_channel(design, spectrum)
+    reach = max(
+        stack_reach(at_wavelength(design, lam), s)
+        for lam, s in zip(
+            spec.wavelengths_um, spectral_samplings(design, spec, sampling), strict=True
+        )
+    )
     lsfs: list[tuple[np.ndarray, np.ndarray]] = []
     for r in range(len(rows)):
-        twin = next((q for q in range(r) if mirror_twin(design, (q, 0), (r, 0))), None)
+        twin = next((q for q in range(r) if mirror_twin(design, (q, 0), (r, 0), reach)), None)
         if twin is not None:
             lsfs.append(lsfs[twin])
             continue
-        x, lsf, _ = spectral_lsf_x(design, zs, spectrum=spectrum, pixel=(r, 0), sampling=sampling)
+        x, lsf, _ = spectral_lsf_x(design, zs, spectrum=spec, pixel=(r, 0), sampling=sampling)
         lsfs.append((x, lsf))
     h = [
         np.stack([[fold(x, p, q, _n_bins(q)) for p in lsf] for x, lsf in lsfs])[:, None]

@@ -26,10 +26,9 @@ from scipy import fft as sfft
 from scipy.signal import czt
 
 from ..design import Design
-from ..raytrace.stack import lattice_of
 from .spectrum import Spectrum, channels, one_channel
 from .wave import WaveResponse, half_width, wave_lsf_x, wave_response
-from .wavebase import SOURCE_EXTRA, WaveSampling, response_summary, wave_sampling
+from .wavebase import SOURCE_EXTRA, WaveSampling, response_summary, stack_axes, wave_sampling
 
 __all__ = [
     "SpectralWaveResponse",
@@ -294,32 +293,31 @@ def spectral_lsf_x(
     return x, lsf, light
 
 
-def mirror_twin(design: Design, pixel: tuple[int, int], other: tuple[int, int]) -> bool:
+def mirror_twin(
+    design: Design, pixel: tuple[int, int], other: tuple[int, int], reach_um: float
+) -> bool:
     """Whether the pixel ``other`` sees the stack as ``pixel`` does mirrored in y with
     the rows' roles exchanged (the nominal staggered lattice: row B's pixel sees row A's
-    view mirrored), so that its x line-spread functions are ``pixel``'s exactly: at
-    every mask the holes of each row lie at the same x offsets modulo the pitch as the
-    other row's from ``other``, and at the opposite y offset (the sensitive area is
-    symmetric in y). Both pixels are taken far from the line's ends."""
+    view mirrored), so that its x line-spread functions are ``pixel``'s exactly: the
+    same sensitive interval (symmetric in y), and at every mask, among the holes within
+    ``reach_um`` along x (:func:`~.wave.stack_reach`: those the separable path takes), each
+    row's intervals along x equal to the other row's from ``other`` and along y their
+    mirror images. Near a line's ends, or with a mask misregistered in y, it is not."""
     if pixel[0] == other[0]:
-        return True
-    lat = lattice_of(design)
-    p = lat.pitch
-    pa, pb = (np.asarray(lat.centers(*q), dtype=np.float64) for q in (pixel, other))
-    ra, rb = pixel[0], other[0]
-    tol = 1e-9 * max(1.0, p)
-    for sl in design.slabs:
-        m = sl.mask_top
-        if m is None:
-            continue
-        for r, rr in ((ra, rb), (rb, ra)):
-            dxa = lat.row_x[r] + m.offset_x_um - pa[0]
-            dxb = lat.row_x[rr] + m.offset_x_um - pb[0]
-            d = (dxa - dxb) / p
-            if abs(d - round(d)) * p > tol:
+        return pixel == other
+    a = stack_axes(design, pixel, reach_um=reach_um)
+    b = stack_axes(design, other, reach_um=reach_um)
+    tol = 1e-9 * max(1.0, design.sensor.row_pitch_um)
+    (ax, ay), (bx, by) = a, b
+    if abs(ay.source[0] + ay.source[1]) > tol or not np.allclose(ax.source, bx.source, atol=tol):
+        return False
+    swap = {pixel[0]: other[0], other[0]: pixel[0]}
+    for i in range(len(ax.holes)):
+        for r in range(design.sensor.rows):
+            hx_a, hx_b = ax.holes[i][r], bx.holes[i][swap.get(r, r)]
+            hy_a, hy_b = ay.holes[i][r], by.holes[i][swap.get(r, r)]
+            if hx_a.shape != hx_b.shape or not np.allclose(hx_a, hx_b, atol=tol):
                 return False
-            dya = lat.row_y[r] + m.offset_y_um - pa[1]
-            dyb = lat.row_y[rr] + m.offset_y_um - pb[1]
-            if abs(dya + dyb) > tol:
+            if not np.allclose(hy_a, -hy_b[:, ::-1], atol=tol):
                 return False
     return True
