@@ -14,10 +14,11 @@ against each predictor, and writes
 - ``docs/img/wave-validity.png``: the errors against the chosen predictor (log x) with
   the fitted envelopes and the tolerances.
 
-    .venv/bin/python scripts/wave_validity.py [--quick] [--out DIR] [--rays N]
+    .venv/bin/python scripts/wave_validity.py [--quick] [--out DIR] [--rays N] [--replot]
 
-``--quick``: 10 designs, fewer rays (a smoke run, about a minute); the full study takes a
-few minutes on 2 cores. The constants of :mod:`opticalstamp.analysis.validity` come from
+``--quick``: 10 designs, fewer rays (a smoke run, about a minute); the full study takes
+about 6.5 minutes on the shared 2-core machine. ``--replot``: redraw the figure from the
+table already in ``--out``. The constants of :mod:`opticalstamp.analysis.validity` come from
 the full run's envelopes.
 """
 
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import json
 import sys
 import time
 from pathlib import Path
@@ -32,25 +34,30 @@ from pathlib import Path
 import numpy as np
 
 from opticalstamp.analysis.dof import depth_of_field
+from opticalstamp.analysis.lsf import FoldedLSF
+from opticalstamp.analysis.rmtf import rmtf_curves
 from opticalstamp.analysis.validity import (
     CHOSEN,
     DEFAULT_LIGHT_TOL,
     DEFAULT_RMTF_TOL,
     ENVELOPE_MARGIN,
+    RMTF_Z_MAX_MM,
+    Envelope,
     design_predictors,
     fit_envelope,
+    ray_errors,
 )
-from opticalstamp.analysis.wavecompare import compare_wave_ray
+from opticalstamp.analysis.wavecompare import compare_wave_ray, ray_in_band
 from opticalstamp.design import load_design
 from opticalstamp.design.variants import replace, scale_to_dpi, with_stack
 from opticalstamp.io.atomic import write_atomic
 from opticalstamp.io.files import save_figure, to_json
+from opticalstamp.raytrace.stack import lattice_of
 
 ROOT = Path(__file__).resolve().parents[1]
 #: heights (mm): the RMTF error is taken over 0-3 mm, the depth of field up to 5 mm
 Z_FULL = tuple(0.5 * i for i in range(11))
 Z_QUICK = (0.0, 1.0, 2.0, 3.0)
-RMTF_ZMAX = 3.0
 PROTO_PLATES = (1000.0, 400.0, 450.0)  # object side first
 PROTO_HOLES = (48.0, 40.0, 40.0)
 
@@ -152,13 +159,51 @@ def _dof(z, r) -> float:
     return depth_of_field(np.asarray(z), r)
 
 
-def measure(label: str, family: str, design, zs, n_rays: int) -> dict:
-    """One design's row of the table."""
+def _ray_rmtf(design, zs, period_um: float, folded_rows) -> np.ndarray:
+    """RMTF on the chart of period ``period_um`` from the rows' folded ray LSFs (as
+    :func:`~opticalstamp.analysis.wavecompare.compare_wave_ray` computes it)."""
+    lat = lattice_of(design)
+    rows = [(float(lat.row_x[r]), float(lat.row_y[r])) for r in range(design.sensor.rows)]
+    h = np.stack(folded_rows)[:, None]  # (rows, 1, nz, n_bins)
+    lsf = FoldedLSF(
+        np.asarray(zs, float), np.array([period_um]), rows, [h], "trace", 0, False, False
+    )
+    return np.asarray(rmtf_curves(lsf, design)["max"][0])
+
+
+def measure(label: str, family: str, design, zs, n_rays: int, seeds: int) -> dict:
+    """One design's row of the table: the wave side once (:func:`compare_wave_ray`), the
+    ray side again with ``seeds`` fresh seeds of ``n_rays`` rays a row
+    (:func:`ray_in_band`); the errors (:func:`ray_errors`' definitions) are those of the
+    seeds' pooled ray figures, with standard errors from the spread between seeds."""
     t = time.perf_counter()
-    c = compare_wave_ray(design, zs, n_rays=n_rays)
+    c = compare_wave_ray(design, zs, n_rays=n_rays, seed=0)
     z = np.asarray(c.z_mm)
-    near = z <= RMTF_ZMAX + 1e-9
-    wr, rr = np.asarray(c.wave["rmtf"]), np.asarray(c.ray["rmtf"])
+    near = z <= RMTF_Z_MAX_MM + 1e-9
+    wr = np.asarray(c.wave["rmtf"])
+    band, per = c.sampling["band"], c.period_um
+    folds, nears = [], []
+    for seed in range(1, seeds + 1):  # compare_wave_ray's ray side used seed 0
+        rays = [
+            ray_in_band(design, zs, band, pixel=(r, 0), period_um=per, n_rays=n_rays, seed=seed)
+            for r in range(design.sensor.rows)
+        ]
+        folds.append([x.folded for x in rays])
+        nears.append(rays[0].near_um2sr)
+    own = c.own_exact_um2sr
+    light_w = c.wave["light_um2sr"]
+    seed0 = ray_errors(c)  # compare_wave_ray's own ray side (seed 0), for the record
+    per_seed = {
+        "light": [light_w / (own + n) - 1 for n in nears],
+        "rmtf": [float(np.abs(wr - _ray_rmtf(design, zs, per, f))[near].max()) for f in folds],
+    }
+    pooled = [np.mean([f[r] for f in folds], axis=0) for r in range(design.sensor.rows)]
+    rr = _ray_rmtf(design, zs, per, pooled)
+    err = {
+        "light": light_w / (own + float(np.mean(nears))) - 1,
+        "rmtf": float(np.abs(wr - rr)[near].max()),
+    }
+    se = {k: float(np.std(v, ddof=1) / np.sqrt(seeds)) for k, v in per_seed.items()}
     dw, dr = _dof(z, wr), _dof(z, rr)
     cell = np.asarray(c.difference["center_cell_fraction"])
     row = {
@@ -173,11 +218,16 @@ def measure(label: str, family: str, design, zs, n_rays: int) -> dict:
         "predictors": design_predictors(design),
         "band": c.sampling["band"],
         "light_wave_um2sr": c.wave["light_um2sr"],
-        "light_ray_um2sr": c.ray["light_um2sr"],
-        "light_error": c.difference["light"],
-        "rmtf_error": float(np.abs(wr - rr)[near].max()),
+        "own_exact_um2sr": own,
+        "near_ray_um2sr": float(np.mean(nears)),
+        "light_error": err["light"],
+        "light_error_se": se["light"],
+        "rmtf_error": err["rmtf"],
+        "rmtf_error_se": se["rmtf"],
+        "per_seed": per_seed,
+        "errors_seed0": seed0,
         "rmtf_error_z0": float(abs(wr[0] - rr[0])),
-        "cell_error": float(np.abs(cell[near]).max()),
+        "cell_error_seed0": float(np.abs(cell[near]).max()),
         "dof_chart_dpi": c.dof_dpi,
         "dof_wave_mm": dw,
         "dof_ray_mm": dr,
@@ -202,16 +252,19 @@ def summarise(rows: list[dict]) -> dict:
     rank correlation with the errors, and what the rule built on it would do to the
     study's designs: ``needless_wave``, designs sent to wave whose ray figures were in
     fact within both tolerances (the price of a loose predictor; none is ever sent to
-    ray outside them, the envelope lies above every point)."""
+    ray outside them: the envelope lies above every error plus two standard errors)."""
     names = list(rows[0]["predictors"])
     light = np.array([abs(r["light_error"]) for r in rows])
     rm = np.array([r["rmtf_error"] for r in rows])
+    # the envelope lies above each error plus two standard errors of its estimate
+    light_hi = light + 2 * np.array([r["light_error_se"] for r in rows])
+    rm_hi = rm + 2 * np.array([r["rmtf_error_se"] for r in rows])
     fine = (light <= DEFAULT_LIGHT_TOL) & (rm <= DEFAULT_RMTF_TOL)
     out = {}
     for n in names:
         p = np.array([r["predictors"][n] for r in rows])
-        le = fit_envelope(p, light, margin=ENVELOPE_MARGIN)
-        re_ = fit_envelope(p, rm, margin=ENVELOPE_MARGIN)
+        le = fit_envelope(p, light_hi, margin=ENVELOPE_MARGIN)
+        re_ = fit_envelope(p, rm_hi, margin=ENVELOPE_MARGIN)
         wave = (le.bound(p) > DEFAULT_LIGHT_TOL) | (re_.bound(p) > DEFAULT_RMTF_TOL)
         out[n] = {
             "spearman_light": rank_agreement(p, light),
@@ -226,7 +279,15 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
-def plot(rows: list[dict], summary: dict, predictor: str):
+LABELS = {
+    "fresnel_own": "own-path Fresnel number P = G$_1$ / (4 λ)",
+    "fresnel_min": "least layer Fresnel number a² / (λ d)",
+}
+
+
+def plot(rows: list[dict], envelopes: dict, predictor: str):
+    """Errors against the predictor (log x), with the envelopes (``light``, ``rmtf``:
+    :class:`Envelope`) and the default tolerances."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(11, 4.2))
@@ -255,7 +316,7 @@ def plot(rows: list[dict], summary: dict, predictor: str):
         (axs[0], "light_envelope", DEFAULT_LIGHT_TOL, "|light wave/ray - 1|"),
         (axs[1], "rmtf_envelope", DEFAULT_RMTF_TOL, "max |RMTF wave - ray|, Z 0-3 mm"),
     ):
-        env = summary[predictor][key]
+        env = envelopes[key.split("_")[0]]
         ax.plot(grid, env.bound(grid), "k-", lw=1, label="envelope (the rule)")
         ax.axhline(tol, color="r", ls="--", lw=1, label=f"tolerance {tol:g}")
         ax.axvline(env.predictor_for(tol), color="r", ls=":", lw=1)
@@ -265,7 +326,7 @@ def plot(rows: list[dict], summary: dict, predictor: str):
     axs[2].set_ylabel("DOF wave - ray (mm)")
     for ax in axs:
         ax.set_xscale("log")
-        ax.set_xlabel(predictor.replace("_", " "))
+        ax.set_xlabel(LABELS.get(predictor, predictor.replace("_", " ")))
         ax.grid(True, which="both", lw=0.3, alpha=0.5)
     axs[0].legend(fontsize=6, loc="lower left")
     axs[1].legend(fontsize=6, loc="lower left")
@@ -280,19 +341,36 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="10 designs, fewer rays")
     ap.add_argument("--out", type=Path, default=ROOT / "docs", help="folder (docs)")
-    ap.add_argument("--rays", type=int, default=None, help="rays per row (2^18; quick 2^16)")
+    ap.add_argument(
+        "--rays", type=int, default=None, help="rays per row and seed (2^18; quick 2^16)"
+    )
+    ap.add_argument("--seeds", type=int, default=None, help="ray seeds pooled (4; quick 2)")
+    ap.add_argument(
+        "--replot", action="store_true", help="redraw the figure from the table in --out"
+    )
     a = ap.parse_args(argv)
+    if a.replot:
+        data = json.loads((a.out / "wave-validity.json").read_text())
+        fit = data["predictors"][data["chosen_predictor"]]
+        env = {k: Envelope(**fit[f"{k}_envelope"]) for k in ("light", "rmtf")}
+        fig = plot(data["designs"], env, data["chosen_predictor"])
+        save_figure(fig, a.out / "img" / "wave-validity.png")
+        return 0
     zs = Z_QUICK if a.quick else Z_FULL
     n_rays = a.rays or (1 << 16 if a.quick else 1 << 18)
+    seeds = a.seeds or (2 if a.quick else 4)
+    if seeds < 2:
+        ap.error("--seeds: at least 2 (the standard errors come from their spread)")
     rows = []
     t0 = time.perf_counter()
     for label, fam, design in study_designs(a.quick):
-        r = measure(label, fam, design, zs, n_rays)
+        r = measure(label, fam, design, zs, n_rays, seeds)
         rows.append(r)
         pr = r["predictors"]
         print(
             f"{label:48s} Fmin {pr['fresnel_min']:6.2f} Fown {pr['fresnel_own']:6.2f} "
-            f"light {r['light_error']:+7.1%} rmtf {r['rmtf_error']:.3f} "
+            f"light {r['light_error']:+7.1%} ±{r['light_error_se']:.1%} "
+            f"rmtf {r['rmtf_error']:.3f} ±{r['rmtf_error_se']:.3f} "
             f"dof {r['dof_wave_mm']} / {r['dof_ray_mm']} ({r['seconds']:.1f} s)",
             flush=True,
         )
@@ -308,8 +386,9 @@ def main(argv=None) -> int:
         "study": "scripts/wave_validity.py" + (" --quick" if a.quick else ""),
         "date": datetime.date.today().isoformat(),
         "n_rays_per_row": n_rays,
+        "ray_seeds": seeds,
         "z_mm": list(zs),
-        "rmtf_error_z_max_mm": RMTF_ZMAX,
+        "rmtf_error_z_max_mm": RMTF_Z_MAX_MM,
         "tolerances": {"light": DEFAULT_LIGHT_TOL, "rmtf": DEFAULT_RMTF_TOL},
         "chosen_predictor": CHOSEN,
         "envelope_margin": ENVELOPE_MARGIN,
@@ -323,7 +402,8 @@ def main(argv=None) -> int:
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "img").mkdir(exist_ok=True)
     write_atomic(a.out / "wave-validity.json", to_json(data))
-    save_figure(plot(rows, summary, CHOSEN), a.out / "img" / "wave-validity.png")
+    env = {"light": summary[CHOSEN]["light_envelope"], "rmtf": summary[CHOSEN]["rmtf_envelope"]}
+    save_figure(plot(rows, env, CHOSEN), a.out / "img" / "wave-validity.png")
     print(
         f"wrote {a.out / 'wave-validity.json'} and img/wave-validity.png "
         f"({time.perf_counter() - t0:.0f} s)"

@@ -22,6 +22,7 @@ from opticalstamp.analysis.validity import (
     design_predictors,
     fit_envelope,
     own_fresnel_number,
+    ray_errors,
     ray_holds_above,
     validity_lines,
 )
@@ -37,6 +38,7 @@ from opticalstamp.design.variants import (
 )
 from opticalstamp.validate import InputError
 
+Z_STUDY = tuple(0.5 * i for i in range(7))  # the study's heights up to 3 mm
 STUDY = Path(__file__).resolve().parents[1] / "docs" / "wave-validity.json"
 
 
@@ -89,9 +91,10 @@ def test_fit_envelope_recovers_a_power_law_and_bounds_every_point():
 
 
 def test_module_envelopes_bound_the_committed_study():
-    """Every design of docs/wave-validity.json lies under the module's envelopes with the
-    margin to spare (the constants were fitted to that table), and the table's own fit
-    for the chosen predictor is what the module holds (a rounded up to 3 digits)."""
+    """Every design of docs/wave-validity.json, its error plus two standard errors, lies
+    under the module's envelopes with the margin to spare (the constants were fitted to
+    that table), and the table's own fit for the chosen predictor is what the module
+    holds (a rounded up to 3 digits)."""
     data = json.loads(STUDY.read_text())
     assert len(data["designs"]) >= 25
     fit = data["predictors"][data["chosen_predictor"]]
@@ -101,39 +104,42 @@ def test_module_envelopes_bound_the_committed_study():
         assert f["a"] <= ENVELOPES[key].a <= f["a"] * 1.01
     for r in data["designs"]:
         p = r["predictors"][data["chosen_predictor"]]
-        assert abs(r["light_error"]) * ENVELOPE_MARGIN <= ENVELOPES["light"].bound(p) * 1.001
-        assert r["rmtf_error"] * ENVELOPE_MARGIN <= ENVELOPES["rmtf"].bound(p) * 1.001
+        light = abs(r["light_error"]) + 2 * r["light_error_se"]
+        rmtf = r["rmtf_error"] + 2 * r["rmtf_error_se"]
+        assert light * ENVELOPE_MARGIN <= ENVELOPES["light"].bound(p) * 1.001, r["label"]
+        assert rmtf * ENVELOPE_MARGIN <= ENVELOPES["rmtf"].bound(p) * 1.001, r["label"]
     ps = [r["predictors"]["fresnel_own"] for r in data["designs"]]
     assert min(ps) < 0.2 and max(ps) > 10
 
 
 def _study_designs():
-    """The study's tightest designs (closest to the envelopes) and a large-hole one."""
+    """The study's designs closest to the envelopes (at 0.78-0.83 of a bound; re-run
+    with seed 11: 0.81, 0.83, 0.64, 0.83)."""
     d = load_design("paper2016")
     plates = (1000.0, 400.0, 450.0)
     half = tuple(t / 2 for t in plates)
     return [
-        load_design("fig1c"),  # RMTF at 0.83 of its bound
-        load_design("three-layer-single-row"),  # RMTF 0.81
+        load_design("three-layer-single-row"),  # RMTF at 0.78 of its bound
         with_stack(d, holes_um=(36.0, 40.0, 40.0)),  # light 0.83
-        replace(  # holes x1.25 over plates x0.5 at 0.45 um: RMTF 0.83
+        replace(  # holes x1.25 over plates x0.5 at 0.45 um: RMTF 0.78
             with_stack(d, holes_um=(60.0, 50.0, 50.0), thicknesses_um=half, reference_gap_um=500),
             wavelength_um=0.45,
         ),
-        scale_to_dpi(d, 100),  # P = 6: the ray side of the rule
+        with_stack(scale_to_dpi(d, 100), thicknesses_um=half, reference_gap_um=500),  # P = 12
     ]
 
 
 def test_rule_bounds_fresh_runs_of_study_designs():
-    """Ray against wave re-run (2^16 rays a row, Z = 0, 1, 2, 3 mm; the study: 2^18 and
-    0.5 mm steps): each error is within the rule's bound at the design's predictor."""
+    """Ray against wave re-run with another seed (2^18 rays a row, the study's heights up
+    to 3 mm; the study pooled 4 seeds): each error (ray_errors: the light
+    against the exact own path plus the traced near ghosts, the RMTF on the
+    depth-of-field chart) is within the rule's bound at the design's predictor."""
     for design in _study_designs():
-        c = compare_wave_ray(design, (0.0, 1.0, 2.0, 3.0), n_rays=1 << 16, seed=7)
+        c = compare_wave_ray(design, Z_STUDY, n_rays=1 << 18, seed=11)
         p = own_fresnel_number(design)
-        light = abs(c.difference["light"])
-        rmtf = max(abs(v) for v in c.difference["rmtf"])
-        assert light <= ENVELOPES["light"].bound(p), (design.name, p, light)
-        assert rmtf <= ENVELOPES["rmtf"].bound(p), (design.name, p, rmtf)
+        err = ray_errors(c)
+        assert abs(err["light"]) <= ENVELOPES["light"].bound(p), (design.name, p, err)
+        assert err["rmtf"] <= ENVELOPES["rmtf"].bound(p), (design.name, p, err)
 
 
 def test_choices(paper):
