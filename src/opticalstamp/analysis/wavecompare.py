@@ -263,8 +263,9 @@ def compare_wave_ray(
 ) -> WaveRayComparison:
     """Ray against wave for ``design`` at the object distances ``z_mm`` (mm).
 
-    The wave figures come from :func:`~opticalstamp.analysis.wave.wave_response` for the
-    pixel of each row (rectangular holes), the ray figures from :func:`ray_in_band`
+    The wave figures come from :func:`~opticalstamp.analysis.wave.wave_response` for row
+    A's pixel (rectangular holes; the other rows' x LSFs for the RMTF from its mirror
+    image on the nominal lattice, else the x-only path), the ray figures from :func:`ray_in_band`
     with ``n_rays`` per row. Differences are wave / ray - 1 for the light and the FWHM,
     wave - ray for the centre-cell share and the RMTF.
 
@@ -286,12 +287,22 @@ def compare_wave_ray(
     rows = range(design.sensor.rows)
     t0 = time.perf_counter()
     if mono:
-        waves: list = [wave_response(design, zs, pixel=(r, 0), sampling=smps[0]) for r in rows]
+        wa = wave_response(design, zs, pixel=(0, 0), sampling=smps[0])
     else:
-        waves = [
-            wave_response_spectral(design, zs, spectrum=spec, pixel=(r, 0), sampling=sampling)
-            for r in rows
-        ]
+        wa = wave_response_spectral(design, zs, spectrum=spec, pixel=(0, 0), sampling=sampling)
+    # the other rows' x LSFs (all the RMTF needs): row A's where the row is its mirror
+    # twin, else the x-only path
+    reach = max(
+        stack_reach(at_wavelength(design, lam), s)
+        for lam, s in zip(spec.wavelengths_um, smps, strict=True)
+    )
+    row_lsf = [(wa.x_um, wa.lsf_x)]
+    for r in rows[1:]:
+        if mirror_twin(design, (0, 0), (r, 0), reach):
+            row_lsf.append(row_lsf[0])
+        else:
+            x, lsf, _ = spectral_lsf_x(design, zs, spectrum=spec, pixel=(r, 0), sampling=sampling)
+            row_lsf.append((x, lsf))
     t_wave = time.perf_counter() - t0
     t0 = time.perf_counter()
     by_lam = []
@@ -308,8 +319,8 @@ def compare_wave_ray(
         )
     rays = [_weighted_rays([b[r] for b in by_lam], spec.weights) for r in rows]
     t_ray = time.perf_counter() - t0
-    wa, ra = waves[0], rays[0]
-    w_fold = [np.array([fold(w.x_um, p, per, nb) for p in w.lsf_x]) for w in waves]
+    ra = rays[0]
+    w_fold = [np.array([fold(x, p, per, nb) for p in lsf]) for x, lsf in row_lsf]
     wave = {
         "light_um2sr": float(wa.etendue_um2sr[0]),
         "fwhm_x_um": [fwhm_of(wa.x_um, p) for p in wa.lsf_x],
