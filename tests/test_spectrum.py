@@ -279,3 +279,25 @@ def test_the_wave_command_takes_a_spectrum():
     assert 0.5 < out["wave"]["light_um2sr"] / out["ray"]["light_um2sr"] < 2
     assert_clean_refusal(run(["wave", "--spectrum", "purple"]), "--spectrum")
     assert_clean_refusal(run(["wave", "--spectrum", "rgb", "--plot", "w.png"]), "--plot")
+
+
+def test_a_given_sampling_is_carried_to_each_wavelength(stamp):
+    """A sampling at the design's wavelength (as --optics wave passes it): mono keeps it
+    as it is; over white light every wavelength gets its band, a step and margin scaled
+    with the wavelength (still within lambda / 6B) and the source points the rule gives."""
+    smp = wave_sampling(stamp)
+    assert spectral_samplings(stamp, sp.mono(0.55), smp) == [smp]
+    white = sp.spectrum_of("white")
+    for lam, w, s in zip(
+        white.wavelengths_um, white.weights, spectral_samplings(stamp, white, smp), strict=True
+    ):
+        assert s.wavelength_um == lam and s.band == smp.band
+        assert s.step_um == pytest.approx(smp.step_um * lam / 0.55, rel=1e-12)
+        assert s.step_um <= lam / (6 * s.band) * (1 + 1e-9)
+        assert s.margin_um == pytest.approx(smp.margin_um * lam / 0.55, rel=1e-12)
+        own = wave_sampling(at_wavelength(stamp, lam), band=smp.band)
+        assert all(abs(a - b) <= 1 for a, b in zip(s.source_points, own.source_points, strict=True))
+        assert s.mode_tol == pytest.approx(min(1e-6, smp.mode_tol / w))
+    f = wave_folded_lsf(stamp, Z, [48.0], sampling=smp, spectrum=white)
+    g = wave_folded_lsf(stamp, Z, [48.0], spectrum=white)
+    np.testing.assert_allclose(f.h[0], g.h[0], rtol=0, atol=1e-3 * g.h[0].max())
