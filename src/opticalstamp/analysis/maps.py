@@ -137,8 +137,13 @@ def traced_map_sets(
     progress: bool = False,
     sampling: Sampling | None = None,
     tracer: PixelTracer | None = None,
+    outside_band: float | None = None,
 ) -> list[TracedMaps]:
     """:func:`traced_maps` for several sets of Z from one trace of the pixel.
+
+    ``outside_band``: the ghost maps hold only the rays with |s_x| or |s_y| >= this (the
+    light a wave engine of that band leaves to the tracer,
+    :mod:`~opticalstamp.analysis.responsivity`); the own-path maps are whole.
 
     Parameters
     ----------
@@ -181,7 +186,7 @@ def traced_map_sets(
     on_gpu = None  # the same maps on the device, where a GPU keeps the rays
     for pb in tr.trace((row, 0), progress=progress):
         b = pb.rays
-        if b.device is not None:
+        if b.device is not None and outside_band is None:
             from . import cuda_tallies as gpu
 
             on_gpu = on_gpu or [(gpu.zeros(f.shape), gpu.zeros(c.shape)) for *_, f, c in sets]
@@ -191,13 +196,17 @@ def traced_map_sets(
                     coarse_bin_um, fine, coarse,
                 )  # fmt: skip
             continue
+        w = pb.w
+        if outside_band is not None:  # ghost rays in the band: the wave engine's
+            out = (np.abs(b.sx) >= outside_band) | (np.abs(b.sy) >= outside_band)
+            w = w * (pb.own | out)
         for zs, fine_lo, fine_bin, fine, coarse in sets:
             _maps(
                 b.x,
                 b.y,
                 b.sx,
                 b.sy,
-                pb.w,
+                w,
                 pb.own,
                 src.x,
                 src.y,

@@ -176,7 +176,10 @@ def scan(
             callback=number(0, 1e4, lo_open=True),
         ),
     ] = None,
-    kernel: Annotated[str, typer.Option(help="auto, paraxial or trace")] = "auto",
+    kernel: Annotated[
+        str,
+        typer.Option(help="auto (paraxial or trace), paraxial, trace or wave (scalar diffraction)"),
+    ] = "auto",
     speed_error: Annotated[
         float,
         typer.Option(

@@ -99,9 +99,20 @@ def paraxial_kernel(design: Design, z_mm: float, bin_um: float = 1.0) -> ScanKer
     return ScanKernel(z_mm, lo, bin_um, cy[None, :], cx[None, :], np.ones(1))
 
 
-def separable_terms(m: np.ndarray, rank_tol: float = 0.02, max_rank: int = 4):
-    """SVD of a 2-D map [y, x] into (scale, u (K, ny), v (K, nx)), signs made positive."""
-    u, s, vt = np.linalg.svd(m, full_matrices=False)
+def separable_terms(
+    m: np.ndarray, rank_tol: float = 0.02, max_rank: int = 4, partial: bool = False
+):
+    """SVD of a 2-D map [y, x] into (scale, u (K, ny), v (K, nx)), signs made positive.
+    ``partial``: only the leading ``max_rank`` + 1 terms, by Lanczos iteration
+    (:func:`scipy.sparse.linalg.svds`; for the wave engine's large maps)."""
+    if partial and min(m.shape) > max_rank + 2:
+        from scipy.sparse.linalg import svds
+
+        u, s, vt = svds(m, k=max_rank + 1, random_state=0)
+        order = np.argsort(s)[::-1]
+        u, s, vt = u[:, order], s[order], vt[order]
+    else:
+        u, s, vt = np.linalg.svd(m, full_matrices=False)
     k = int(max(1, min(max_rank, np.sum(s > rank_tol * s[0]))))
     u, s, vt = u[:, :k].T.copy(), s[:k].copy(), vt[:k].copy()
     for i in range(k):  # make the dominant term's factors positive
@@ -111,25 +122,65 @@ def separable_terms(m: np.ndarray, rank_tol: float = 0.02, max_rank: int = 4):
     return s, u, vt
 
 
+def map_kernel(
+    z_mm: float,
+    own: np.ndarray,
+    lo_um: float,
+    bin_um: float,
+    rank_tol=0.02,
+    max_rank=4,
+    partial: bool = False,
+) -> ScanKernel:
+    """A kernel from a near-field map [y, x] (um^2 sr per bin, bins of ``bin_um`` from
+    ``lo_um`` in x and y about the pixel's axis), separated by SVD (``partial``: as
+    :func:`separable_terms`)."""
+    s, u, v = separable_terms(own, rank_tol, max_rank, partial)
+    zero = np.zeros((s.size, 1))
+    cy = np.hstack([zero, np.cumsum(u, axis=1)])
+    cx = np.hstack([zero, np.cumsum(v, axis=1)])
+    return ScanKernel(float(z_mm), lo_um, bin_um, cy, cx, s)
+
+
+def _with_ghost(k: ScanKernel, maps: TracedMaps, iz: int) -> ScanKernel:
+    return replace(
+        k, ghost=maps.ghost[iz], ghost_lo_um=maps.coarse_lo_um, ghost_bin_um=maps.coarse_bin_um
+    )
+
+
 def traced_kernels(
     maps: TracedMaps, ghosts: bool = True, rank_tol: float = 0.02, max_rank: int = 4
 ) -> list[ScanKernel]:
     """Kernels from traced maps (own path by SVD, ghost map kept coarse)."""
     out = []
     for iz, z in enumerate(maps.z_mm):
-        s, u, v = separable_terms(maps.own[iz], rank_tol, max_rank)
-        zero = np.zeros((s.size, 1))
-        cy = np.hstack([zero, np.cumsum(u, axis=1)])
-        cx = np.hstack([zero, np.cumsum(v, axis=1)])
-        k = ScanKernel(float(z), maps.fine_lo_um, maps.fine_bin_um, cy, cx, s)
-        if ghosts:
-            k = replace(
-                k,
-                ghost=maps.ghost[iz],
-                ghost_lo_um=maps.coarse_lo_um,
-                ghost_bin_um=maps.coarse_bin_um,
-            )
-        out.append(k)
+        k = map_kernel(z, maps.own[iz], maps.fine_lo_um, maps.fine_bin_um, rank_tol, max_rank)
+        out.append(_with_ghost(k, maps, iz) if ghosts else k)
+    return out
+
+
+#: bin of the wave engine's near-field maps that wave kernels are made of (um)
+WAVE_BIN_UM = 2.0
+
+
+def wave_kernels(
+    design: Design, z_mm, row: int, ghosts: bool, maps: TracedMaps | None
+) -> list[ScanKernel]:
+    """One row's kernels by wave optics: the wave engine's map of the light in its band
+    (own path, its diffraction, near crosstalk; :func:`~opticalstamp.analysis.wave.
+    wave_response`, the design's wavelength) on ``WAVE_BIN_UM`` bins, SVD-separated, and
+    the traced ghost map of the light beyond the band (``maps``, traced with
+    ``outside_band``): the join of :mod:`~opticalstamp.analysis.responsivity`."""
+    from ..analysis.responsivity import resolve_optics
+    from ..analysis.wave import wave_response
+
+    opt = resolve_optics(design, "wave")
+    zs = np.asarray(z_mm, dtype=np.float64)
+    r = wave_response(design, zs, pixel=(row, 0), sampling=opt.sampling)
+    out = []
+    for iz, z in enumerate(zs):
+        edges, m = r.spot(iz, WAVE_BIN_UM)
+        k = map_kernel(z, m * WAVE_BIN_UM**2, float(edges[0]), WAVE_BIN_UM, partial=True)
+        out.append(_with_ghost(k, maps, iz) if ghosts else k)
     return out
 
 
@@ -214,15 +265,29 @@ def stamp_kernel_sets(
     "paraxial" or "trace"), from one trace per row where anything is traced."""
     sampling = Sampling(_rays(source, n_rays), seed, fresnel)
     tr = tracer_for(design, sampling, tracer)  # one reverse path for every row
+    band = None
+    if source == "wave":  # the tracer keeps the light beyond the wave engine's band
+        from ..analysis.responsivity import resolve_optics
+
+        band = resolve_optics(design, "wave").band
     out = [[] for _ in z_sets]
     for row in range(design.sensor.rows):
         maps = [None] * len(z_sets)
         if z_sets and (source == "trace" or ghosts):
             maps = traced_map_sets(
-                design, z_sets=z_sets, row=row, sampling=sampling, tracer=tr, progress=progress
+                design,
+                z_sets=z_sets,
+                row=row,
+                sampling=sampling,
+                tracer=tr,
+                progress=progress,
+                outside_band=band,
             )
         for ks, z_mm, m in zip(out, z_sets, maps, strict=True):
-            ks.append(_row_kernels(design, z_mm, source, ghosts, m))
+            if source == "wave":
+                ks.append(wave_kernels(design, z_mm, row, ghosts, m))
+            else:
+                ks.append(_row_kernels(design, z_mm, source, ghosts, m))
     return out
 
 

@@ -56,13 +56,24 @@ class Stamp:
         return out
 
     def kernel_source(self, design, source: str, fresnel: bool) -> str:
-        """ "paraxial" or "trace" (see :func:`~opticalstamp.imaging.kernels.scan_kernels`)."""
+        """ "paraxial", "trace" or "wave" (see
+        :func:`~opticalstamp.imaging.kernels.scan_kernels`)."""
         rect = all(m.shape != "circle" for m in design.masks)
         if source == "auto":  # the closed form where it holds: rectangles, paraxial own path
             steep = paraxial_max_slope(design) > PARAXIAL_MAX_SLOPE if rect else True
             source = "paraxial" if rect and not fresnel and not steep else "trace"
-        if source not in ("paraxial", "trace"):
-            raise ValueError(f"kernel source must be auto, paraxial or trace (got {source!r})")
+        if source not in ("paraxial", "trace", "wave"):
+            raise ValueError(
+                f"kernel source must be auto, paraxial, trace or wave (got {source!r})"
+            )
+        if source == "wave":
+            from ..analysis.responsivity import wave_unavailable
+
+            why = wave_unavailable(design)
+            if why is not None:
+                raise ValueError(f"wave kernels: {why}")
+            if fresnel:
+                raise ValueError("wave kernels: the wave engine has no Fresnel losses yet")
         if source == "paraxial" and not rect:
             raise ValueError("paraxial kernels need rectangular holes (this design has circles)")
         return source

@@ -44,7 +44,7 @@ from .sensor import SensorModel, expose, fixed_pattern, signal_budget
 from .separable import box_taps, inside, x_pass, y_pass
 
 Illumination = Literal["uniform", "ripple"]
-Kernel = Literal["auto", "paraxial", "trace"]
+Kernel = Literal["auto", "paraxial", "trace", "wave"]
 #: the choices of ScanSettings.illumination and .kernel
 ILLUMINATIONS: tuple[str, ...] = get_args(Illumination)
 KERNELS: tuple[str, ...] = get_args(Kernel)
