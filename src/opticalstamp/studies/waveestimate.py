@@ -36,7 +36,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ..analysis.efficiency import reference_etendue
-from ..analysis.rmtf import DEFAULT_Z_MM, depth_of_field, period_of_dpi, rmtf_curves
+from ..analysis.rmtf import DEFAULT_Z_MM, period_of_dpi, refine_results, rmtf_from_lsf
 from ..analysis.wavebase import wave_sampling
 from ..design import Design
 from ..raytrace.pixel import PixelTracer, Sampling
@@ -46,6 +46,8 @@ from .evaluate import GHOST_Z_MM, RMTF_Z_MM, Z_LIMIT_MM, diffraction_spill, exte
 #: diffraction orders of the smallest hole over the own path's slopes in the estimator's
 #: band (the analyses use 12: :data:`~opticalstamp.analysis.wavebase.ORDERS`)
 FAST_ORDERS = 4.0
+#: Z steps of the estimator's refinement of its RMTF crossings (the exact figures: 8)
+REFINE = 4
 #: how :func:`evaluate_wave` estimates, recorded with every figure it makes
 WAVE_ESTIMATE = (
     f"wave estimator: separable wave engine in a band of {FAST_ORDERS:g} diffraction orders "
@@ -141,6 +143,7 @@ def evaluate_wave(
     wavelength_um: float | None = None,
     restored: bool = False,
     orders: float = FAST_ORDERS,
+    refine: int = REFINE,
 ) -> dict:
     """The figures of :func:`~opticalstamp.studies.evaluate.evaluate_design` by the wave
     estimator (``"estimator"``: :data:`WAVE_ESTIMATE`, ``"optics"``: "wave").
@@ -159,12 +162,23 @@ def evaluate_wave(
     far = far_light(design, smp.band, n_rays=ghost_rays, seed=seed, tracer=tracer)
     per = period_of_dpi(dpi)
     zs = np.asarray(z_mm, dtype=np.float64)
+    key = f"{dpi:g}"
     while True:
         wave, lsf = _joined_lsf(design, zs, per, smp, ghost_rays, seed, tracer)
-        curve = rmtf_curves(lsf, design)["max"][0]
+        res = rmtf_from_lsf(lsf, design, dpi=[dpi], seed=seed, dof_threshold=dof_threshold,
+                            dof_dpi=dpi)  # fmt: skip
+        curve = np.asarray(res.rmtf_max[key])
         if curve.min() < dof_threshold or zs[-1] >= Z_LIMIT_MM:
             break
         zs = extended_z(zs)  # the depth of field is a crossing: go on in the same step
+    # the crossings found again between the grid's heights, as the exact figures do
+    # (an RMTF near the threshold dips between heights), in fewer steps
+    (res,) = refine_results(
+        [res],
+        lambda z: [_joined_lsf(design, z, per, smp, ghost_rays, seed, tracer)[1]],
+        design,
+        steps=refine,
+    )
     own = float(wave.h[0][0, 0, 0].sum())  # row A's in-band light at the first Z
     ghost = far["far_um2sr"]
     tot = own + ghost
@@ -185,7 +199,7 @@ def evaluate_wave(
         "ghost_fraction": frac,
         "efficiency_ratio": own / ref,
         "efficiency_ratio_total": tot / ref,
-        "dof_mm": depth_of_field(zs, curve, dof_threshold),
+        "dof_mm": res.dof_mm[key],
         "dof_open_ended": bool(curve.min() >= dof_threshold),
         "rmtf_at": {f"{z:g}": float(np.interp(z, zs, curve)) for z in rmtf_z_mm},
         "nearest_ghost_mm": far["nearest_far_mm"],
