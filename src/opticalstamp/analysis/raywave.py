@@ -146,7 +146,10 @@ def verdict_text(j: dict) -> str:
     tol_l = f"{tol['light'] * 100:g} %"
     light, d_max = j["light_difference"], j["rmtf_difference_max"]
     chart = f"the {j['dof_dpi']:g}-dpi chart"
-    dof = f"depth of field {_dof_words(j, 'wave')} by wave against {_dof_words(j, 'ray')} by rays"
+    dof = (
+        f"depth of field of the light in the band (own path and near crosstalk, no far "
+        f"ghosts) {_dof_words(j, 'wave')} by wave against {_dof_words(j, 'ray')} by rays"
+    )
     if j["holds"] == "ray":
         return (
             f"Ray optics holds for this design: wave and ray agree within the tolerances "

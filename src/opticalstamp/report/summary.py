@@ -34,7 +34,7 @@ FIGURES = MappingProxyType(
             "same rule as the raw scan's above",
             "mm",
         ),
-        "light": ("light vs the F/10 lens (own path)", ""),
+        "light": ("light vs the F/10 lens (own path; by wave optics: the light in its band)", ""),
         "f_number": ("working F-number", ""),
         "vs_rod_lens": ("light vs a 1-row 12-degree rod-lens array", ""),
         "thickness": ("sensor to document reference", "mm"),
