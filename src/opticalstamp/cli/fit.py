@@ -116,7 +116,10 @@ def _write_report(folder: Path, res, obs, specs, dpi, linear, data: dict) -> Non
 
 
 def result_lines(res) -> list[str]:
-    """The fit as text: estimates with errors, chi2, starts, degeneracies."""
+    """The fit as text: estimates with errors, parameters held at nominal, chi2, starts,
+    degeneracies."""
+    from ..studies.fit import HELD
+
     lines = [
         f"fit of {res.design.name}: chi2 {res.chi2:.1f} for {res.dof} degrees of freedom "
         f"(reduced {res.chi2 / max(res.dof, 1):.2f}; errors scaled by {res.error_scale:.2f})",
@@ -125,6 +128,8 @@ def result_lines(res) -> list[str]:
     for n, v, e, m in zip(res.names, res.values, res.errors, res.nominal, strict=True):
         err = "undet." if e is None else f"{e:9.3g}"
         lines.append(f"{n:12s} {m:10.3f} {v:10.3f} {err:>9s}")
+    for n, v in res.held.items():
+        lines.append(f"{n:12s} {v:10.3f} {v:10.3f}    {HELD}")
     for n, v in res.pinned.items():
         lines.append(f"{n:12s} pinned at {v:g}")
     good = sum(1 for s in res.starts if s["delta_chi2"] < 1.0)

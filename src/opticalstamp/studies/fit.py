@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from ..design import Design
 from ..validate import InputError
@@ -46,6 +47,10 @@ CORR_TOL = 0.95
 UNDETERMINED = 10.0
 #: The residual of every datum where the parameters make no design or no light.
 BAD_RESIDUAL = 1e4
+#: Rounds of holding undetermined parameters at nominal and fitting the rest again.
+HOLD_ROUNDS = 3
+#: Why a parameter is held (the JSON's and the terminal's words).
+HELD = "held at nominal: undetermined from these images"
 #: How far (relative) a bar block's period may move from the one measured.
 PERIOD_TOL = 0.03
 
@@ -302,6 +307,8 @@ class FitResult:
     ``names``, ``values``, ``errors`` (None: not determined by these images), ``nominal``:
     the free physical parameters (``ref``: offset in um). ``correlation``: theirs.
     ``nuisance``: {image: {name: (value, error)}}. ``starts``: (cost, chi2) of each start.
+    ``held``: {name: nominal value} of the parameters the images did not determine, held
+    at nominal in ``fitted`` (their reason :data:`HELD`); the rest re-fitted with them held.
     """
 
     design: Design
@@ -319,6 +326,7 @@ class FitResult:
     nuisance: dict
     starts: list[dict]
     theta: np.ndarray = field(repr=False, default=None)
+    held: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {
@@ -330,8 +338,13 @@ class FitResult:
                 for n, v, e, m in zip(
                     self.names, self.values, self.errors, self.nominal, strict=True
                 )
+            }
+            | {
+                n: {"value": v, "error": None, "nominal": v, "held": HELD}
+                for n, v in self.held.items()
             },
             "pinned": self.pinned,
+            "held": {n: {"value": v, "reason": HELD} for n, v in self.held.items()},
             "correlation": {"names": self.names, "matrix": self.correlation.tolist()},
             "degeneracies": self.degeneracies,
             "chi2": self.chi2,
@@ -372,15 +385,19 @@ def _local(prob: Problem, theta0: np.ndarray, max_nfev: int):
     )
 
 
-def _degeneracies(jac: np.ndarray, lay: Layout, cov: np.ndarray) -> tuple[list[str], set[int]]:
-    """Messages naming what the images cannot tell apart, and the physical columns of
-    the combinations they do not see at all."""
+def _degeneracies(
+    jac: np.ndarray, lay: Layout, cov: np.ndarray
+) -> tuple[list[str], set[int], set[int]]:
+    """Messages naming what the images cannot tell apart, the physical columns of the
+    combinations they do not see at all, and those to hold at nominal (every unseen
+    parameter; of a combination unseen, its largest member: holding it fixes the rest)."""
     names = [lay.params[j].name for j in lay.free]
     nf = lay.n_free
     norms = np.linalg.norm(jac, axis=0)
-    msgs, blind = [], set()
+    msgs, blind, hold = [], set(), set()
     for k in range(nf):
         if norms[k] == 0:
+            hold.add(k)
             msgs.append(
                 f"{names[k]} is not constrained by these images (none changes with it): "
                 f"fix it with --pin {names[k]}=..., or add an image that does (an edge for y)"
@@ -400,6 +417,8 @@ def _degeneracies(jac: np.ndarray, lay: Layout, cov: np.ndarray) -> tuple[list[s
             continue  # nuisance alone
         who = [k for k in range(nf) if abs(phys[k]) > 0.1 * np.abs(phys).max()]
         blind.update(who)
+        if not hold & set(who):
+            hold.add(max(who, key=lambda k: abs(phys[k])))
         listed = ", ".join(names[k] for k in who)
         chart = np.linalg.norm(w[nf:]) > 0.3
         why = " (together with the charts' positions)" if chart else ""
@@ -421,7 +440,34 @@ def _degeneracies(jac: np.ndarray, lay: Layout, cov: np.ndarray) -> tuple[list[s
                     f"(correlation {corr[a, b]:+.3f}): fix one with --pin {names[b]}=..., or "
                     "add an edge at another height"
                 )
-    return msgs, blind
+    return msgs, blind, hold
+
+
+def _estimate(prob: Problem, theta: np.ndarray):
+    """(chi2, dof, error scale^2, covariance, messages, blind, hold) at ``theta``."""
+    lay = prob.lay
+    jac = prob.jacobian(theta)
+    chi2 = float(np.sum(prob.residuals(theta) ** 2))
+    dof = max(jac.shape[0] - jac.shape[1], 1)
+    scale2 = max(1.0, chi2 / dof)
+    norms = np.linalg.norm(jac, axis=0)
+    norms[norms == 0] = 1.0
+    js = jac / norms
+    cov = np.linalg.pinv(js.T @ js, rcond=1e-12, hermitian=True) / np.outer(norms, norms)
+    cov *= scale2
+    msgs, blind, hold = _degeneracies(jac, lay, cov)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    for k in range(lay.n_free):  # an error far beyond the assembly scale: not determined
+        p = lay.params[lay.free[k]]
+        if k not in blind and sd[k] > UNDETERMINED * p.scale:
+            blind.add(k)
+            hold.add(k)
+            msgs.append(
+                f"{p.name} is not determined by these images (standard error "
+                f"{sd[k]:.3g} um, over {UNDETERMINED:g} x its assembly scale {p.scale:g} um): "
+                f"fix it with --pin {p.name}=..., or add images at other heights"
+            )
+    return chi2, int(dof), scale2, cov, msgs, blind, hold
 
 
 def fit(
@@ -436,6 +482,12 @@ def fit(
 ) -> FitResult:
     """Fit ``design``'s physical parameters to the observations (see the module doc).
 
+    A parameter the images do not determine (none changes with it, its error beyond
+    ``UNDETERMINED`` x its assembly scale, or the largest member of a combination no
+    image sees) is held at its nominal value and the rest fitted again from the best
+    minimum (up to ``HOLD_ROUNDS`` times): the fitted design carries the drawing's value
+    there, never wherever the optimiser stopped. ``FitResult.held`` lists them.
+
     Parameters
     ----------
     design : the nominal design (rectangular holes: the paraxial own path)
@@ -446,6 +498,13 @@ def fit(
     """
     if not observations:
         raise FitError("no images to fit")
+    # BLAS on one thread for the fit only (restored on leaving): the solves are small,
+    # and OpenBLAS's spinning threads made a fit 5x slower on a loaded 2-core machine
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _fit(design, observations, free, pinned, starts, seed, max_nfev)
+
+
+def _fit(design, observations, free, pinned, starts, seed, max_nfev) -> FitResult:
     lay = layout_for(design, observations, free, pinned)
     prob = Problem(design, observations, lay)
     rng = np.random.default_rng([seed, 24])
@@ -464,28 +523,31 @@ def fit(
         if best is None or r.cost < best.cost:
             best = r
     theta = best.x
-    jac = prob.jacobian(theta)
-    chi2 = float(np.sum(prob.residuals(theta) ** 2))
-    dof = max(jac.shape[0] - jac.shape[1], 1)
-    scale2 = max(1.0, chi2 / dof)
-    norms = np.linalg.norm(jac, axis=0)
-    norms[norms == 0] = 1.0
-    js = jac / norms
-    cov = np.linalg.pinv(js.T @ js, rcond=1e-12, hermitian=True) / np.outer(norms, norms)
-    cov *= scale2
-    msgs, blind = _degeneracies(jac, lay, cov)
+    for r in runs:  # how far each start's minimum is from the best one
+        r["delta_chi2"] = r["chi2"] - float(2 * best.cost)
+    chi2, dof, scale2, cov, msgs, blind, hold = _estimate(prob, theta)
+    held: dict[str, float] = {}
+    for _ in range(HOLD_ROUNDS):
+        if not hold:
+            break
+        names_now = [lay.params[j].name for j in lay.free]
+        for k in hold:
+            j = lay.free[k]
+            held[names_now[k]] = float(lay.params[j].nominal)
+        keep = [k for k in range(lay.n_free) if k not in hold]
+        lay = layout_for(
+            design, observations, [names_now[k] for k in keep], dict(pinned or {}) | held
+        )
+        prob = Problem(design, observations, lay)
+        t0 = np.concatenate([theta[keep], theta[len(names_now) :]])
+        theta = _local(prob, t0, max_nfev).x
+        chi2, dof, scale2, cov, more, blind, hold = _estimate(prob, theta)
+        # what made a parameter held stays said; the correlations are the last fit's
+        msgs = [m for m in msgs if "hard to tell apart" not in m]
+        msgs += [m for m in more if m not in msgs]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-    names = [lay.params[j].name for j in lay.free]
     nf = lay.n_free
-    for k in range(nf):  # an error far beyond the assembly scale: not determined
-        p = lay.params[lay.free[k]]
-        if k not in blind and sd[k] > UNDETERMINED * p.scale:
-            blind.add(k)
-            msgs.append(
-                f"{names[k]} is not determined by these images (standard error "
-                f"{sd[k]:.3g} um, over {UNDETERMINED:g} x its assembly scale {p.scale:g} um): "
-                f"fix it with --pin {names[k]}=..., or add images at other heights"
-            )
+    names = [lay.params[j].name for j in lay.free]
     errors = [None if k in blind else float(sd[k]) for k in range(nf)]
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov[:nf, :nf] / np.outer(sd[:nf], sd[:nf])
@@ -501,8 +563,6 @@ def fit(
             n: [float(theta[k]), float(sd[k])]
             for n, k in zip(nn, range(sl.start, sl.stop), strict=True)
         }
-    for r in runs:  # how far each start's minimum is from the best one
-        r["delta_chi2"] = r["chi2"] - float(2 * best.cost)
     return FitResult(
         design=design,
         fitted=fitted,
@@ -519,4 +579,5 @@ def fit(
         nuisance=nuisance,
         starts=runs,
         theta=theta,
+        held=held,
     )
