@@ -16,22 +16,44 @@ def efficiency_html(e: dict, signal: dict | None = None, paper: bool = False) ->
     missing = unmeasured(title, e)
     if missing is not None:
         return missing
+    o = e.get("meta", {}).get("optics", {})
+    wave = o.get("engine") == "wave"
     eff_rows = [
         [
-            "own path: the signal (the headline figure)",
+            "own path with its diffraction, the light in the wave band: the signal (headline)"
+            if wave
+            else "own path: the signal (the headline figure)",
             e["etendue_own_um2sr"],
             e["ratio_own"],
             1 / e["ratio_own"] if e["ratio_own"] else None,  # no light: no inverse
             e["working_f_number_own"],
         ],
         [
-            "own + ghost light (ghost light is crosstalk)",
+            "all light: wave band + traced far ghosts (crosstalk)"
+            if wave
+            else "own + ghost light (ghost light is crosstalk)",
             e["etendue_um2sr"],
             e["ratio"],
             1 / e["ratio"] if e["ratio"] else None,
             e["working_f_number"],
         ],
-    ] + ([["paper (Fig. 13)", None, 1 / 36, 36.0, 60.0]] if paper else [])
+    ]
+    if wave:  # the ray figures the wave ones replace
+        g_ref = e["reference_etendue_um2sr"]
+        eff_rows += [
+            [
+                f"ray optics: {name}",
+                g,
+                g / g_ref,
+                g_ref / g if g else None,
+                e["reference_f_number"] / (g / g_ref) ** 0.5 if g else None,
+            ]
+            for name, g in (
+                ("own path (geometric)", o["ray_etendue_own_um2sr"]),
+                ("own + ghost light", o["ray_etendue_um2sr"]),
+            )
+        ]
+    eff_rows += [["paper (Fig. 13)", None, 1 / 36, 36.0, 60.0]] if paper else []
     area_rows = [
         [
             a["sensitive_um"][0],

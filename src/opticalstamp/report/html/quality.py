@@ -26,10 +26,16 @@ def rmtf_html(d: dict, design: Design) -> str:
         for i, z in enumerate(r["z_mm"])
     ]
     dof_keys = [dk] + [k for k in keys if k != dk]
+    wave = r.get("meta", {}).get("optics", {}).get("engine") == "wave"
+    all_light = (
+        "wave optics in its band + the traced far ghosts (the headline)"
+        if wave
+        else "exact tracer, own + ghost light"
+    )
     dof_rows = [
         [name] + [dof_cell(res, k) for k in dof_keys]
         for name, res in (
-            ("exact tracer, own + ghost light", r),
+            (all_light, r),
             ("exact tracer, own path only", own),
             (f"{par['method']}, own path only", par),
         )
@@ -45,8 +51,9 @@ def rmtf_html(d: dict, design: Design) -> str:
     )
     return f"""<h2>{title}</h2>
 <p>Bar charts of {", ".join(f"{k} dpi" for k in keys)} over a {r["window_um"]:g} µm window,
-shifted in {r["shift_step_um"]:g} µm steps; RMTF is the maximum over shifts ({r["method"]},
-ghost light {"included" if r["ghosts"] else "left out"}, {r["n_rays"]:,} rays per pixel row).
+shifted in {r["shift_step_um"]:g} µm steps; RMTF is the maximum over shifts ({
+        "wave optics in the band (docs/optics.md), traced beyond it" if wave else r["method"]
+    }, ghost light {"included" if r["ghosts"] else "left out"}, {r["n_rays"]:,} rays per pixel row).
 The merged line {merged}.
 Depth of field: first Z where RMTF on the {r["dof_dpi"]:g}-dpi chart{chart_why(r, design)}
 falls below {r["dof_threshold"]:g}:
