@@ -60,16 +60,20 @@ EXACT_WAVE = (
     "it (efficiency and rmtf with optics wave), RMTF with that light where it lands"
 )
 #: How far the wave estimator may be from the exact wave figures: the largest |estimate -
-#: exact| over the designs of benchmarks/wave_estimator_accuracy.py (random feasible
-#: designs of the 600-dpi search space and the 600-dpi half-scale prototype, seed 0;
-#: docs/search.md), times 1.2: depth of field in mm, RMTF and ghost fraction in absolute
-#: units, the light as a relative error.
+#: exact| measured by benchmarks/wave_estimator_accuracy.py (seed 0) on the 600-dpi
+#: half-scale prototype and random feasible designs of the 600-dpi search space, times
+#: about 1.2 (docs/search.md): depth of field in mm (largest 0.020 mm over 5 designs,
+#: the crossings refined), RMTF at 1, 2, 3 mm and ghost fraction in absolute units
+#: (largest 0.161 and 0.131 over 7), the light as a relative error (largest 6.6 %, always
+#: low: the diffraction beyond the narrower band). The RMTF and ghost errors come from
+#: designs with ghost fractions of 0.3-0.7 (their far light traced with 2^17 rays against
+#: 2^21); on the half-scale prototype (ghost fraction 0.10) they are 0.004 and 0.0003.
 WAVE_ACCURACY = MappingProxyType(
     {
-        "dof_mm": 0.10,
-        "rmtf": 0.03,
-        "efficiency_ratio": 0.03,
-        "ghost_fraction": 0.03,
+        "dof_mm": 0.05,
+        "rmtf": 0.20,
+        "efficiency_ratio": 0.08,
+        "ghost_fraction": 0.16,
     }
 )
 
