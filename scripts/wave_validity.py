@@ -35,6 +35,7 @@ import numpy as np
 
 from opticalstamp.analysis.dof import depth_of_field
 from opticalstamp.analysis.lsf import FoldedLSF
+from opticalstamp.analysis.paraxial import paraxial_etendue
 from opticalstamp.analysis.rmtf import rmtf_curves
 from opticalstamp.analysis.validity import (
     CHOSEN,
@@ -190,9 +191,9 @@ def measure(label: str, family: str, design, zs, n_rays: int, seeds: int) -> dic
         ]
         folds.append([x.folded for x in rays])
         nears.append(rays[0].near_um2sr)
-    own = c.own_exact_um2sr
+    own = paraxial_etendue(design)  # the separable wave path's geometric limit
     light_w = c.wave["light_um2sr"]
-    seed0 = ray_errors(c)  # compare_wave_ray's own ray side (seed 0), for the record
+    seed0 = ray_errors(c, design)  # compare_wave_ray's own ray side (seed 0), for the record
     per_seed = {
         "light": [light_w / (own + n) - 1 for n in nears],
         "rmtf": [float(np.abs(wr - _ray_rmtf(design, zs, per, f))[near].max()) for f in folds],
@@ -218,7 +219,9 @@ def measure(label: str, family: str, design, zs, n_rays: int, seeds: int) -> dic
         "predictors": design_predictors(design),
         "band": c.sampling["band"],
         "light_wave_um2sr": c.wave["light_um2sr"],
-        "own_exact_um2sr": own,
+        "own_paraxial_um2sr": own,
+        "own_exact_um2sr": c.own_exact_um2sr,
+        "light_error_vs_exact": light_w / (c.own_exact_um2sr + float(np.mean(nears))) - 1,
         "near_ray_um2sr": float(np.mean(nears)),
         "light_error": err["light"],
         "light_error_se": se["light"],

@@ -114,30 +114,30 @@ def test_module_envelopes_bound_the_committed_study():
 
 def _study_designs():
     """The study's designs closest to the envelopes (at 0.78-0.83 of a bound; re-run
-    with seed 11: 0.81, 0.83, 0.64, 0.83)."""
+    with seed 11: RMTF 0.81, light 0.83, light 0.82, RMTF 0.71 of theirs)."""
     d = load_design("paper2016")
     plates = (1000.0, 400.0, 450.0)
     half = tuple(t / 2 for t in plates)
     return [
         load_design("three-layer-single-row"),  # RMTF at 0.78 of its bound
         with_stack(d, holes_um=(36.0, 40.0, 40.0)),  # light 0.83
-        replace(  # holes x1.25 over plates x0.5 at 0.45 um: RMTF 0.78
+        replace(  # holes x1.25 over plates x0.5 at 0.45 um: light 0.83, RMTF 0.78
             with_stack(d, holes_um=(60.0, 50.0, 50.0), thicknesses_um=half, reference_gap_um=500),
             wavelength_um=0.45,
         ),
-        with_stack(scale_to_dpi(d, 100), thicknesses_um=half, reference_gap_um=500),  # P = 12
+        with_stack(scale_to_dpi(d, 100), thicknesses_um=half, reference_gap_um=500),  # P 12
     ]
 
 
 def test_rule_bounds_fresh_runs_of_study_designs():
     """Ray against wave re-run with another seed (2^18 rays a row, the study's heights up
     to 3 mm; the study pooled 4 seeds): each error (ray_errors: the light
-    against the exact own path plus the traced near ghosts, the RMTF on the
+    against the paraxial own path plus the traced near ghosts, the RMTF on the
     depth-of-field chart) is within the rule's bound at the design's predictor."""
     for design in _study_designs():
         c = compare_wave_ray(design, Z_STUDY, n_rays=1 << 18, seed=11)
         p = own_fresnel_number(design)
-        err = ray_errors(c)
+        err = ray_errors(c, design)
         assert abs(err["light"]) <= ENVELOPES["light"].bound(p), (design.name, p, err)
         assert err["rmtf"] <= ENVELOPES["rmtf"].bound(p), (design.name, p, err)
 
