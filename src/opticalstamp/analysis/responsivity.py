@@ -24,6 +24,7 @@ periods, with an :class:`Optics` value that says which engine gives them:
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -34,6 +35,9 @@ from ..validate import InputError
 from .lsf import SLOPE_EDGES, FoldedLSF, traced_folded_lsf
 from .paraxial import paraxial_folded_lsf
 from .wavebase import WaveSampling, rectangular, wave_sampling
+
+if TYPE_CHECKING:
+    from .wavecompare import WaveFolds
 
 #: what a user may ask for
 OPTICS = ("ray", "wave", "auto")
@@ -151,13 +155,15 @@ def folded_lsf(
     fresnel: bool = False,
     progress: bool = False,
     tracer: PixelTracer | None = None,
+    wave: WaveFolds | None = None,
 ) -> FoldedLSF:
     """The used pixels' LSFs folded onto ``periods_um`` at each ``z_mm``, by ``optics``.
 
     Ray optics: ``method`` "trace" (exact tracer; ``ghosts``, ``fresnel``, ``n_rays``,
     ``seed``, ``tracer`` as :func:`~opticalstamp.analysis.lsf.traced_folded_lsf`) or
-    "paraxial" (own path, closed form). Wave optics: the wave engine's LSFs in its band
-    plus, with ``ghosts``, the traced light outside it (:func:`join`); its method is
+    "paraxial" (own path, closed form). ``wave``: as :func:`folded_lsf_pair`. Wave
+    optics: the wave engine's LSFs in its band plus, with ``ghosts``, the traced light
+    outside it (:func:`join`); its method is
     "wave" and its standard errors those of the traced part (the wave part has no
     sampling noise). Fresnel losses are the tracer's only: with wave optics ``fresnel``
     is refused rather than applied to half the light.
@@ -182,9 +188,8 @@ def folded_lsf(
         )
     if method == "paraxial":
         raise InputError("method: 'paraxial' is a ray-optics closed form; not with --optics wave")
-    from .wavecompare import wave_folded_lsf
-
-    wave = wave_folded_lsf(design, z_mm, periods_um, sampling=optics.sampling)
+    wf = wave or wave_folds(design, optics, float(np.max(z_mm)))
+    wave = wf.folded(z_mm, periods_um)
     if not ghosts:
         return wave
     far = traced_folded_lsf(
@@ -213,11 +218,13 @@ def folded_lsf_pair(
     fresnel: bool = False,
     progress: bool = False,
     tracer: PixelTracer | None = None,
+    wave: WaveFolds | None = None,
 ) -> tuple[FoldedLSF, FoldedLSF]:
     """All light by ``optics`` and the own path alone (traced, geometric), from one trace
     per row (:func:`~opticalstamp.analysis.lsf.traced_folded_lsf_pair`): with wave
     optics the all-light LSFs are the wave engine's in band joined with the traced light
-    beyond it (:func:`join`), as :func:`folded_lsf` gives them."""
+    beyond it (:func:`join`), as :func:`folded_lsf` gives them. ``wave``: the wave
+    engine's folds to reuse (:func:`wave_folds`; built here where None)."""
     from .lsf import traced_folded_lsf_pair
 
     if optics.engine == "wave" and fresnel:
@@ -237,10 +244,19 @@ def folded_lsf_pair(
     )
     if optics.engine == "ray":
         return both, own
-    from .wavecompare import wave_folded_lsf
+    wf = wave or wave_folds(design, optics, float(np.max(z_mm)))
+    return join(wf.folded(z_mm, periods_um), both, optics.band, _n_obj(design)), own
 
-    wave = wave_folded_lsf(design, z_mm, periods_um, sampling=optics.sampling)
-    return join(wave, both, optics.band, _n_obj(design)), own
+
+def wave_folds(design: Design, optics: Optics, z_max_mm: float) -> WaveFolds | None:
+    """The wave engine's folds of ``design`` for heights up to ``z_max_mm`` (None with
+    ray optics): pass them as ``wave=`` to :func:`folded_lsf` and
+    :func:`folded_lsf_pair` called again and again (the stack traversed once)."""
+    if optics.engine != "wave":
+        return None
+    from .wavecompare import WaveFolds
+
+    return WaveFolds(design, z_max_mm, sampling=optics.sampling)
 
 
 def _n_obj(design: Design) -> float:

@@ -37,7 +37,7 @@ from ..units import period_of_dpi
 from ..validate import check_memory, parse_grid
 from .dof import depth_of_field, dof_bounds, dof_text, refine_points, spurious_ranges
 from .lsf import FoldedLSF, fast_light
-from .responsivity import RAY, Optics, folded_lsf, resolve_optics
+from .responsivity import RAY, Optics, folded_lsf, resolve_optics, wave_folds
 
 __all__ = ["depth_of_field", "dof_bounds", "dof_text", "refine_points", "spurious_ranges"]
 
@@ -448,6 +448,7 @@ def rmtf(
     if method not in ("trace", "paraxial"):
         raise ValueError(f"method must be 'trace' or 'paraxial' (got {method!r})")
     opt = resolve_optics(design, optics, fresnel=fresnel, method=method)
+    wave = wave_folds(design, opt, float(zs.max()))  # the stack once, for every Z below
 
     def lsf_at(z: np.ndarray) -> FoldedLSF:
         return folded_lsf(
@@ -455,6 +456,7 @@ def rmtf(
             z_mm=z,
             periods_um=periods,
             optics=opt,
+            wave=wave,
             method=method,
             n_rays=n_rays,
             seed=seed,

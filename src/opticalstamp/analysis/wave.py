@@ -259,14 +259,46 @@ def wave_lsf_x(
     -------
     (x_um (nx,), lsf_x (nz, nx) um sr per um, light um^2 sr, meta {"modes", "sequences"})
     """
-    smp = wave_sampling(design) if sampling is None else sampling
     zs = _heights(z_mm)
+    return lsf_source(design, float(zs.max()), pixel=pixel, sampling=sampling).lsf_x(zs)
+
+
+@dataclass(frozen=True)
+class LSFSource:
+    """A used pixel's in-band field after the stack, on an object-side grid that holds
+    the band's reach up to ``z_max_mm``: x line-spread functions at any Z in [0,
+    ``z_max_mm``] without traversing the stack again (:func:`lsf_source`)."""
+
+    side: ObjectSide
+    z_max_mm: float
+    sequences: list[str]
+
+    def lsf_x(self, z_mm) -> tuple[np.ndarray, np.ndarray, float, dict]:
+        """As :func:`wave_lsf_x` at the heights ``z_mm`` (each <= ``z_max_mm``)."""
+        zs = _heights(z_mm)
+        if zs.max() > self.z_max_mm * (1 + 1e-12):
+            raise ValueError(
+                f"z_mm: {zs.max():g} mm lies beyond the grid's reach ({self.z_max_mm:g} mm)"
+            )
+        lsf, light, modes = lsf_x_at(self.side, zs)
+        return self.side.grids[0], lsf, light, {"modes": modes, "sequences": self.sequences}
+
+
+def lsf_source(
+    design: Design,
+    z_max_mm: float,
+    *,
+    pixel: tuple[int, int] = (0, 0),
+    sampling: WaveSampling | None = None,
+) -> LSFSource:
+    """The stack traversed once for the pixel: an :class:`LSFSource` for every Z up to
+    ``z_max_mm`` (the analyses that refine their heights ask it again and again)."""
+    smp = wave_sampling(design) if sampling is None else sampling
     terms, axes, _ = _stack(design, pixel, smp)
     keys = list(terms)
     terms = _band_only(terms, axes, smp)
-    side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, zs.max())
-    lsf, light, modes = lsf_x_at(side, zs)
-    return side.grids[0], lsf, light, {"modes": modes, "sequences": _names(keys)}
+    side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, z_max_mm)
+    return LSFSource(side, float(z_max_mm), _names(keys))
 
 
 def _heights(z_mm) -> np.ndarray:

@@ -33,6 +33,7 @@ from .spectrum import Spectrum, one_channel
 from .wave import stack_reach, wave_response
 from .wavebase import WaveSampling, fresnel_numbers, fwhm_of, wave_sampling
 from .wavespectral import (
+    SpectralLSFSource,
     at_wavelength,
     mirror_twin,
     spectral_lsf_x,
@@ -197,31 +198,69 @@ def wave_folded_lsf(
     ``sampling``: a sampling at one wavelength, carried to each of the light's. The LSFs
     come from the x-only path (:func:`~.wave.wave_lsf_x`); a row whose pixel sees the
     stack as row A's mirrored in y (:func:`~.wavespectral.mirror_twin`, the nominal
-    staggered lattice) takes row A's LSFs."""
+    staggered lattice) takes row A's LSFs. :class:`WaveFolds` gives the same for many
+    sets of heights with the stack traversed once."""
     zs = np.asarray(z_mm, dtype=np.float64)
-    per = np.asarray(periods_um, dtype=np.float64)
-    lat = lattice_of(design)
-    rows = [(float(lat.row_x[r]), float(lat.row_y[r])) for r in range(design.sensor.rows)]
-    spec = one_channel(design, spectrum)
-    reach = max(
-        stack_reach(at_wavelength(design, lam), s)
-        for lam, s in zip(
-            spec.wavelengths_um, spectral_samplings(design, spec, sampling), strict=True
-        )
-    )
-    lsfs: list[tuple[np.ndarray, np.ndarray]] = []
-    for r in range(len(rows)):
-        twin = next((q for q in range(r) if mirror_twin(design, (q, 0), (r, 0), reach)), None)
-        if twin is not None:
-            lsfs.append(lsfs[twin])
-            continue
-        x, lsf, _ = spectral_lsf_x(design, zs, spectrum=spec, pixel=(r, 0), sampling=sampling)
-        lsfs.append((x, lsf))
-    h = [
-        np.stack([[fold(x, p, q, _n_bins(q)) for p in lsf] for x, lsf in lsfs])[:, None]
-        for q in per
-    ]
-    return FoldedLSF(zs, per, rows, h, "wave", 0, False, False)
+    folds = WaveFolds(design, float(zs.max()), sampling=sampling, spectrum=spectrum)
+    return folds.folded(zs, periods_um)
+
+
+class WaveFolds:
+    """The wave engine's folded LSFs of every row at any heights up to ``z_max_mm``: the
+    stack is traversed once per row and wavelength, when first asked
+    (:class:`~.wavespectral.SpectralLSFSource`); each call of :meth:`folded` then costs
+    the object side alone (the depth-of-field refinement asks again and again)."""
+
+    def __init__(
+        self,
+        design: Design,
+        z_max_mm: float,
+        *,
+        sampling: WaveSampling | None = None,
+        spectrum: str | Spectrum | None = None,
+    ) -> None:
+        self.design, self.z_max_mm = design, float(z_max_mm)
+        self.sampling, self.spectrum = sampling, spectrum
+        lat = lattice_of(design)
+        self.rows = [(float(lat.row_x[r]), float(lat.row_y[r])) for r in range(design.sensor.rows)]
+        self._sources: list = []
+
+    def _row_sources(self) -> list:
+        if not self._sources:
+            spec = one_channel(self.design, self.spectrum)
+            smps = spectral_samplings(self.design, spec, self.sampling)
+            reach = max(
+                stack_reach(at_wavelength(self.design, lam), s)
+                for lam, s in zip(spec.wavelengths_um, smps, strict=True)
+            )
+            for r in range(len(self.rows)):
+                twin = next(
+                    (q for q in range(r) if mirror_twin(self.design, (q, 0), (r, 0), reach)),
+                    None,
+                )
+                self._sources.append(
+                    self._sources[twin]
+                    if twin is not None
+                    else SpectralLSFSource.of(
+                        self.design,
+                        self.z_max_mm,
+                        spectrum=spec,
+                        pixel=(r, 0),
+                        sampling=self.sampling,
+                    )  # fmt: skip
+                )
+        return self._sources
+
+    def folded(self, z_mm, periods_um) -> FoldedLSF:
+        """The rows' LSFs at ``z_mm`` (each <= ``z_max_mm``) folded onto ``periods_um``."""
+        zs = np.asarray(z_mm, dtype=np.float64)
+        per = np.asarray(periods_um, dtype=np.float64)
+        lsfs = [src.lsf_x(zs)[:2] for src in self._row_sources()]
+        h = [
+            np.stack([[fold(x, p, q, _n_bins(q)) for p in lsf] for x, lsf in lsfs])[:, None]
+            for q in per
+        ]
+        return FoldedLSF(zs, per, self.rows, h, "wave", 0, False, False)
 
 
 def _weighted_rays(parts: list[RayInBand], weights) -> RayInBand:

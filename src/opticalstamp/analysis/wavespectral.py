@@ -27,7 +27,7 @@ from scipy.signal import czt
 
 from ..design import Design
 from .spectrum import Spectrum, channels, one_channel
-from .wave import WaveResponse, half_width, wave_lsf_x, wave_response
+from .wave import WaveResponse, half_width, lsf_source, wave_response
 from .wavebase import SOURCE_EXTRA, WaveSampling, response_summary, stack_axes, wave_sampling
 
 __all__ = [
@@ -281,16 +281,47 @@ def spectral_lsf_x(
     """The x line-spread functions alone under a light of one channel (the x-only path,
     :func:`~.wave.wave_lsf_x`, at each wavelength, weighted): (x_um, lsf_x (nz, nx),
     light um^2 sr)."""
-    spec = one_channel(design, spectrum)
-    smps = spectral_samplings(design, spec, sampling)
-    runs = [
-        wave_lsf_x(at_wavelength(design, lam), z_mm, pixel=pixel, sampling=s)
-        for lam, s in zip(spec.wavelengths_um, smps, strict=True)
-    ]
-    cyc = [2 * s.band / s.wavelength_um for s in smps]
-    x, lsf = _weighted_sum([r[0] for r in runs], [r[1] for r in runs], spec.weights, cyc)
-    light = float(sum(w * r[2] for w, r in zip(spec.weights, runs, strict=True)))
-    return x, lsf, light
+    zs = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
+    src = SpectralLSFSource.of(design, float(zs.max()), spectrum=spectrum, pixel=pixel,
+                               sampling=sampling)  # fmt: skip
+    return src.lsf_x(zs)
+
+
+@dataclass(frozen=True)
+class SpectralLSFSource:
+    """The stack traversed once per wavelength of one channel's light
+    (:func:`~.wave.lsf_source`): weighted x LSFs at any Z up to ``z_max_mm``."""
+
+    sources: list
+    weights: np.ndarray
+    cycles: list[float]
+
+    @classmethod
+    def of(
+        cls,
+        design: Design,
+        z_max_mm: float,
+        *,
+        spectrum: str | Spectrum | None = None,
+        pixel: tuple[int, int] = (0, 0),
+        sampling: WaveSampling | None = None,
+    ) -> SpectralLSFSource:
+        spec = one_channel(design, spectrum)
+        smps = spectral_samplings(design, spec, sampling)
+        sources = [
+            lsf_source(at_wavelength(design, lam), z_max_mm, pixel=pixel, sampling=s)
+            for lam, s in zip(spec.wavelengths_um, smps, strict=True)
+        ]
+        cyc = [2 * s.band / s.wavelength_um for s in smps]
+        return cls(sources, np.asarray(spec.weights, dtype=np.float64), cyc)
+
+    def lsf_x(self, z_mm) -> tuple[np.ndarray, np.ndarray, float]:
+        """(x_um, lsf_x (nz, nx), light um^2 sr) at the heights ``z_mm``."""
+        runs = [src.lsf_x(z_mm) for src in self.sources]
+        x, lsf = _weighted_sum([r[0] for r in runs], [r[1] for r in runs], self.weights,
+                               self.cycles)  # fmt: skip
+        light = float(sum(w * r[2] for w, r in zip(self.weights, runs, strict=True)))
+        return x, lsf, light
 
 
 def mirror_twin(

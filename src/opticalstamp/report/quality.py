@@ -53,7 +53,7 @@ def rmtf_section(
     the own path (traced), the paraxial RMTF and the chart profiles (Fig. 12 analogue)."""
     import numpy as np
 
-    from ..analysis.responsivity import folded_lsf_pair
+    from ..analysis.responsivity import folded_lsf_pair, wave_folds
     from ..analysis.rmtf import (
         DEFAULT_Z_MM,
         chart_waveform,
@@ -68,12 +68,15 @@ def rmtf_section(
     periods = [period_of_dpi(d) for d in dpis]
     zs = np.asarray(DEFAULT_Z_MM if work.lsf_z_mm is None else work.lsf_z_mm)
 
+    wave = wave_folds(design, optics, float(zs.max()))  # the wave stack once (wave optics)
+
     def pair(z, show: bool):  # all light and the own path alone from one trace per row
         return folded_lsf_pair(
             design,
             z_mm=z,
             periods_um=periods,
             optics=optics,
+            wave=wave,
             n_rays=work.lsf_rays,
             seed=seed,
             fresnel=fresnel,
