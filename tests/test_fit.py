@@ -25,7 +25,7 @@ from opticalstamp.imaging.charts import bar_chart, edge_chart
 from opticalstamp.imaging.scan import prepare_kernels, simulate_scan
 from opticalstamp.io.atomic import write_atomic
 from opticalstamp.io.files import encode_tiff16
-from opticalstamp.studies.fit import HELD, fit
+from opticalstamp.studies.fit import HELD, UNDETERMINED, _to_hold, fit, layout_for
 from opticalstamp.studies.fitdata import observation
 from opticalstamp.studies.fitmodel import bar_fraction, spread
 
@@ -182,6 +182,26 @@ def test_degenerate_image_set_flagged():
     assert all(e is not None for e in res.errors)
     x = dict(zip(res.names, res.values, strict=True))
     assert res.fitted.slabs[1].mask_top.offset_x_um == pytest.approx(x["layer2.x"])
+
+
+def test_rank_revealing_hold_on_a_known_jacobian():
+    """_to_hold on Jacobians whose rank is known: a column no datum changes is held; of
+    three columns with c = a + b, exactly one is held; a direction whose error is over
+    UNDETERMINED assembly scales is held, one just under it is kept."""
+    lay = layout_for(NOMINAL, [], ["layer1.x", "layer2.x", "layer3.x"])
+    rng = np.random.default_rng(3)
+    a, b = rng.standard_normal(200), rng.standard_normal(200)
+    assert _to_hold(np.column_stack([a, b, np.zeros(200)]), lay, 1.0) == [2]
+    held = _to_hold(np.column_stack([a, b, a + b]), lay, 1.0)
+    assert len(held) == 1
+    # a third column e orthogonal to a and b: its parameter's error is 1 / (|e| x 3 um)
+    # assembly scales (3 um), independent of the others
+    e = rng.standard_normal(200)
+    e -= np.column_stack([a, b]) @ np.linalg.lstsq(np.column_stack([a, b]), e, rcond=None)[0]
+    for err_scales, want in ((1.2 * UNDETERMINED, [2]), (0.8 * UNDETERMINED, [])):
+        jac = np.column_stack([a, b, e / np.linalg.norm(e) / (3.0 * err_scales)])
+        assert _to_hold(jac, lay, 1.0) == want, err_scales
+        assert _to_hold(jac, lay, 1.5**2) == [2]  # errors widened 1.5x by the misfit
 
 
 def test_fitted_model_predicts_held_out_height_better():

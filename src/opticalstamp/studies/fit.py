@@ -18,9 +18,11 @@ physical parameters correlated beyond ``CORR_TOL`` are named too.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import re
+from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import qr
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
@@ -36,6 +38,7 @@ from .fitmodel import (
     spread,
     with_params,
 )
+from .fitresult import HELD, FitResult
 
 #: Singular value (of the column-normalised Jacobian, over the largest) below which a
 #: direction is not seen by the images.
@@ -49,8 +52,6 @@ UNDETERMINED = 10.0
 BAD_RESIDUAL = 1e4
 #: Rounds of holding undetermined parameters at nominal and fitting the rest again.
 HOLD_ROUNDS = 3
-#: Why a parameter is held (the JSON's and the terminal's words).
-HELD = "held at nominal: undetermined from these images"
 #: How far (relative) a bar block's period may move from the one measured.
 PERIOD_TOL = 0.03
 
@@ -300,62 +301,6 @@ def layout_for(
     return Layout(params, idx, fixed, tuple(nuis))
 
 
-@dataclass(frozen=True)
-class FitResult:
-    """A fit's estimates, uncertainties, degeneracies and fitted design.
-
-    ``names``, ``values``, ``errors`` (None: not determined by these images), ``nominal``:
-    the free physical parameters (``ref``: offset in um). ``correlation``: theirs.
-    ``nuisance``: {image: {name: (value, error)}}. ``starts``: (cost, chi2) of each start.
-    ``held``: {name: nominal value} of the parameters the images did not determine, held
-    at nominal in ``fitted`` (their reason :data:`HELD`); the rest re-fitted with them held.
-    """
-
-    design: Design
-    fitted: Design
-    names: list[str]
-    values: list[float]
-    errors: list[float | None]
-    nominal: list[float]
-    pinned: dict[str, float]
-    correlation: np.ndarray
-    degeneracies: list[str]
-    chi2: float
-    dof: int
-    error_scale: float
-    nuisance: dict
-    starts: list[dict]
-    theta: np.ndarray = field(repr=False, default=None)
-    held: dict[str, float] = field(default_factory=dict)
-
-    def to_dict(self) -> dict:
-        return {
-            "design": self.design.name,
-            "design_fingerprint": self.design.fingerprint(),
-            "fitted_fingerprint": self.fitted.fingerprint(),
-            "parameters": {
-                n: {"value": v, "error": e, "nominal": m}
-                for n, v, e, m in zip(
-                    self.names, self.values, self.errors, self.nominal, strict=True
-                )
-            }
-            | {
-                n: {"value": v, "error": None, "nominal": v, "held": HELD}
-                for n, v in self.held.items()
-            },
-            "pinned": self.pinned,
-            "held": {n: {"value": v, "reason": HELD} for n, v in self.held.items()},
-            "correlation": {"names": self.names, "matrix": self.correlation.tolist()},
-            "degeneracies": self.degeneracies,
-            "chi2": self.chi2,
-            "dof": self.dof,
-            "reduced_chi2": self.chi2 / max(self.dof, 1),
-            "error_scale": self.error_scale,
-            "nuisance": self.nuisance,
-            "starts": self.starts,
-        }
-
-
 def _draw_start(prob: Problem, rng: np.random.Generator) -> np.ndarray:
     lay = prob.lay
     lo, hi = prob.bounds()
@@ -385,19 +330,15 @@ def _local(prob: Problem, theta0: np.ndarray, max_nfev: int):
     )
 
 
-def _degeneracies(
-    jac: np.ndarray, lay: Layout, cov: np.ndarray
-) -> tuple[list[str], set[int], set[int]]:
-    """Messages naming what the images cannot tell apart, the physical columns of the
-    combinations they do not see at all, and those to hold at nominal (every unseen
-    parameter; of a combination unseen, its largest member: holding it fixes the rest)."""
+def _degeneracies(jac: np.ndarray, lay: Layout, cov: np.ndarray) -> tuple[list[str], set[int]]:
+    """Messages naming what the images cannot tell apart, and the physical columns of
+    the combinations they do not see at all."""
     names = [lay.params[j].name for j in lay.free]
     nf = lay.n_free
     norms = np.linalg.norm(jac, axis=0)
-    msgs, blind, hold = [], set(), set()
+    msgs, blind = [], set()
     for k in range(nf):
         if norms[k] == 0:
-            hold.add(k)
             msgs.append(
                 f"{names[k]} is not constrained by these images (none changes with it): "
                 f"fix it with --pin {names[k]}=..., or add an image that does (an edge for y)"
@@ -417,8 +358,6 @@ def _degeneracies(
             continue  # nuisance alone
         who = [k for k in range(nf) if abs(phys[k]) > 0.1 * np.abs(phys).max()]
         blind.update(who)
-        if not hold & set(who):
-            hold.add(max(who, key=lambda k: abs(phys[k])))
         listed = ", ".join(names[k] for k in who)
         chart = np.linalg.norm(w[nf:]) > 0.3
         why = " (together with the charts' positions)" if chart else ""
@@ -440,7 +379,35 @@ def _degeneracies(
                     f"(correlation {corr[a, b]:+.3f}): fix one with --pin {names[b]}=..., or "
                     "add an edge at another height"
                 )
-    return msgs, blind, hold
+    return msgs, blind
+
+
+def _to_hold(jac: np.ndarray, lay: Layout, scale2: float) -> list[int]:
+    """The physical parameters to hold at nominal: a rank-revealing QR (column pivoting)
+    of the Jacobian's physical columns, each in units of its assembly scale and with the
+    nuisance columns projected out. Directions whose standard error exceeds UNDETERMINED
+    assembly scales are not determined; as many parameters as there are such directions
+    are held, those the pivoting takes last (the best determined are kept; of a
+    combination the images do not see, one member is held and fixes it)."""
+    nf = lay.n_free
+    if nf == 0:
+        return []
+    scales = np.array([lay.params[j].scale for j in lay.free])
+    jp, jn = jac[:, :nf] * scales, jac[:, nf:]
+    if jn.shape[1]:
+        q, _ = np.linalg.qr(jn)
+        jp = jp - q @ (q.T @ jp)
+    sv = np.linalg.svd(jp, compute_uv=False)
+    rank = int(np.sum(sv >= np.sqrt(scale2) / UNDETERMINED))
+    if rank == nf:
+        return []
+    _, _, perm = qr(jp, mode="economic", pivoting=True)
+    return sorted(int(k) for k in perm[rank:])
+
+
+def _names(message: str, name: str) -> bool:
+    """Whether ``message`` names the parameter ``name`` (as a whole word)."""
+    return re.search(rf"(?<![\w.]){re.escape(name)}(?![\w]|\.\w)", message) is not None
 
 
 def _estimate(prob: Problem, theta: np.ndarray):
@@ -455,13 +422,13 @@ def _estimate(prob: Problem, theta: np.ndarray):
     js = jac / norms
     cov = np.linalg.pinv(js.T @ js, rcond=1e-12, hermitian=True) / np.outer(norms, norms)
     cov *= scale2
-    msgs, blind, hold = _degeneracies(jac, lay, cov)
+    msgs, blind = _degeneracies(jac, lay, cov)
+    hold = set(_to_hold(jac, lay, scale2))
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     for k in range(lay.n_free):  # an error far beyond the assembly scale: not determined
         p = lay.params[lay.free[k]]
         if k not in blind and sd[k] > UNDETERMINED * p.scale:
             blind.add(k)
-            hold.add(k)
             msgs.append(
                 f"{p.name} is not determined by these images (standard error "
                 f"{sd[k]:.3g} um, over {UNDETERMINED:g} x its assembly scale {p.scale:g} um): "
@@ -527,6 +494,7 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev) -> FitResul
         r["delta_chi2"] = r["chi2"] - float(2 * best.cost)
     chi2, dof, scale2, cov, msgs, blind, hold = _estimate(prob, theta)
     held: dict[str, float] = {}
+    said: list[str] = []  # why each held parameter is held
     for _ in range(HOLD_ROUNDS):
         if not hold:
             break
@@ -534,6 +502,8 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev) -> FitResul
         for k in hold:
             j = lay.free[k]
             held[names_now[k]] = float(lay.params[j].nominal)
+            why = [m for m in msgs if _names(m, names_now[k]) and "hard to tell" not in m]
+            said += [m for m in why if m not in said] or [f"{names_now[k]}: {HELD}"]
         keep = [k for k in range(lay.n_free) if k not in hold]
         lay = layout_for(
             design, observations, [names_now[k] for k in keep], dict(pinned or {}) | held
@@ -541,10 +511,8 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev) -> FitResul
         prob = Problem(design, observations, lay)
         t0 = np.concatenate([theta[keep], theta[len(names_now) :]])
         theta = _local(prob, t0, max_nfev).x
-        chi2, dof, scale2, cov, more, blind, hold = _estimate(prob, theta)
-        # what made a parameter held stays said; the correlations are the last fit's
-        msgs = [m for m in msgs if "hard to tell apart" not in m]
-        msgs += [m for m in more if m not in msgs]
+        chi2, dof, scale2, cov, msgs, blind, hold = _estimate(prob, theta)
+    msgs = said + [m for m in msgs if m not in said]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     nf = lay.n_free
     names = [lay.params[j].name for j in lay.free]

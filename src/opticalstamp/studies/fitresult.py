@@ -1,0 +1,68 @@
+"""A fit's result (issue 24): estimates, errors, what was held, the fitted design."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..design import Design
+
+#: Why a parameter is held at its nominal value (the JSON's and the terminal's words).
+HELD = "held at nominal: undetermined from these images"
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A fit's estimates, uncertainties, degeneracies and fitted design.
+
+    ``names``, ``values``, ``errors`` (None: not determined by these images), ``nominal``:
+    the free physical parameters (``ref``: offset in um). ``correlation``: theirs.
+    ``nuisance``: {image: {name: (value, error)}}. ``starts``: (cost, chi2) of each start.
+    ``held``: {name: nominal value} of the parameters the images did not determine, held
+    at nominal in ``fitted`` (their reason :data:`HELD`); the rest re-fitted with them held.
+    """
+
+    design: Design
+    fitted: Design
+    names: list[str]
+    values: list[float]
+    errors: list[float | None]
+    nominal: list[float]
+    pinned: dict[str, float]
+    correlation: np.ndarray
+    degeneracies: list[str]
+    chi2: float
+    dof: int
+    error_scale: float
+    nuisance: dict
+    starts: list[dict]
+    theta: np.ndarray = field(repr=False, default=None)
+    held: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {
+            "design": self.design.name,
+            "design_fingerprint": self.design.fingerprint(),
+            "fitted_fingerprint": self.fitted.fingerprint(),
+            "parameters": {
+                n: {"value": v, "error": e, "nominal": m}
+                for n, v, e, m in zip(
+                    self.names, self.values, self.errors, self.nominal, strict=True
+                )
+            }
+            | {
+                n: {"value": v, "error": None, "nominal": v, "held": HELD}
+                for n, v in self.held.items()
+            },
+            "pinned": self.pinned,
+            "held": {n: {"value": v, "reason": HELD} for n, v in self.held.items()},
+            "correlation": {"names": self.names, "matrix": self.correlation.tolist()},
+            "degeneracies": self.degeneracies,
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "reduced_chi2": self.chi2 / max(self.dof, 1),
+            "error_scale": self.error_scale,
+            "nuisance": self.nuisance,
+            "starts": self.starts,
+        }
