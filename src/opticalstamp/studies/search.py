@@ -25,7 +25,6 @@ its constraints are in :mod:`.searchspace`, the result, its records and the merg
 from __future__ import annotations
 
 import functools
-import math
 from collections import Counter
 from pathlib import Path
 
@@ -315,8 +314,6 @@ def search(
             "budget_mm": budget_mm,
             "near_mm": near_mm,
             "max_ghost": max_ghost,
-            # no spill constraint any more (a reported figure); inf keeps older readers
-            "max_spill": math.inf,
             "optics": optics,
             "optics_used": dict(Counter(r["optics"] for r in records if r["ok"])),
             "wave_estimator": WAVE_ESTIMATE,

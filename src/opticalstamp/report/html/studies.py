@@ -72,8 +72,8 @@ def search_html(
     return f"""<h2>Design search (paper §3)</h2>
 <p>NSGA-II over hole sizes and slab thicknesses ({s["n_evaluations"]} designs,
 {s["n_feasible"]} feasible: no ghost light within {s["meta"]["near_mm"]:g} mm, stack within
-{s["meta"]["budget_mm"]:g} mm, diffraction spill below {s["meta"]["max_spill"]:g}; a compact
-run, `opticalstamp search` runs 480), ranked by the {html.escape(s["meta"]["estimator"])}.
+{s["meta"]["budget_mm"]:g} mm; a compact run, `opticalstamp search` runs 480), ranked by the
+{html.escape(s["meta"]["estimator"])}, {html.escape(s["meta"].get("optics", "ray"))} optics.
 {note} This design: efficiency {one_in(ref["efficiency_ratio"])}, depth of field
 {ref["dof_mm"]:.2f} mm at {s["meta"]["dof_dpi"]:g} dpi by the search's exact check
 ({headline_dof(rmtf)}), dominated by
