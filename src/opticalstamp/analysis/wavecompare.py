@@ -255,7 +255,11 @@ class WaveFolds:
         """The rows' LSFs at ``z_mm`` (each <= ``z_max_mm``) folded onto ``periods_um``."""
         zs = np.asarray(z_mm, dtype=np.float64)
         per = np.asarray(periods_um, dtype=np.float64)
-        lsfs = [src.lsf_x(zs)[:2] for src in self._row_sources()]
+        done: dict[int, tuple] = {}  # a mirror twin shares its row's source: once each
+        for src in self._row_sources():
+            if id(src) not in done:
+                done[id(src)] = src.lsf_x(zs)[:2]
+        lsfs = [done[id(src)] for src in self._row_sources()]
         h = [
             np.stack([[fold(x, p, q, _n_bins(q)) for p in lsf] for x, lsf in lsfs])[:, None]
             for q in per
