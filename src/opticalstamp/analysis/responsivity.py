@@ -301,12 +301,13 @@ def pixel_light(
     tracer's in-band light beside it (what ray optics gives for the same directions) and
     the light the object-side mask diffracts beyond the band (counted, not propagated:
     an upper bound on the halo left out)."""
-    from .wave import wave_response
     from .wavecompare import ray_in_band
+    from .wavespectral import wave_response_spectral
 
     if optics.engine != "wave":
         raise ValueError("pixel_light: wave optics only (the ray figures are the ghost analysis')")
-    w = wave_response(design, [0.0], pixel=pixel, sampling=optics.sampling)
+    # under the design's light (its illumination's spectrum), in one band at every wavelength
+    w = wave_response_spectral(design, [0.0], pixel=pixel, sampling=optics.sampling)
     per = float(design.sensor.row_pitch_um)
     r = ray_in_band(
         design, [0.0], optics.band, pixel=pixel, period_um=per, n_rays=n_rays, seed=seed

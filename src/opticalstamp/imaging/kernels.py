@@ -166,16 +166,16 @@ def wave_kernels(
     design: Design, z_mm, row: int, ghosts: bool, maps: TracedMaps | None
 ) -> list[ScanKernel]:
     """One row's kernels by wave optics: the wave engine's map of the light in its band
-    (own path, its diffraction, near crosstalk; :func:`~opticalstamp.analysis.wave.
-    wave_response`, the design's wavelength) on ``WAVE_BIN_UM`` bins, SVD-separated, and
-    the traced ghost map of the light beyond the band (``maps``, traced with
+    (own path, its diffraction, near crosstalk; :func:`~opticalstamp.analysis.
+    wavespectral.wave_response_spectral`, the design's light) on ``WAVE_BIN_UM`` bins,
+    SVD-separated, and the traced ghost map of the light beyond the band (``maps``, traced with
     ``outside_band``): the join of :mod:`~opticalstamp.analysis.responsivity`."""
     from ..analysis.responsivity import resolve_optics
-    from ..analysis.wave import wave_response
+    from ..analysis.wavespectral import wave_response_spectral
 
     opt = resolve_optics(design, "wave")
     zs = np.asarray(z_mm, dtype=np.float64)
-    r = wave_response(design, zs, pixel=(row, 0), sampling=opt.sampling)
+    r = wave_response_spectral(design, zs, pixel=(row, 0), sampling=opt.sampling)
     out = []
     for iz, z in enumerate(zs):
         edges, m = r.spot(iz, WAVE_BIN_UM)
