@@ -35,6 +35,7 @@ def test_report_writes_every_section(tmp_path):
         "stack",
         "summary",
         "restoration",
+        "ray_vs_wave",
     ):
         assert key in d, key
     # restoration with the known blur: every method carries the depth of field beyond the
