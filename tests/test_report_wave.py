@@ -28,8 +28,10 @@ from opticalstamp.analysis.raywave import (
 from opticalstamp.analysis.wavebase import fresnel_numbers, wave_sampling
 from opticalstamp.design import load_design, with_stack
 from opticalstamp.design.variants import with_hole_shape
+from opticalstamp.report.html.page import summary_html
 from opticalstamp.report.html.wave import wave_html
 from opticalstamp.report.section import NotMeasurable, measure
+from opticalstamp.report.summary import summary
 from opticalstamp.report.wave import wave_heights, wave_section
 from opticalstamp.report.work import report_work
 from opticalstamp.studies.compare import wave_figures
@@ -151,6 +153,10 @@ def test_circular_holes_are_not_measurable_and_say_why():
     res = measure(wave_section, d, report_work(quick=True), seed=0, dof_dpi=200.0)
     assert isinstance(res, NotMeasurable) and res.reason == NEEDS_RECTANGLES
     assert f"<p>not measurable: {NEEDS_RECTANGLES}</p>" in wave_html(res.to_dict())
+    # the verdict box says so too
+    box = summary({"ray_vs_wave": res.to_dict()})
+    assert box["optics"] == f"not measurable: {NEEDS_RECTANGLES}"
+    assert f"Ray vs wave optics: not measurable: {NEEDS_RECTANGLES}" in summary_html(box)
     row = wave_figures(d)
     assert row["wave"] == {"not_measurable": NEEDS_RECTANGLES}
     # a circle's Fresnel number takes its radius: 24 um over the 1 mm gap

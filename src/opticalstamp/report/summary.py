@@ -17,7 +17,7 @@ from types import MappingProxyType
 
 from ..analysis.dof import dof_text
 from ..validate import InputError
-from .section import section
+from .section import not_measurable, section
 
 #: Figures a spec may name: key -> (what, unit).
 FIGURES = MappingProxyType(
@@ -120,6 +120,15 @@ def headline_figures(data: dict) -> dict:
     return values
 
 
+def _optics_line(data: dict) -> str | None:
+    """The ray-vs-wave section's verdict in one line; "not measurable: reason" where it
+    was not computed; None where the report has no such section."""
+    reason = not_measurable(data.get("ray_vs_wave"))
+    if reason is not None:
+        return f"not measurable: {reason}"
+    return (section(data, "ray_vs_wave") or {}).get("verdict", {}).get("text")
+
+
 def _yield_doubt(tol: dict) -> str | None:
     """Why a tolerance yield is no headline: the study's estimator disagrees with the exact
     tracer on the nominal design beyond its stated accuracy (None: no doubt)."""
@@ -178,8 +187,8 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
         "yield_note": _yield_doubt(tol) if tol and tol.get("spec") else None,
         "spec": [f"{n}{op}{v:g}" for n, op, v in spec],
         "meets_spec": all(c["pass"] for c in checks.values()) if checks else None,
-        # the ray-vs-wave section's verdict in one line (None: not computed)
-        "optics": (section(data, "ray_vs_wave") or {}).get("verdict", {}).get("text"),
+        # the ray-vs-wave section's verdict in one line, or why it has none (None: not run)
+        "optics": _optics_line(data),
         # which engine gave the headline RMTF, depth of field and light, and why
         "headline_optics": data.get("optics"),
     }
