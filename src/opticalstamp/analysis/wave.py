@@ -42,6 +42,7 @@ import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..design import Design
 from ..raytrace.stack import lattice_of, output_pitch
@@ -59,7 +60,7 @@ from .wavebase import (
     stack_grid,
     wave_sampling,
 )
-from .waveobject import ObjectSide, lsf_x_at, object_side, responses_at
+from .waveobject import ObjectSide, lsf_x_from, object_side, responses_at, x_modes
 
 __all__ = ["WaveResponse", "WaveSampling", "wave_lsf_x", "wave_response", "wave_sampling"]
 
@@ -239,8 +240,9 @@ def wave_response(
     """
     smp = wave_sampling(design) if sampling is None else sampling
     zs = _heights(z_mm)
-    terms, axes, budget = _stack(design, pixel, smp)
-    return _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um)
+    with one_blas_thread():
+        terms, axes, budget = _stack(design, pixel, smp)
+        return _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um)
 
 
 def wave_lsf_x(
@@ -272,6 +274,8 @@ class LSFSource:
     side: ObjectSide
     z_max_mm: float
     sequences: list[str]
+    modes: np.ndarray = field(repr=False)  # (q, nb) coherent modes of LSF_x (x_modes)
+    light: float = 0.0
 
     def lsf_x(self, z_mm) -> tuple[np.ndarray, np.ndarray, float, dict]:
         """As :func:`wave_lsf_x` at the heights ``z_mm`` (each <= ``z_max_mm``)."""
@@ -280,8 +284,10 @@ class LSFSource:
             raise ValueError(
                 f"z_mm: {zs.max():g} mm lies beyond the grid's reach ({self.z_max_mm:g} mm)"
             )
-        lsf, light, modes = lsf_x_at(self.side, zs)
-        return self.side.grids[0], lsf, light, {"modes": modes, "sequences": self.sequences}
+        with one_blas_thread():
+            lsf = lsf_x_from(self.side, self.modes, zs)
+        meta = {"modes": self.modes.shape[0], "sequences": self.sequences}
+        return self.side.grids[0], lsf, self.light, meta
 
 
 def lsf_source(
@@ -294,11 +300,20 @@ def lsf_source(
     """The stack traversed once for the pixel: an :class:`LSFSource` for every Z up to
     ``z_max_mm`` (the analyses that refine their heights ask it again and again)."""
     smp = wave_sampling(design) if sampling is None else sampling
-    terms, axes, _ = _stack(design, pixel, smp)
-    keys = list(terms)
-    terms = _band_only(terms, axes, smp)
-    side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, z_max_mm)
-    return LSFSource(side, float(z_max_mm), _names(keys))
+    with one_blas_thread():
+        terms, axes, _ = _stack(design, pixel, smp)
+        keys = list(terms)
+        terms = _band_only(terms, axes, smp)
+        side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, z_max_mm)
+        modes, light = x_modes(side)
+    return LSFSource(side, float(z_max_mm), _names(keys), modes, light)
+
+
+def one_blas_thread():
+    """BLAS on one thread for the engine's call (restored on leaving): its products are
+    small or thin, the FFTs carry the work, and OpenBLAS's spinning threads made them
+    5-10x slower on a loaded 2-core machine (as in :func:`~opticalstamp.studies.fit.fit`)."""
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def _heights(z_mm) -> np.ndarray:

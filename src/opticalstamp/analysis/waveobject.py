@@ -40,7 +40,7 @@ from scipy.linalg import blas, solve_triangular
 
 from .wavebase import Plane, WaveSampling, in_band, object_grid
 
-__all__ = ["ObjectSide", "object_side", "responses_at", "lsf_x_at"]
+__all__ = ["ObjectSide", "lsf_x_at", "lsf_x_from", "object_side", "responses_at", "x_modes"]
 
 
 @dataclass(frozen=True)
@@ -191,21 +191,32 @@ def lsf_x_at(side: ObjectSide, zs: np.ndarray) -> tuple[np.ndarray, float, int]:
     """The x line-spread functions alone at each Z (nz, nx) on the fine grid, the light
     (um^2 sr) and the number of coherent modes propagated (the x-only path: coherent
     modes of LSF_x's mutual intensity, all but ``mode_tol`` of the power)."""
+    modes, light = x_modes(side)
+    return lsf_x_from(side, modes, zs), light, modes.shape[0]
+
+
+def x_modes(side: ObjectSide) -> tuple[np.ndarray, float]:
+    """The coherent modes of LSF_x's mutual intensity as in-band spectra (q, nb), all but
+    ``mode_tol`` of the power, and the light (um^2 sr): the Z-independent part of the
+    x-only path (:func:`lsf_x_from` propagates them)."""
     gy = side.gram(1)
-    e = float(np.sum(side.gram(0) * gy).real)
+    light = float(np.sum(side.gram(0) * gy).real)
     p, v = _rotation(gy)
     w = np.tensordot(v, side.spectra[0], axes=([0], [0]))  # (J, m, nb)
     a = (w * np.sqrt(p)[:, None, None]).reshape(-1, w.shape[-1])  # (J m, nb)
-    modes = _modes(a, side.sampling.mode_tol)
-    keep = modes.shape[0]
+    return _modes(a, side.sampling.mode_tol), light
+
+
+def lsf_x_from(side: ObjectSide, modes: np.ndarray, zs: np.ndarray) -> np.ndarray:
+    """LSF_x (nz, nx) on the fine grid at each Z from the modes of :func:`x_modes`."""
     x, nc = side.coarse(0)
     n = side.grids[0].size
     out = np.zeros((zs.size, n))
-    buf = np.zeros((keep, nc), dtype=np.complex128)
+    buf = np.zeros((modes.shape[0], nc), dtype=np.complex128)
     for iz, z in enumerate(zs):
         f = side.on_coarse(0, modes, float(z), nc, buf).view(np.float64)  # (q, 2 N')
         out[iz] = _to_fine(np.einsum("ij,ij->j", f, f).reshape(nc, 2).sum(axis=1), n)
-    return out, e, keep
+    return out
 
 
 def _modes(a: np.ndarray, tol: float) -> np.ndarray:
