@@ -540,9 +540,13 @@ def report(
             "its tolerance)",
         ),
     ] = "auto",
+    fit: Annotated[
+        Path | None, typer.Option(help="opticalstamp fit --report's folder or its fit.json")
+    ] = None,
 ) -> None:
     """Run every analysis and write JSON, PNG figures and one HTML page."""
     from ..report.build import build_report
+    from ..report.fitsection import load_fit
 
     d = open_design(design)
     from ..report.summary import parse_report_spec
@@ -551,6 +555,7 @@ def report(
     if paper_sections not in ("auto", "yes", "no"):
         fail(f"--paper-sections: must be auto, yes or no (got {paper_sections!r})")
     zs = None if z is None else float_list(z, "--z", 0.0, 100.0)
+    fit_data = None if fit is None else load_fit(fit)  # "model vs measurement"
     data = build_report(
         d,
         out,
@@ -564,6 +569,7 @@ def report(
         dpi=dpi,
         paper_sections=None if paper_sections == "auto" else paper_sections == "yes",
         optics=optics,
+        fit=fit_data,
     )
     typer.echo(f"wrote {out / 'index.html'} and {out / 'report.json'}", err=as_json)
     if as_json:

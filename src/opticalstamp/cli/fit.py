@@ -107,11 +107,13 @@ def _write_report(folder: Path, res, obs, specs, dpi, linear, data: dict) -> Non
         path, _ = _image_spec(text)
         imgs[path.name] = read_scan_image(path, dpi, linear, min_px=16)[0]
     comp = rmtf_comparison(res, obs, imgs)
-    data = data | {"rmtf": comp}
+    res_items = residuals(res, obs)
+    keep = ("name", "kind", "z_mm", "residual")  # what `report --fit` shows
+    data = data | {"rmtf": comp, "residuals": [{k: r[k] for k in keep} for r in res_items]}
     write_atomic(folder / "fit.json", to_json(data) + "\n")
     if comp["points"]:
         save_figure(plot_fit_rmtf(comp), folder / "rmtf.png")
-    save_figure(plot_fit_residuals(residuals(res, obs)), folder / "residuals.png")
+    save_figure(plot_fit_residuals(res_items), folder / "residuals.png")
     typer.echo(f"wrote {folder}/fit.json and its figures", err=True)
 
 

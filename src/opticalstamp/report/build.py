@@ -41,6 +41,7 @@ from ..io.files import provenance, replace_folder, save_figure, to_json, write_a
 from ..raytrace.pixel import PixelTracer
 from .background import Background
 from .figures import png, rodlens_figures, section_figures, study_figure
+from .fitsection import fit_section
 from .html import page
 from .light import custom_area_scales, efficiency_section, signal_and_noise
 from .optics import concept_section, diffraction_section, ghost_section, psf_section, spot_section
@@ -95,6 +96,7 @@ def build_report(
     dpi: float | None = None,
     paper_sections: bool | None = None,
     optics: str = "auto",
+    fit: dict | None = None,
 ) -> dict:
     """Run every analysis and write report.json, PNG figures and index.html to out_dir.
 
@@ -125,6 +127,8 @@ def build_report(
         "auto" (the measured validity rule,
         :func:`~opticalstamp.analysis.responsivity.resolve_optics`); the ghosts, spots,
         PSFs, scans and restoration are ray optics; the "ray vs wave" section shows both
+    fit : a fit's JSON (:func:`~opticalstamp.report.fitsection.load_fit`): the section
+        "model vs measurement" (:mod:`.fitsection`); None: no such section
 
     Returns
     -------
@@ -176,6 +180,7 @@ def build_report(
         clock.lap("scans")
         restoration = run(restoration_section, design, work, **traced, tracer=tracer, dof_dpi=dpi)
         clock.lap("restoration")
+        fitted = None if fit is None else measure(fit_section, fit, design)
         figures = section_figures(
             design,
             ghosts=g,
@@ -188,6 +193,7 @@ def build_report(
             restoration=restoration,
             chart_dpi=dpi,
             wave=wave,
+            fit=fitted,
         )
         # each figure drawn by a background process that is idle (while the studies run
         # on), else here; written in this order either way
@@ -242,6 +248,7 @@ def build_report(
             "signal": as_data(signal),
             "diffraction": as_data(diffraction),
             "ray_vs_wave": as_data(wave),
+            "model_vs_measurement": as_data(fitted),
             "parameter_study": as_data(done.get("parameter_study")),
             "scans": as_data(scans),
             "restoration": as_data(restoration),

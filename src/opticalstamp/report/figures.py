@@ -38,6 +38,7 @@ def section_figures(
     restoration,
     chart_dpi: float,
     wave=None,
+    fit=None,
 ) -> dict:
     """The figures of the sections computed here, in the page's order: file name ->
     (plot, its arguments); none for a section that is not measurable."""
@@ -64,6 +65,10 @@ def section_figures(
         from .plotting.wave import plot_wave_report
 
         figures["raywave.png"] = (plot_wave_report, wave.comparison, wave.verdict)
+    if fit is not None and measured(fit) is not None:
+        from .fitsection import fit_figures
+
+        figures |= fit_figures(fit)
     if measured(scans) is not None:
         p = scans.panels
         figures |= {

@@ -24,13 +24,26 @@ def rmtf_comparison(res: FitResult, observations: list[Observation], images: dic
             points.append({"z_mm": o.z_mm, "period_um": b["period_um"], "rmtf": b["rmtf"]})
     top = max([o.z_mm for o in observations] + [1.0])
     zs = np.round(np.linspace(0.0, 1.2 * top, 25), 4)
-    periods = sorted({round(p["period_um"], 0) for p in points}) or [254.0]
+    periods = _chart_periods([p["period_um"] for p in points]) or [254.0]
     dpis = [50800.0 / p for p in periods]
     curves = {}
     for key, d in (("nominal", res.design), ("fitted", res.fitted)):
         r = rmtf(d, dpi=dpis, z_mm=zs, method="paraxial", ghosts=False)
         curves[key] = {"z_mm": r.z_mm, "rmtf": r.rmtf_max, "dof_mm": r.dof_mm}
     return {"points": points, "curves": curves, "dpi": dpis}
+
+
+def _chart_periods(measured: list[float], tol: float = 0.03) -> list[float]:
+    """The charts' periods from the periods measured on each image: those within ``tol``
+    (relative) of each other are one chart's (each image measures its own), given as
+    their median."""
+    groups: list[list[float]] = []
+    for p in sorted(measured):
+        if groups and p <= groups[-1][0] * (1 + tol):
+            groups[-1].append(p)
+        else:
+            groups.append([p])
+    return [float(np.median(g)) for g in groups]
 
 
 def residuals(res: FitResult, observations: list[Observation]) -> list[dict]:

@@ -11,6 +11,7 @@ from ...raytrace.stack import output_pitch
 from ..paper import one_in
 from ..section import not_measurable
 from .common import fmt, table, unmeasured
+from .fit import fit_html
 from .light import efficiency_html
 from .optics import concepts_html, diffraction_html, ghost_span, ghosts_html, psf_html, spots_html
 from .quality import rmtf_html
@@ -49,7 +50,7 @@ Numbers: <a href="report.json">report.json</a>.</p>
 {ghosts_html(d["ghosts"])}{concepts_html(d["concepts"])}
 {spots_html(d["spots"], pitch_um)}{psf_html(d["psf"])}{rmtf_html(d, design)}{
         efficiency_html(d["efficiency"], d.get("signal"), paper)
-    }{diffraction_html(d["diffraction"], paper)}{wave}{
+    }{diffraction_html(d["diffraction"], paper)}{wave}{fit_html(d.get("model_vs_measurement"))}{
         study_html(d["parameter_study"], d.get("quick", False))
     }
 
