@@ -151,7 +151,6 @@ def test_errors_match_scatter_over_seeds():
     assert np.all(sd < 1.7 * stated) and np.all(sd > 0.4 * stated), (sd, stated)
     clean = fit(NOMINAL, _noise_free(_scatter_fit(11)[0]), starts=1, **SCATTER)
     mean = np.mean(vals, axis=0)
-    print("scatter", sd, "stated", stated, "mean", mean, "noise-free", clean.values)
     assert np.all(np.abs(mean - clean.values) < 3 * sd / np.sqrt(len(vals))), (mean, clean)
 
 
@@ -165,7 +164,6 @@ def test_errors_match_profile_likelihood():
         pins = SCATTER["pinned"] | {"layer2.x": v + sign * e}
         prof = fit(NOMINAL, obs, free=["ref"], pinned=pins, starts=1)
         rise = (prof.chi2 - res.chi2) / res.error_scale**2
-        print("profile", sign, rise)
         assert 0.75 < rise < 1.33, (sign, rise)
 
 

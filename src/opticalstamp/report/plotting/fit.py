@@ -12,10 +12,9 @@ def plot_fit_rmtf(comp: dict):
     """Measured RMTF points and the nominal (dashed) and fitted (solid) curves."""
     fig, ax = subplots(figsize=(6.4, 4.2))
     colours = ["C0", "C1", "C2", "C3", "C4", "C5"]
+    keys = list(comp["curves"]["fitted"]["rmtf"])
     for i, dpi in enumerate(comp["dpi"]):
-        key = next(iter(comp["curves"]["fitted"]["rmtf"]))
-        keys = list(comp["curves"]["fitted"]["rmtf"])
-        key = keys[i] if i < len(keys) else key
+        key = min(keys, key=lambda k: abs(float(k) - dpi))  # the curve of this chart
         c = colours[i % len(colours)]
         for name, style in (("nominal", "--"), ("fitted", "-")):
             cur = comp["curves"][name]
