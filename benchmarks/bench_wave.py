@@ -17,33 +17,29 @@
    prototype and the 600-dpi copy.
 Medians of several runs after a warm-up, wall-clock and CPU seconds; the machine's load
 is printed with them (the 2-core test machine is shared: a loaded run is several times
-slower). OpenBLAS runs single-threaded here (OPENBLAS_NUM_THREADS=1, set before numpy is
-imported unless already set): on the shared machine its spinning threads made every
-BLAS call 5-10x slower under load; the FFTs use both cores.
+slower). The separable engine runs BLAS on one thread itself (wave.one_blas_thread); the
+FFTs use both cores.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import statistics
+import sys
+import time
+from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-import json  # noqa: E402
-import statistics  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-from opticalstamp.analysis.rmtf import rmtf_from_lsf  # noqa: E402
-from opticalstamp.analysis.wave import wave_response  # noqa: E402
-from opticalstamp.analysis.wave2d import wave_response_2d  # noqa: E402
-from opticalstamp.analysis.wavebase import wave_sampling  # noqa: E402
-from opticalstamp.analysis.wavecompare import compare_wave_ray, wave_folded_lsf  # noqa: E402
-from opticalstamp.analysis.wavespectral import wave_response_spectral  # noqa: E402
-from opticalstamp.design import load_design  # noqa: E402
-from opticalstamp.design.resolution import chart_dpis  # noqa: E402
-from opticalstamp.design.variants import scale_to_dpi, with_hole_shape, with_stack  # noqa: E402
-from opticalstamp.units import period_of_dpi  # noqa: E402
+from opticalstamp.analysis.rmtf import rmtf_from_lsf
+from opticalstamp.analysis.wave import wave_response
+from opticalstamp.analysis.wave2d import wave_response_2d
+from opticalstamp.analysis.wavebase import wave_sampling
+from opticalstamp.analysis.wavecompare import compare_wave_ray, wave_folded_lsf
+from opticalstamp.analysis.wavespectral import wave_response_spectral
+from opticalstamp.design import load_design
+from opticalstamp.design.resolution import chart_dpis
+from opticalstamp.design.variants import scale_to_dpi, with_hole_shape, with_stack
+from opticalstamp.units import period_of_dpi
 
 Z19 = tuple(0.25 * i for i in range(19))
 
@@ -122,7 +118,6 @@ if __name__ == "__main__":
     out = {
         "load_average": os.getloadavg(),
         "cpus": os.cpu_count(),
-        "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
     }
     spectral(out, reps)
     if "--spectral-only" in sys.argv:  # update the white-light entries of the results
@@ -131,7 +126,6 @@ if __name__ == "__main__":
         keys = [k for k in out if k.endswith(" spectral")]
         old.update({k: out[k] for k in keys})
         old["spectral_load_average"] = [out["load_average"], os.getloadavg()]
-        old["spectral_openblas_threads"] = out["openblas_threads"]
         path.write_text(json.dumps(old, indent=1, default=str))
         sys.exit(0)
     for name, d in designs().items():
