@@ -221,3 +221,27 @@ def test_scan_with_wave_kernels(tmp_path):
         blocks = measure_rmtf(img, dpi)
         got[kernel] = next(b["rmtf"] for b in blocks if abs(b["dpi"] - 200) < 5)
     assert got["wave"] < got["paraxial"] - 0.01
+
+
+def test_spots_by_wave_optics(paper):
+    """Spots by wave optics: without ghost light they are the wave engine's maps alone
+    (its centre-cell share, its FWHM on the same bins); with it, the far ghosts traced
+    beyond the band lower the share; the extents stay the geometric own path's."""
+    from opticalstamp.analysis.spots import fwhm, spots
+    from opticalstamp.analysis.wavespectral import wave_response_spectral
+
+    zs = (0.0, 2.0)
+    alone = spots(paper, z_mm=zs, n_rays=1 << 18, ghosts=False, optics="wave")
+    w = wave_response_spectral(paper, zs, sampling=wave_sampling(paper))
+    ray = spots(paper, z_mm=zs, n_rays=1 << 18, ghosts=False)
+    for iz, s in enumerate(alone.spots):
+        assert s.center_cell_fraction == pytest.approx(w.center_cell_fraction[iz], rel=1e-9)
+        e, m = w.spot(iz, s.x_edges_um[1] - s.x_edges_um[0], -s.x_edges_um[0])
+        np.testing.assert_allclose(s.map_sr, m, rtol=1e-12, atol=0)
+        c = 0.5 * (e[1:] + e[:-1])
+        assert s.fwhm_x_um == pytest.approx(fwhm(m.sum(axis=0), c))
+        assert s.extent_x_um == pytest.approx(ray.spots[iz].extent_x_um, rel=0.02)
+    both = spots(paper, z_mm=zs, n_rays=1 << 18, optics="wave")
+    assert both.meta["optics"]["engine"] == "wave"
+    for a, b in zip(alone.spots, both.spots, strict=True):
+        assert b.center_cell_fraction < a.center_cell_fraction

@@ -80,13 +80,13 @@ def test_a_slab_without_a_mask_shifts_the_layer_numbers():
 def test_kernel_choices_are_listed_not_a_pattern(tmp_path):
     res = run(["scan", tmp_path / "page.png", "-o", tmp_path / "s.png", "--z", 1, "--kernel",
                "fast"])  # fmt: skip
-    assert_clean_refusal(res, "--kernel: expected one of auto, paraxial, trace (got 'fast')")
+    assert_clean_refusal(res, "--kernel: expected one of auto, paraxial, trace, wave (got 'fast')")
     assert "pattern" not in res.output and "^(" not in res.output
     for field, value in (("kernel", "fast"), ("illumination", "sunny")):
         with pytest.raises(ValidationError) as info:
             ScanSettings(**{field: value})
         assert "pattern" not in str(info.value) and "^(" not in str(info.value)
-    assert KERNELS == ("auto", "paraxial", "trace")
+    assert KERNELS == ("auto", "paraxial", "trace", "wave")
 
 
 def test_every_sensor_key_is_explained():

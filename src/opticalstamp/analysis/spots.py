@@ -20,6 +20,7 @@ from ..raytrace.launch import launch
 from ..raytrace.pixel import PixelTracer, Sampling, acceptance, tracer_for
 from ..raytrace.sampling import Source
 from ..raytrace.stack import forward_path, lattice_of, output_pitch
+from .responsivity import Optics, resolve_optics
 
 
 @dataclass(frozen=True)
@@ -158,6 +159,7 @@ def spots(
     progress: bool = False,
     sampling: Sampling | None = None,
     tracer: PixelTracer | None = None,
+    optics: str | Optics = "ray",
 ) -> SpotResult:
     """Responsivity maps of one pixel at each object distance (paper Fig. 5).
 
@@ -171,11 +173,16 @@ def spots(
         count, where None, is ``n_rays``)
     tracer : PixelTracer of this design whose pilot runs to reuse (other analyses of the
         same pixel share them); the sampling is still this call's
+    optics : "ray", "wave" or "auto" (:func:`~opticalstamp.analysis.responsivity.
+        resolve_optics`): with wave optics the maps are the wave engine's in its band
+        (the design's light) plus the traced light beyond it, on the wave engine's
+        bins; the edge-to-edge extents stay those of the geometric own path
     """
     if sampling is None:
         sampling = Sampling(n_rays, seed, fresnel, chunk)
     sampling = sampling.or_rays(n_rays)
     n_rays = sampling.n_rays
+    opt = resolve_optics(design, optics, fresnel=sampling.fresnel)
     tr = tracer_for(design, sampling, tracer)
     row, k = pixel
     src = tr.source(pixel)
@@ -193,6 +200,16 @@ def spots(
     # mapped on coarser bins, never on a grid that does not fit in memory
     bins = np.maximum(bin_um, 2 * half / MAP_MAX_BINS)
     edges = [np.arange(-h, h + b / 2, b) for h, b in zip(half, bins, strict=True)]
+    wave = None
+    if opt.engine == "wave":  # the in-band light by the wave engine, on its own bins
+        from .wavespectral import wave_response_spectral
+
+        wave = wave_response_spectral(design, zs, pixel=pixel, sampling=opt.sampling)
+        wave_maps = [
+            wave.spot(iz, float(b), float(h))
+            for iz, (h, b) in enumerate(zip(half, bins, strict=True))
+        ]
+        edges = [e for e, _ in wave_maps]
     maps = [np.zeros((e.size - 1, e.size - 1)) for e in edges]
     lo = np.full((len(zs), 2), np.inf)
     hi = np.full((len(zs), 2), -np.inf)
@@ -202,6 +219,9 @@ def spots(
         w, o = pb.w, pb.own
         if not ghosts:
             w = w * o
+        if wave is not None:  # the rays in the band are the wave engine's
+            b = pb.rays
+            w = w * ((np.abs(b.sx) >= opt.band) | (np.abs(b.sy) >= opt.band)) * ghosts
         np.add.at(total, np.zeros(w.size, np.int64), w)
         for iz, z in enumerate(zs):
             dx, dy = pb.offsets(z * 1000)
@@ -214,10 +234,16 @@ def spots(
             np.add.at(maps[iz], (iy[ok], ix[ok]), w[ok])
             cell = (np.abs(dx) <= cell_um / 2) & (np.abs(dy) <= cell_um / 2)
             np.add.at(inside, np.full(int(cell.sum()), iz), w[cell])
+    if wave is not None:
+        light = wave.etendue_um2sr * n_rays  # in the tallies' units (etendue x rays)
+        inside = inside + light * wave.center_cell_fraction
+        total = total + light[0]
     out = []
     for iz, z in enumerate(zs):
         e = edges[iz]
         m = maps[iz] / (n_rays * bins[iz] * bins[iz])
+        if wave is not None:
+            m = m + wave_maps[iz][1]
         c = 0.5 * (e[1:] + e[:-1])
         out.append(
             Spot(
@@ -239,7 +265,13 @@ def spots(
         n_rays,
         {"row": "AB"[row], "k": k, "x_um": src.x, "y_um": src.y},
         out,
-        {"ghosts": ghosts, "fresnel": sampling.fresnel, "bin_um": bin_um, "cell_um": cell_um},
+        {
+            "ghosts": ghosts,
+            "fresnel": sampling.fresnel,
+            "bin_um": bin_um,
+            "cell_um": cell_um,
+            "optics": opt.to_dict(),
+        },
     )
 
 

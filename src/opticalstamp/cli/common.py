@@ -384,12 +384,21 @@ def spots(
     z: Annotated[str, typer.Option(help="object distances (mm)")] = "0,1,2,3,4",
     no_ghosts: Annotated[bool, typer.Option("--no-ghosts", help="leave ghost light out")] = False,
     fresnel: FresnelOpt = False,
+    optics: Annotated[
+        str,
+        typer.Option(
+            "--optics",
+            help="ray, wave (the wave engine in its band + the traced far ghosts) or auto "
+            "(wave where the measured validity rule says ray optics is off)",
+        ),
+    ] = "auto",
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:
     """Responsivity map (spot) of one pixel on the object plane at each Z (paper Fig. 5)."""
     from ..analysis.spots import spots as run
     from ..io.files import provenance
+    from .optics import optics_line
 
     d = open_design(design)
     r = run(
@@ -400,11 +409,15 @@ def spots(
         fresnel=fresnel,
         ghosts=not no_ghosts,
         progress=not as_json,
+        optics=optics,
     )
     data = r.to_dict() | {"provenance": provenance(d, seed)}
+    wave = r.meta["optics"]["engine"] == "wave"
     lines = [
         f"design {d.name}: spots of pixel A0 ({r.n_rays:,} rays)",
-        "Z (mm)  extent x/y (µm)   FWHM x/y (µm)   centre-cell fraction",
+        optics_line(r.meta["optics"]),
+        f"Z (mm)  extent x/y (µm{', geometric' if wave else ''})   FWHM x/y (µm)   "
+        "centre-cell fraction",
     ]
     for s in r.spots:
         lines.append(

@@ -163,7 +163,7 @@ def build_report(
         tracer = PixelTracer(design, replay=True)
         shown = dict(traced, progress=progress)
         g = run(ghost_section, design, work, **shown, tracer=tracer)
-        sp = run(spot_section, design, work, **shown, tracer=tracer)
+        sp = run(spot_section, design, work, **shown, tracer=tracer, optics=opt)
         psfs = run(psf_section, design, work, **shown)
         clock.lap("ghosts_spots_psf")
         concepts = run(concept_section, design, g, work, **traced) if work.paper else None

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..analysis.ghosts import GhostResult, analyse_ghosts
+from ..analysis.responsivity import RAY, Optics
 from ..analysis.spots import PSF, SpotResult, psf, spots
 from ..design import Design, load_design
 from ..raytrace.pixel import PixelTracer
@@ -33,9 +34,16 @@ def ghost_section(
 
 
 def spot_section(
-    design: Design, work: Work, *, seed: int, fresnel: bool, progress: bool, tracer: PixelTracer
+    design: Design,
+    work: Work,
+    *,
+    seed: int,
+    fresnel: bool,
+    progress: bool,
+    tracer: PixelTracer,
+    optics: Optics = RAY,
 ) -> SpotResult:
-    """Responsivity maps on the object plane at ``work.z_mm``."""
+    """Responsivity maps on the object plane at ``work.z_mm``, by ``optics``."""
     return spots(
         design,
         z_mm=work.z_mm,
@@ -44,6 +52,7 @@ def spot_section(
         fresnel=fresnel,
         progress=progress,
         tracer=tracer,
+        optics=optics,
     )
 
 
