@@ -25,7 +25,7 @@ class WaveSection:
     verdict : :func:`~opticalstamp.analysis.raywave.judge`'s verdict
     prediction : what the validity rule predicts from the geometry alone, at the same
         tolerances (:func:`~opticalstamp.analysis.validity.choose_optics`, ``auto``);
-        None where the comparison ran at another wavelength than the design's
+        None where the comparison ran with another sampling than the design's
     """
 
     comparison: object
@@ -78,7 +78,7 @@ def wave_section(
         dof_dpi=dof_dpi,
     )
     pred = None
-    if c.sampling["wavelength_um"] == design.wavelength_um:  # the rule reads the design's
+    if sampling is None:  # the rule reads the design as it is (not an overridden sampling)
         choice = choose_optics(design, light_tol=LIGHT_TOLERANCE, rmtf_tol=RMTF_TOLERANCE)
         pred = choice.to_dict()
     return WaveSection(c, verdict, pred)

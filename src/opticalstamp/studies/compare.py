@@ -120,6 +120,7 @@ def wave_figures(design: Design, *, seed: int = 0, dof_dpi: float | None = None)
             "tolerances": v["tolerances"],
             "verdict": v["text"],
             "wavelength_um": c.sampling["wavelength_um"],
+            "spectrum": c.meta.get("spectrum"),
             "band": c.sampling["band"],
             "n_rays": WAVE_RAYS,
             "note": "own path and near crosstalk in the wave band, by both engines (the far "

@@ -75,13 +75,23 @@ def wave_html(w: dict | None, fresnel_losses: bool = False) -> str:
             "here (the wave engine does not model them yet)"
         )
     note = "".join(f" Note: {html.escape(n)}." for n in notes)
+    light_words = f"at λ = {s['wavelength_um']:g} µm in the band"
+    spec = w["meta"].get("spectrum") or {}
+    lams = spec.get("wavelengths_um") or []
+    if len(lams) > 1:
+        light_words = (
+            f"under the design's light ({html.escape(str(spec.get('name', '')))}: "
+            f"{len(lams)} wavelengths, {min(lams):.3f}-{max(lams):.3f} µm; both engines' figures "
+            f"are the weighted sums, each wavelength in its own band; the Fresnel numbers at "
+            f"the mean wavelength) in the band, at the heaviest wavelength,"
+        )
     return f"""<h2>{TITLE}</h2>
 <p>The tracer is geometric optics; where holes are small against the gaps below them
 (Fresnel numbers a²/(λd) near or below 1) diffraction changes the light and the spot. The
 wave engine (scalar, band-limited angular spectrum through every slab and mask, the pixel
-as an incoherent source; docs/wave.md) computes the pixel's responsivity at
-λ = {s["wavelength_um"]:g} µm in the band |s<sub>x</sub>|, |s<sub>y</sub>| &lt;
-{s["band"]:.3f}; the ray figures beside it are the tracer's rays in the same band
+as an incoherent source; docs/wave.md) computes the pixel's responsivity
+{light_words} |s<sub>x</sub>|, |s<sub>y</sub>| &lt; {s["band"]:.3f}; the ray figures beside
+it are the tracer's rays in the same band
 ({r["n_rays"]:,} rays per pixel row). Both are the own path and the near crosstalk: the far
 ghost light, which the RMTF section includes, is left out on both sides.{note}</p>
 <p><b>{html.escape(v["text"])}</b></p>

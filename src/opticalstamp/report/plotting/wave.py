@@ -119,8 +119,14 @@ def plot_wave_report(c, verdict: dict):
     bx.legend(fontsize=7)
     holds = "ray optics holds" if verdict["holds"] == "ray" else "diffraction dominates"
     light = verdict["light_difference"]
+    lams = (c.meta.get("spectrum") or {}).get("wavelengths_um") or []
+    light_name = (
+        f"under {c.meta['spectrum'].get('name', '')} light ({len(lams)} wavelengths)"
+        if len(lams) > 1
+        else f"at {c.sampling['wavelength_um']:g} µm"
+    )
     fig.suptitle(
-        f"{c.design} at {c.sampling['wavelength_um']:g} µm: {holds} (light wave/ray "
+        f"{c.design} {light_name}: {holds} (light wave/ray "
         + ("n/a" if light is None else f"{light * 100:+.1f} %")
         + f"; Fresnel numbers from {verdict['fresnel_min']:.2f})",
         fontsize=9,
