@@ -245,3 +245,17 @@ def test_spots_by_wave_optics(paper):
     assert both.meta["optics"]["engine"] == "wave"
     for a, b in zip(alone.spots, both.spots, strict=True):
         assert b.center_cell_fraction < a.center_cell_fraction
+
+
+def test_rgb_light_is_ray_under_auto_and_refused_for_wave(paper):
+    """An rgb design's three channels are not taken one by one by the analyses yet: auto
+    picks ray and says why, wave is refused naming the field."""
+    from opticalstamp.design.variants import replace as vary
+
+    rgb = vary(paper, {"electronics.illumination": "rgb"})
+    o = resolve_optics(rgb, "auto")
+    assert o.engine == "ray" and "electronics.illumination is rgb" in o.reason
+    with pytest.raises(InputError, match="electronics.illumination is rgb"):
+        resolve_optics(rgb, "wave")
+    white = vary(paper, {"electronics.illumination": "white"})
+    assert resolve_optics(white, "auto").engine == "wave"

@@ -87,6 +87,11 @@ def wave_unavailable(design: Design, band: float | None = None) -> str | None:
     the cone is |s| <= n0 sin(half-angle) in the medium next to the pixel)."""
     if not rectangular(design):
         return "the wave engine feeds the analyses for rectangular holes only (circles: not yet)"
+    if design.electronics.illumination == "rgb":
+        return (
+            "electronics.illumination is rgb: three channels, whose figures the analyses "
+            "do not take one by one yet (opticalstamp wave --spectrum rgb shows them)"
+        )
     cut = design.sensor.acceptance_half_angle_deg
     if cut < 90.0:
         b = wave_sampling(design).band if band is None else band
