@@ -187,29 +187,33 @@ def folded_lsf(
             progress=progress,
             tracer=tracer,
         )
+    if method == "paraxial":
+        raise InputError("method: 'paraxial' is a ray-optics closed form; not with --optics wave")
+    _no_fresnel(fresnel)
+    wf = wave or wave_folds(design, optics, float(np.max(z_mm)))
+    if not ghosts:
+        return wf.folded(z_mm, periods_um)
+    both, _ = folded_lsf_pair(
+        design,
+        z_mm=z_mm,
+        periods_um=periods_um,
+        optics=optics,
+        n_rays=n_rays,
+        seed=seed,
+        progress=progress,
+        tracer=tracer,
+        wave=wf,
+    )
+    return both
+
+
+def _no_fresnel(fresnel: bool) -> None:
+    """Fresnel losses are the tracer's only: refused with wave optics rather than applied
+    to half the light."""
     if fresnel:
         raise InputError(
             "fresnel: the wave engine has no Fresnel losses yet; use --optics ray with --fresnel"
         )
-    if method == "paraxial":
-        raise InputError("method: 'paraxial' is a ray-optics closed form; not with --optics wave")
-    wf = wave or wave_folds(design, optics, float(np.max(z_mm)))
-    wave = wf.folded(z_mm, periods_um)
-    if not ghosts:
-        return wave
-    far = traced_folded_lsf(
-        design,
-        z_mm=z_mm,
-        periods_um=periods_um,
-        n_rays=n_rays,
-        seed=seed,
-        ghosts=True,
-        fresnel=False,
-        progress=progress,
-        tracer=tracer,
-        outside_band=optics.band,
-    )
-    return join(wave, far, optics.band, _n_obj(design))
 
 
 def folded_lsf_pair(
@@ -232,10 +236,8 @@ def folded_lsf_pair(
     engine's folds to reuse (:func:`wave_folds`; built here where None)."""
     from .lsf import traced_folded_lsf_pair
 
-    if optics.engine == "wave" and fresnel:
-        raise InputError(
-            "fresnel: the wave engine has no Fresnel losses yet; use --optics ray with --fresnel"
-        )
+    if optics.engine == "wave":
+        _no_fresnel(fresnel)
     both, own = traced_folded_lsf_pair(
         design,
         z_mm=z_mm,
