@@ -27,8 +27,10 @@ from opticalstamp.io.atomic import write_atomic
 from opticalstamp.io.files import encode_tiff16, save_figure
 from opticalstamp.report.fitsection import fit_figures, fit_section, load_fit
 from opticalstamp.report.html.fit import fit_html
-from opticalstamp.studies.fit import HELD, UNDETERMINED, _to_hold, fit, layout_for
+from opticalstamp.studies import fit as fitmod
+from opticalstamp.studies.fit import HELD, UNDETERMINED, fit, layout_for
 from opticalstamp.studies.fitdata import observation
+from opticalstamp.studies.fitident import weak_directions
 from opticalstamp.studies.fitmodel import bar_fraction, spread
 
 CHART_DPI = 2400.0
@@ -186,24 +188,48 @@ def test_degenerate_image_set_flagged():
     assert res.fitted.slabs[1].mask_top.offset_x_um == pytest.approx(x["layer2.x"])
 
 
-def test_rank_revealing_hold_on_a_known_jacobian():
-    """_to_hold on Jacobians whose rank is known: a column no datum changes is held; of
-    three columns with c = a + b, exactly one is held; a direction whose error is over
-    UNDETERMINED assembly scales is held, one just under it is kept."""
-    lay = layout_for(NOMINAL, [], ["layer1.x", "layer2.x", "layer3.x"])
+def test_undetermined_directions_of_a_known_jacobian():
+    """weak_directions on Jacobians whose null directions are known: a column no datum changes is
+    that parameter's direction; of three columns with c = a + b, the direction
+    (1, 1, -1) / sqrt(3); a direction whose error is over UNDETERMINED assembly scales is
+    found, one just under it is not, and a misfit's widening (s = 1.5) finds it again."""
+    lay = layout_for(NOMINAL, [], ["layer1.x", "layer2.x", "layer3.x"])  # scales 3 um
     rng = np.random.default_rng(3)
     a, b = rng.standard_normal(200), rng.standard_normal(200)
-    assert _to_hold(np.column_stack([a, b, np.zeros(200)]), lay, 1.0) == [2]
-    held = _to_hold(np.column_stack([a, b, a + b]), lay, 1.0)
-    assert len(held) == 1
+    w = weak_directions(np.column_stack([a, b, np.zeros(200)]), lay, 1.0, UNDETERMINED)
+    assert w.shape == (1, 3) and np.allclose(np.abs(w[0]), [0, 0, 1], atol=1e-9)
+    w = weak_directions(np.column_stack([a, b, a + b]), lay, 1.0, UNDETERMINED)
+    assert w.shape == (1, 3) and np.allclose(np.abs(w[0]), np.ones(3) / np.sqrt(3), atol=1e-9)
+    assert np.sign(w[0, 0]) == np.sign(w[0, 1]) == -np.sign(w[0, 2])
     # a third column e orthogonal to a and b: its parameter's error is 1 / (|e| x 3 um)
-    # assembly scales (3 um), independent of the others
+    # assembly scales, independent of the others
     e = rng.standard_normal(200)
     e -= np.column_stack([a, b]) @ np.linalg.lstsq(np.column_stack([a, b]), e, rcond=None)[0]
-    for err_scales, want in ((1.2 * UNDETERMINED, [2]), (0.8 * UNDETERMINED, [])):
+    for err_scales, want in ((1.2 * UNDETERMINED, 1), (0.8 * UNDETERMINED, 0)):
         jac = np.column_stack([a, b, e / np.linalg.norm(e) / (3.0 * err_scales)])
-        assert _to_hold(jac, lay, 1.0) == want, err_scales
-        assert _to_hold(jac, lay, 1.5**2) == [2]  # errors widened 1.5x by the misfit
+        assert len(weak_directions(jac, lay, 1.0, UNDETERMINED)) == want, err_scales
+        assert len(weak_directions(jac, lay, 1.5**2, UNDETERMINED)) == 1
+
+
+def test_a_combination_held_at_nominal(monkeypatch):
+    """Bars at two heights see the three layers' x shifts nearly only in two
+    combinations: with the threshold lowered to make the third undetermined, the fit
+    holds that combination at nominal (its component of the fitted shifts is zero), keeps
+    the three parameters, names the combination, and its chi2 is no better than the free
+    fit's."""
+    obs = _observations(1, z_bars=(0.5, 2.5), z_edges=())
+    free = ["layer1.x", "layer2.x", "layer3.x"]
+    pins = {"slab2": 420.0, "ref": 200.0}
+    res0 = fit(NOMINAL, obs, free=free, pinned=pins, starts=1)
+    monkeypatch.setattr(fitmod, "UNDETERMINED", 0.5 * max(res0.errors) / 3.0)
+    res = fit(NOMINAL, obs, free=free, pinned=pins, starts=1)
+    assert res.names == free and not res.held and len(res.held_combinations) == 1
+    combo = res.held_combinations[0]
+    v = np.array([combo.get(n, 0.0) for n in free])
+    assert abs(v @ np.array(res.values) / 3.0) < 1e-3 * np.linalg.norm(v)  # at nominal (0)
+    assert any("combination" in m and HELD in m for m in res.degeneracies)
+    assert res.chi2 >= res0.chi2 - 1e-6 * res0.chi2
+    assert res.to_dict()["held_combinations"][0]["reason"] == HELD
 
 
 def test_fitted_model_predicts_held_out_height_better():

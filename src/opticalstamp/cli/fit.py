@@ -132,6 +132,9 @@ def result_lines(res) -> list[str]:
         lines.append(f"{n:12s} {m:10.3f} {v:10.3f} {err:>9s}")
     for n, v in res.held.items():
         lines.append(f"{n:12s} {v:10.3f} {v:10.3f}    {HELD}")
+    for c in res.held_combinations:
+        terms = " ".join(f"{v:+.2f} {n}" for n, v in c.items())
+        lines.append(f"combination {terms} (assembly scales): {HELD}")
     for n, v in res.pinned.items():
         lines.append(f"{n:12s} pinned at {v:g}")
     good = sum(1 for s in res.starts if s["delta_chi2"] < 1.0)

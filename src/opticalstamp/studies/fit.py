@@ -13,22 +13,21 @@ uncertainty is propagated), s^2 = max(1, chi^2 / dof) (a misfit beyond the noise
 the errors, never narrows them). Degeneracies: directions of the column-normalised
 Jacobian whose singular value is below ``NULL_TOL`` of the largest are combinations the
 images do not see at all (their parameters have no standard error: ``None``); pairs of
-physical parameters correlated beyond ``CORR_TOL`` are named too.
+physical parameters correlated beyond ``CORR_TOL`` are named too (:mod:`.fitident`).
 """
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import qr
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from ..design import Design
 from ..validate import InputError
 from .fitdata import Observation
+from .fitident import combination, degeneracies, names_in, weak_directions
 from .fitmodel import (
     Param,
     bar_fraction,
@@ -40,11 +39,6 @@ from .fitmodel import (
 )
 from .fitresult import HELD, FitResult
 
-#: Singular value (of the column-normalised Jacobian, over the largest) below which a
-#: direction is not seen by the images.
-NULL_TOL = 1e-6
-#: |correlation| above which two physical parameters are named as hard to tell apart.
-CORR_TOL = 0.95
 #: A standard error beyond this many times a parameter's assembly scale: the parameter
 #: is reported as not determined (its error None), not with false precision.
 UNDETERMINED = 10.0
@@ -52,6 +46,14 @@ UNDETERMINED = 10.0
 BAD_RESIDUAL = 1e4
 #: Rounds of holding undetermined parameters at nominal and fitting the rest again.
 HOLD_ROUNDS = 3
+#: Width (assembly scales) of the prior on every parameter in a search's first stage.
+PRIOR_SCALES = 1.0
+#: Weight of a held direction's residual (its distance from nominal in assembly scales):
+#: its error becomes 1e-4 scales, a constraint.
+HOLD_WEIGHT = 1e4
+#: A direction not determined whose largest component (unit vector) is above this is
+#: that one parameter's: the parameter is held (pinned) at nominal.
+SINGLE = 0.99
 #: How far (relative) a bar block's period may move from the one measured.
 PERIOD_TOL = 0.03
 
@@ -154,13 +156,37 @@ def data_of(obs: Observation) -> tuple[np.ndarray, np.ndarray]:
 class Problem:
     """A fit's residuals and Jacobian, with the spreads cached by physical values."""
 
-    def __init__(self, design: Design, observations: list[Observation], layout: Layout):
+    def __init__(
+        self,
+        design: Design,
+        observations: list[Observation],
+        layout: Layout,
+        hold: np.ndarray | None = None,
+        prior: float = 0.0,
+    ):
+        """``hold``: (m, free) directions, in units of each parameter's assembly scale,
+        along which the fit is held at nominal (rows of weight HOLD_WEIGHT appended to
+        the residuals); ``prior``: the weight of every free parameter's distance from
+        nominal in assembly scales (a search's first stage; 0: none)."""
         self.design = design
         self.obs = observations
         self.lay = layout
         self.smear = smear_of(design)
         self.data = [data_of(o) for o in observations]
+        self.n_data = sum(v.size for v, _ in self.data)
+        nf = layout.n_free
+        self.hold = np.zeros((0, nf)) if hold is None else np.asarray(hold).reshape(-1, nf)
+        self._nominal = layout.fixed[list(layout.free)]
+        self._scales = np.array([layout.params[j].scale for j in layout.free])
+        self.prior = float(prior)
         self._cache: dict[bytes, list] = {}
+
+    def penalty(self, theta: np.ndarray) -> np.ndarray:
+        """The held directions' residuals (HOLD_WEIGHT x their distance from nominal) and
+        the prior's."""
+        d = (theta[: self.lay.n_free] - self._nominal) / self._scales
+        out = HOLD_WEIGHT * self.hold @ d
+        return np.concatenate([out, self.prior * d]) if self.prior else out
 
     def spreads(self, phys: np.ndarray) -> list:
         """Each observation's spread at these physical values, or None where the design
@@ -185,8 +211,10 @@ class Problem:
     def residuals(self, theta: np.ndarray) -> np.ndarray:
         sps = self.spreads(self.lay.physical(theta))
         if sps is None:
-            return np.full(sum(v.size for v, _ in self.data), BAD_RESIDUAL)
-        return np.concatenate([self.residual_of(i, sp, theta) for i, sp in enumerate(sps)])
+            data = np.full(self.n_data, BAD_RESIDUAL)
+        else:
+            data = np.concatenate([self.residual_of(i, sp, theta) for i, sp in enumerate(sps)])
+        return np.concatenate([data, self.penalty(theta)])
 
     def steps(self, theta: np.ndarray) -> np.ndarray:
         h = np.empty(theta.size)
@@ -330,100 +358,21 @@ def _local(prob: Problem, theta0: np.ndarray, max_nfev: int):
     )
 
 
-def _degeneracies(jac: np.ndarray, lay: Layout, cov: np.ndarray) -> tuple[list[str], set[int]]:
-    """Messages naming what the images cannot tell apart, and the physical columns of
-    the combinations they do not see at all."""
-    names = [lay.params[j].name for j in lay.free]
-    nf = lay.n_free
-    norms = np.linalg.norm(jac, axis=0)
-    msgs, blind = [], set()
-    for k in range(nf):
-        if norms[k] == 0:
-            msgs.append(
-                f"{names[k]} is not constrained by these images (none changes with it): "
-                f"fix it with --pin {names[k]}=..., or add an image that does (an edge for y)"
-            )
-            blind.add(k)
-    use = norms > 0
-    js = jac[:, use] / norms[use]
-    _, sv, vt = np.linalg.svd(js, full_matrices=False)
-    cols = np.flatnonzero(use)
-    for s, v in zip(sv, vt, strict=True):
-        if s > NULL_TOL * sv[0]:
-            continue
-        w = np.zeros(jac.shape[1])
-        w[cols] = v
-        phys = w[:nf]
-        if np.linalg.norm(phys) < 1e-3:
-            continue  # nuisance alone
-        who = [k for k in range(nf) if abs(phys[k]) > 0.1 * np.abs(phys).max()]
-        blind.update(who)
-        listed = ", ".join(names[k] for k in who)
-        chart = np.linalg.norm(w[nf:]) > 0.3
-        why = " (together with the charts' positions)" if chart else ""
-        msgs.append(
-            f"{listed} are degenerate from these images{why}: one combination of them "
-            f"changes no image; fix one with --pin {names[who[0]]}=..., or add an edge at "
-            "another height"
-        )
-    sd = np.sqrt(np.clip(np.diag(cov)[:nf], 0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov[:nf, :nf] / np.outer(sd, sd)
-    for a in range(nf):
-        for b in range(a + 1, nf):
-            if a in blind or b in blind or not np.isfinite(corr[a, b]):
-                continue
-            if abs(corr[a, b]) > CORR_TOL:
-                msgs.append(
-                    f"{names[a]} and {names[b]} are hard to tell apart from these images "
-                    f"(correlation {corr[a, b]:+.3f}): fix one with --pin {names[b]}=..., or "
-                    "add an edge at another height"
-                )
-    return msgs, blind
-
-
-def _to_hold(jac: np.ndarray, lay: Layout, scale2: float) -> list[int]:
-    """The physical parameters to hold at nominal: a rank-revealing QR (column pivoting)
-    of the Jacobian's physical columns, each in units of its assembly scale and with the
-    nuisance columns projected out. Directions whose standard error exceeds UNDETERMINED
-    assembly scales are not determined; as many parameters as there are such directions
-    are held, those the pivoting takes last (the best determined are kept; of a
-    combination the images do not see, one member is held and fixes it)."""
-    nf = lay.n_free
-    if nf == 0:
-        return []
-    scales = np.array([lay.params[j].scale for j in lay.free])
-    jp, jn = jac[:, :nf] * scales, jac[:, nf:]
-    if jn.shape[1]:
-        q, _ = np.linalg.qr(jn)
-        jp = jp - q @ (q.T @ jp)
-    sv = np.linalg.svd(jp, compute_uv=False)
-    rank = int(np.sum(sv >= np.sqrt(scale2) / UNDETERMINED))
-    if rank == nf:
-        return []
-    _, _, perm = qr(jp, mode="economic", pivoting=True)
-    return sorted(int(k) for k in perm[rank:])
-
-
-def _names(message: str, name: str) -> bool:
-    """Whether ``message`` names the parameter ``name`` (as a whole word)."""
-    return re.search(rf"(?<![\w.]){re.escape(name)}(?![\w]|\.\w)", message) is not None
-
-
 def _estimate(prob: Problem, theta: np.ndarray):
-    """(chi2, dof, error scale^2, covariance, messages, blind, hold) at ``theta``."""
+    """(chi2, dof, error scale^2, covariance, messages, blind, weak directions) at
+    ``theta`` (chi2 and dof of the images' data; the held directions are constraints)."""
     lay = prob.lay
     jac = prob.jacobian(theta)
-    chi2 = float(np.sum(prob.residuals(theta) ** 2))
-    dof = max(jac.shape[0] - jac.shape[1], 1)
+    chi2 = float(np.sum(prob.residuals(theta)[: prob.n_data] ** 2))
+    dof = max(prob.n_data - jac.shape[1] + prob.hold.shape[0], 1)
     scale2 = max(1.0, chi2 / dof)
     norms = np.linalg.norm(jac, axis=0)
     norms[norms == 0] = 1.0
     js = jac / norms
     cov = np.linalg.pinv(js.T @ js, rcond=1e-12, hermitian=True) / np.outer(norms, norms)
     cov *= scale2
-    msgs, blind = _degeneracies(jac, lay, cov)
-    hold = set(_to_hold(jac, lay, scale2))
+    msgs, blind = degeneracies(jac, lay, cov)
+    weak = weak_directions(jac, lay, scale2, UNDETERMINED)
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     for k in range(lay.n_free):  # an error far beyond the assembly scale: not determined
         p = lay.params[lay.free[k]]
@@ -434,7 +383,7 @@ def _estimate(prob: Problem, theta: np.ndarray):
                 f"{sd[k]:.3g} um, over {UNDETERMINED:g} x its assembly scale {p.scale:g} um): "
                 f"fix it with --pin {p.name}=..., or add images at other heights"
             )
-    return chi2, int(dof), scale2, cov, msgs, blind, hold
+    return chi2, int(dof), scale2, cov, msgs, blind, weak
 
 
 def fit(
@@ -484,34 +433,59 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev) -> FitResul
         t0 = base.copy()
         if s:
             t0[: lay.n_free] = _draw_start(prob, rng)[: lay.n_free]
-        r = _local(prob, t0, max_nfev)
+        # first near the start (a prior of PRIOR_SCALES assembly scales on every
+        # parameter: the well-seen ones converge before the barely-seen ones wander
+        # into another valley), then free
+        first = _local(Problem(design, observations, lay, prior=1 / PRIOR_SCALES), t0, max_nfev)
+        r = _local(prob, first.x, max_nfev)
         chi2 = float(2 * r.cost)
-        runs.append({"start": s, "chi2": chi2, "nfev": int(r.nfev), "status": int(r.status)})
+        runs.append(
+            {
+                "start": s,
+                "chi2": chi2,
+                "nfev": int(first.nfev + r.nfev),
+                "status": int(r.status),
+            }
+        )
         if best is None or r.cost < best.cost:
             best = r
     theta = best.x
     for r in runs:  # how far each start's minimum is from the best one
         r["delta_chi2"] = r["chi2"] - float(2 * best.cost)
-    chi2, dof, scale2, cov, msgs, blind, hold = _estimate(prob, theta)
+    chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     held: dict[str, float] = {}
-    said: list[str] = []  # why each held parameter is held
+    combos: list[dict[str, float]] = []
+    said: list[str] = []  # why each held parameter or combination is held
+    rows = np.zeros((0, lay.n_free))  # the combinations held, in assembly scales
     for _ in range(HOLD_ROUNDS):
-        if not hold:
+        if not len(weak):
             break
         names_now = [lay.params[j].name for j in lay.free]
-        for k in hold:
+        # a direction along one parameter: that parameter held (pinned) at nominal;
+        # a combination of several: held at nominal as a combination
+        single = {int(np.argmax(np.abs(v))) for v in weak if np.abs(v).max() > SINGLE}
+        for k in sorted(single):
             j = lay.free[k]
             held[names_now[k]] = float(lay.params[j].nominal)
-            why = [m for m in msgs if _names(m, names_now[k]) and "hard to tell" not in m]
+            why = [m for m in msgs if names_in(m, names_now[k]) and "hard to tell" not in m]
             said += [m for m in why if m not in said] or [f"{names_now[k]}: {HELD}"]
-        keep = [k for k in range(lay.n_free) if k not in hold]
+        keep = [k for k in range(lay.n_free) if k not in single]
+        new = [v[keep] / np.linalg.norm(v[keep]) for v in weak if np.abs(v).max() <= SINGLE]
+        for v in new:
+            combos.append(combination(v, [names_now[k] for k in keep]))
+            terms = " ".join(f"{c:+.2f} {n}" for n, c in combos[-1].items())
+            said.append(
+                f"the combination {terms} (each in its assembly scale) is {HELD}: its "
+                "members' values and errors are given it; pin one to choose otherwise"
+            )
+        rows = np.vstack([rows[:, keep]] + [v[None] for v in new])
         lay = layout_for(
             design, observations, [names_now[k] for k in keep], dict(pinned or {}) | held
         )
-        prob = Problem(design, observations, lay)
+        prob = Problem(design, observations, lay, hold=rows)
         t0 = np.concatenate([theta[keep], theta[len(names_now) :]])
         theta = _local(prob, t0, max_nfev).x
-        chi2, dof, scale2, cov, msgs, blind, hold = _estimate(prob, theta)
+        chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     msgs = said + [m for m in msgs if m not in said]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     nf = lay.n_free
@@ -548,4 +522,5 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev) -> FitResul
         starts=runs,
         theta=theta,
         held=held,
+        held_combinations=combos,
     )

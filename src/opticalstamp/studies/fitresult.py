@@ -21,6 +21,8 @@ class FitResult:
     ``nuisance``: {image: {name: (value, error)}}. ``starts``: (cost, chi2) of each start.
     ``held``: {name: nominal value} of the parameters the images did not determine, held
     at nominal in ``fitted`` (their reason :data:`HELD`); the rest re-fitted with them held.
+    ``held_combinations``: combinations of the free parameters ({name: coefficient}, in
+    units of each one's assembly scale) the images did not determine, held at nominal.
     """
 
     design: Design
@@ -39,6 +41,7 @@ class FitResult:
     starts: list[dict]
     theta: np.ndarray = field(repr=False, default=None)
     held: dict[str, float] = field(default_factory=dict)
+    held_combinations: list[dict[str, float]] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {
@@ -57,6 +60,9 @@ class FitResult:
             },
             "pinned": self.pinned,
             "held": {n: {"value": v, "reason": HELD} for n, v in self.held.items()},
+            "held_combinations": [
+                {"combination": c, "reason": HELD} for c in self.held_combinations
+            ],
             "correlation": {"names": self.names, "matrix": self.correlation.tolist()},
             "degeneracies": self.degeneracies,
             "chi2": self.chi2,
