@@ -162,14 +162,13 @@ def traced_kernels(
 WAVE_BIN_UM = 2.0
 
 
-def wave_kernels(
-    design: Design, z_mm, row: int, ghosts: bool, maps: TracedMaps | None
-) -> list[ScanKernel]:
-    """One row's kernels by wave optics: the wave engine's map of the light in its band
-    (own path, its diffraction, near crosstalk; :func:`~opticalstamp.analysis.
-    wavespectral.wave_response_spectral`, the design's light) on ``WAVE_BIN_UM`` bins,
-    SVD-separated, and the traced ghost map of the light beyond the band (``maps``, traced with
-    ``outside_band``): the join of :mod:`~opticalstamp.analysis.responsivity`."""
+def wave_near_kernels(design: Design, z_mm, row: int) -> list[ScanKernel]:
+    """One row's near-field kernels by wave optics at each height, the stack traversed
+    once: the wave engine's map of the light in its band (own path, its diffraction,
+    near crosstalk; :func:`~opticalstamp.analysis.wavespectral.wave_response_spectral`,
+    the design's light) on ``WAVE_BIN_UM`` bins, SVD-separated (partial SVD).
+    :func:`stamp_kernel_sets` adds the traced ghost map of the light beyond the band
+    (traced with ``outside_band``): the join of :mod:`~opticalstamp.analysis.responsivity`."""
     from ..analysis.responsivity import resolve_optics
     from ..analysis.wavespectral import wave_response_spectral
 
@@ -179,8 +178,7 @@ def wave_kernels(
     out = []
     for iz, z in enumerate(zs):
         edges, m = r.spot(iz, WAVE_BIN_UM)
-        k = map_kernel(z, m * WAVE_BIN_UM**2, float(edges[0]), WAVE_BIN_UM, partial=True)
-        out.append(_with_ghost(k, maps, iz) if ghosts else k)
+        out.append(map_kernel(z, m * WAVE_BIN_UM**2, float(edges[0]), WAVE_BIN_UM, partial=True))
     return out
 
 
@@ -283,9 +281,14 @@ def stamp_kernel_sets(
                 progress=progress,
                 outside_band=band,
             )
+        near = {}
+        if source == "wave":  # every set's heights from one wave run of the row
+            zs = sorted({float(z) for z_mm in z_sets for z in np.atleast_1d(z_mm)})
+            near = dict(zip(zs, wave_near_kernels(design, zs, row), strict=True))
         for ks, z_mm, m in zip(out, z_sets, maps, strict=True):
             if source == "wave":
-                ks.append(wave_kernels(design, z_mm, row, ghosts, m))
+                row_k = [near[float(z)] for z in np.atleast_1d(z_mm)]
+                ks.append([_with_ghost(k, m, i) if ghosts else k for i, k in enumerate(row_k)])
             else:
                 ks.append(_row_kernels(design, z_mm, source, ghosts, m))
     return out

@@ -178,7 +178,9 @@ def build_report(
             scan_section, design, work, **traced, tracer=tracer, rmtf_section=rm, chart_dpi=dpi
         )
         clock.lap("scans")
-        restoration = run(restoration_section, design, work, **traced, tracer=tracer, dof_dpi=dpi)
+        restoration = run(
+            restoration_section, design, work, **traced, tracer=tracer, dof_dpi=dpi, optics=opt
+        )
         clock.lap("restoration")
         fitted = None if fit is None else measure(fit_section, fit, design)
         figures = section_figures(

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..analysis.responsivity import RAY, Optics
 from ..design import Design
 from ..raytrace.pixel import PixelTracer
 from .work import Work
@@ -35,6 +36,7 @@ def restoration_section(
     fresnel: bool,
     tracer: PixelTracer,
     dof_dpi: float,
+    optics: Optics = RAY,
 ) -> RestorationSection:
     """Restoration with the known blur: the study against height (on the ``dof_dpi``
     chart), text crops raw and restored, OCR of small text before and after (a quick
@@ -54,8 +56,14 @@ def restoration_section(
     from ..io.files import linear_to_srgb
     from ..studies.restoration import STUDY_Z_MM, restoration_study
 
+    # scanned and restored through the kernels of the report's optics (wave: diffraction
+    # blurs the scan, and the restoration knows it)
     page = ScanSettings(
-        surround=1.0, fresnel=fresnel, kernel_rays=work.kernel_rays, sensor=design.electronics
+        surround=1.0,
+        fresnel=fresnel,
+        kernel_rays=work.kernel_rays,
+        sensor=design.electronics,
+        kernel="wave" if optics.engine == "wave" else "auto",
     )
     quick = not work.studies
     methods = ("wiener",) if quick else METHODS

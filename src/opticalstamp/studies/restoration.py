@@ -132,13 +132,15 @@ def restoration_study(
         dof[n] = {"dof_mm": v, "open_ended": open_ended}
     # the ceiling: the own transfer at the chart's frequency on a finer, longer Z grid
     z_fine = [round(v, 6) for v in np.arange(0.0, max(zs) + 1.5 + 1e-9, 0.125)]
+    # (ray optics: the wave engine's kernels at ~50 heights would cost a minute)
+    st_own = st.model_copy(update={"kernel": "auto"}) if st.kernel == "wave" else st
     own_cache = prepare_kernels(
-        design, z_mm=z_fine, settings=st, seed=seed, ghosts=False, tracer=tracer
+        design, z_mm=z_fine, settings=st_own, seed=seed, ghosts=False, tracer=tracer
     )
     t = np.array(
         [
             output_kernel(
-                design, z, settings=st, seed=seed, ghosts=False, kernels=own_cache
+                design, z, settings=st_own, seed=seed, ghosts=False, kernels=own_cache
             ).transfer(pitch / period_of_dpi(dpi))
             for z in z_fine
         ]
@@ -164,6 +166,8 @@ def restoration_study(
         "transfer_z_mm": z_fine,
         "transfer_fine": t.tolist(),
         "transfer_zero_mm": zero,
+        "kernels": st.kernel,
+        "transfer_kernels": st_own.kernel,
     }
 
 

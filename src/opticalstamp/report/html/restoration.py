@@ -7,6 +7,17 @@ import html
 from .common import table, unmeasured
 
 
+def _kernels(st: dict) -> str:
+    """Which kernels made the scans and restored them."""
+    if st.get("kernels") != "wave":
+        return "Scanned and restored through ray-optics kernels."
+    return (
+        "Scanned and restored through wave-optics kernels (the wave engine in its band, "
+        "the far ghosts traced: diffraction blurs the scan and the restoration knows it); "
+        "the own path's transfer below is ray optics."
+    )
+
+
 def restoration_html(r: dict | None) -> str:
     """Raw against restored: the restored depth of field per method, noise gain, OCR."""
     if not r:
@@ -57,8 +68,8 @@ model's error ({st["model_error"]:g} rms), nothing tuned per image
 the fundamental's fitted amplitude relative to the ideal's and its contrast to noise, not by
 RMTF (overshoot clipped to [0, 1] pins RMTF at 1): the restored depth of field is where the
 amplitude is at least {st["threshold"]:g} of the ideal's and the contrast to noise at least
-{st["cnr_floor"]:g} ({html.escape(r["settings"])}). The own path's transfer at {st["dpi"]:g}
-dpi falls with height; {ceiling}.</p>
+{st["cnr_floor"]:g} ({html.escape(r["settings"])}). {_kernels(st)} The own path's transfer
+at {st["dpi"]:g} dpi falls with height; {ceiling}.</p>
 {table(rows, ["", "depth of field (mm)", "largest overshoot", "noise gain (white page)"])}
 <img src="restore_curves.png"><img src="restore_text.png">{ocr_p}
 """
