@@ -30,7 +30,7 @@ from opticalstamp.report.html.fit import fit_html
 from opticalstamp.studies import fit as fitmod
 from opticalstamp.studies.fit import HELD, UNDETERMINED, fit, layout_for
 from opticalstamp.studies.fitdata import observation
-from opticalstamp.studies.fitident import weak_directions
+from opticalstamp.studies.fitident import starts_apart, weak_directions
 from opticalstamp.studies.fitmodel import bar_fraction, spread
 
 CHART_DPI = 2400.0
@@ -209,6 +209,18 @@ def test_undetermined_directions_of_a_known_jacobian():
         jac = np.column_stack([a, b, e / np.linalg.norm(e) / (3.0 * err_scales)])
         assert len(weak_directions(jac, lay, 1.0, UNDETERMINED)) == want, err_scales
         assert len(weak_directions(jac, lay, 1.5**2, UNDETERMINED)) == 1
+
+
+def test_starts_that_fit_as_well_but_disagree():
+    """starts_apart: a start within delta of the best chi2 that puts a parameter more than
+    3 errors away makes it undetermined (its range reported); a start far worse in chi2
+    does not, nor a difference within 3 errors."""
+    ends = np.array([[1.0, 10.0], [1.5, 12.0], [9.0, 50.0]])
+    chi2s = np.array([100.0, 103.0, 150.0])
+    sd = np.array([0.1, 1.0])
+    assert starts_apart(ends, chi2s, ends[0], sd, 5.0) == {0: (1.0, 1.5)}
+    assert starts_apart(ends, chi2s, ends[0], sd, 2.0) == {}
+    assert starts_apart(ends, chi2s, ends[0], sd, 60.0) == {0: (1.0, 9.0), 1: (10.0, 50.0)}
 
 
 def test_a_combination_held_at_nominal(monkeypatch):

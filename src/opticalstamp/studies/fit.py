@@ -22,12 +22,13 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import chi2 as chi2_dist
 from threadpoolctl import threadpool_limits
 
 from ..design import Design
 from ..validate import InputError
 from .fitdata import Observation
-from .fitident import combination, degeneracies, names_in, weak_directions
+from .fitident import combination, degeneracies, names_in, starts_apart, weak_directions
 from .fitmodel import (
     Param,
     bar_fraction,
@@ -428,7 +429,7 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev) -> FitResul
     base = np.concatenate([lay.fixed[list(lay.free)], np.zeros(n_nu)])
     for o, (sl, _) in zip(observations, lay.nuis, strict=True):
         base[sl] = _nuisance_start(o)
-    runs, best = [], None
+    runs, ends, best = [], [], None
     for s in range(max(1, starts)):
         t0 = base.copy()
         if s:
@@ -447,30 +448,48 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev) -> FitResul
                 "status": int(r.status),
             }
         )
+        ends.append(r.x)
         if best is None or r.cost < best.cost:
             best = r
     theta = best.x
     for r in runs:  # how far each start's minimum is from the best one
         r["delta_chi2"] = r["chi2"] - float(2 * best.cost)
     chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
+    names_now = [lay.params[j].name for j in lay.free]
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))[: lay.n_free]
+    delta = scale2 * chi2_dist.ppf(0.95, max(lay.n_free, 1))
+    chis = np.array([r["chi2"] for r in runs])
+    apart = starts_apart(np.array(ends)[:, : lay.n_free], chis, theta[: lay.n_free], sd, delta)
+    for k, (lo, hi) in apart.items():
+        msgs.append(
+            f"{names_now[k]} is not determined by these images: starts that fit them as "
+            f"well (chi2 within {delta:.3g} of the best) put it from {lo:.4g} to {hi:.4g} um "
+            f"(error at the best {sd[k]:.2g} um)"
+        )
     held: dict[str, float] = {}
     combos: list[dict[str, float]] = []
     said: list[str] = []  # why each held parameter or combination is held
     rows = np.zeros((0, lay.n_free))  # the combinations held, in assembly scales
+    extra = set(apart)  # held in the first round with the single directions
     for _ in range(HOLD_ROUNDS):
-        if not len(weak):
+        if not len(weak) and not extra:
             break
         names_now = [lay.params[j].name for j in lay.free]
         # a direction along one parameter: that parameter held (pinned) at nominal;
         # a combination of several: held at nominal as a combination
         single = {int(np.argmax(np.abs(v))) for v in weak if np.abs(v).max() > SINGLE}
+        single, extra = single | extra, set()
         for k in sorted(single):
             j = lay.free[k]
             held[names_now[k]] = float(lay.params[j].nominal)
             why = [m for m in msgs if names_in(m, names_now[k]) and "hard to tell" not in m]
             said += [m for m in why if m not in said] or [f"{names_now[k]}: {HELD}"]
         keep = [k for k in range(lay.n_free) if k not in single]
-        new = [v[keep] / np.linalg.norm(v[keep]) for v in weak if np.abs(v).max() <= SINGLE]
+        new = [
+            v[keep] / np.linalg.norm(v[keep])
+            for v in weak
+            if np.abs(v).max() <= SINGLE and np.linalg.norm(v[keep]) > 0.5
+        ]
         for v in new:
             combos.append(combination(v, [names_now[k] for k in keep]))
             terms = " ".join(f"{c:+.2f} {n}" for n, c in combos[-1].items())

@@ -96,3 +96,21 @@ def combination(v: np.ndarray, names: list[str]) -> dict[str, float]:
 def names_in(message: str, name: str) -> bool:
     """Whether ``message`` names the parameter ``name`` (as a whole word)."""
     return re.search(rf"(?<![\w.]){re.escape(name)}(?![\w]|\.\w)", message) is not None
+
+
+def starts_apart(
+    ends: np.ndarray, chi2s: np.ndarray, best: np.ndarray, sd: np.ndarray, delta: float
+) -> dict[int, tuple[float, float]]:
+    """Parameters the starts leave undetermined: {column: (lowest, highest)} of those
+    that a start fitting the images as well as the best (chi2 within ``delta`` of it)
+    puts more than 3 standard errors ``sd`` (the best's) from the best ``best``. The
+    local errors cannot see another valley; the starts can.
+
+    ``ends``: (starts, free) each start's minimum; ``chi2s``: their chi2.
+    """
+    good = ends[chi2s <= chi2s.min() + delta]
+    far = np.abs(good - best) > 3 * np.where(np.isfinite(sd), sd, np.inf)
+    return {
+        int(k): (float(good[:, k].min()), float(good[:, k].max()))
+        for k in np.flatnonzero(far.any(axis=0))
+    }
