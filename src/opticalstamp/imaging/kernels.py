@@ -103,14 +103,10 @@ def separable_terms(
     m: np.ndarray, rank_tol: float = 0.02, max_rank: int = 4, partial: bool = False
 ):
     """SVD of a 2-D map [y, x] into (scale, u (K, ny), v (K, nx)), signs made positive.
-    ``partial``: only the leading ``max_rank`` + 1 terms, by Lanczos iteration
-    (:func:`scipy.sparse.linalg.svds`; for the wave engine's large maps)."""
-    if partial and min(m.shape) > max_rank + 2:
-        from scipy.sparse.linalg import svds
-
-        u, s, vt = svds(m, k=max_rank + 1, random_state=0)
-        order = np.argsort(s)[::-1]
-        u, s, vt = u[:, order], s[order], vt[order]
+    ``partial``: only the leading ``max_rank`` + 1 terms, by a randomized range finder
+    (:func:`_randomized_svd`; for the wave engine's large maps)."""
+    if partial and min(m.shape) > 4 * (max_rank + 8):
+        u, s, vt = _randomized_svd(m, max_rank + 1)
     else:
         u, s, vt = np.linalg.svd(m, full_matrices=False)
     k = int(max(1, min(max_rank, np.sum(s > rank_tol * s[0]))))
@@ -120,6 +116,18 @@ def separable_terms(
             u[i] *= -1
             vt[i] *= -1
     return s, u, vt
+
+
+def _randomized_svd(m: np.ndarray, k: int, oversample: int = 8, power: int = 3):
+    """The leading ``k`` singular triplets of ``m`` (Halko, Martinsson & Tropp 2011: a
+    Gaussian sketch of k + ``oversample`` columns, ``power`` subspace iterations, then
+    the exact SVD of the small projection); seeded, so the kernels are reproducible."""
+    omega = np.random.default_rng(0).standard_normal((m.shape[1], k + oversample))
+    q = np.linalg.qr(m @ omega)[0]
+    for _ in range(power):
+        q = np.linalg.qr(m @ np.linalg.qr(m.T @ q)[0])[0]
+    ub, s, vt = np.linalg.svd(q.T @ m, full_matrices=False)
+    return (q @ ub)[:, :k], s[:k], vt[:k]
 
 
 def map_kernel(
@@ -158,8 +166,9 @@ def traced_kernels(
     return out
 
 
-#: bin of the wave engine's near-field maps that wave kernels are made of (um)
-WAVE_BIN_UM = 2.0
+#: bin of the wave engine's near-field maps that wave kernels are made of (um): the traced
+#: kernels' (maps.traced_map_sets fine_bin_um)
+WAVE_BIN_UM = 4.0
 
 
 def wave_near_kernels(design: Design, z_mm, row: int) -> list[ScanKernel]:
@@ -170,15 +179,18 @@ def wave_near_kernels(design: Design, z_mm, row: int) -> list[ScanKernel]:
     :func:`stamp_kernel_sets` adds the traced ghost map of the light beyond the band
     (traced with ``outside_band``): the join of :mod:`~opticalstamp.analysis.responsivity`."""
     from ..analysis.responsivity import resolve_optics
+    from ..analysis.wave import one_blas_thread
     from ..analysis.wavespectral import wave_response_spectral
 
     opt = resolve_optics(design, "wave")
     zs = np.asarray(z_mm, dtype=np.float64)
     r = wave_response_spectral(design, zs, pixel=(row, 0), sampling=opt.sampling)
     out = []
-    for iz, z in enumerate(zs):
-        edges, m = r.spot(iz, WAVE_BIN_UM)
-        out.append(map_kernel(z, m * WAVE_BIN_UM**2, float(edges[0]), WAVE_BIN_UM, partial=True))
+    with one_blas_thread():  # thin products: BLAS's threads only spin (the engine's rule)
+        for iz, z in enumerate(zs):
+            edges, m = r.spot(iz, WAVE_BIN_UM)
+            k = map_kernel(z, m * WAVE_BIN_UM**2, float(edges[0]), WAVE_BIN_UM, partial=True)
+            out.append(k)
     return out
 
 

@@ -175,7 +175,14 @@ def build_report(
         wave = run(wave_section, design, work, seed=seed, dof_dpi=dpi)
         clock.lap("ray_vs_wave")
         scans = run(
-            scan_section, design, work, **traced, tracer=tracer, rmtf_section=rm, chart_dpi=dpi
+            scan_section,
+            design,
+            work,
+            **traced,
+            tracer=tracer,
+            rmtf_section=rm,
+            chart_dpi=dpi,
+            optics=opt,
         )
         clock.lap("scans")
         restoration = run(

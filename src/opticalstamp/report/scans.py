@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..analysis.responsivity import RAY, Optics
 from ..design import Design
 from ..raytrace.pixel import PixelTracer
 from .section import measured
@@ -34,6 +35,7 @@ def scan_section(
     tracer: PixelTracer,
     rmtf_section=None,
     chart_dpi: float = 200.0,
+    optics: Optics = RAY,
 ) -> ScanSection:
     """Simulated scans of the built-in charts (paper Figs. 8, 9, 12) and their measures.
 
@@ -63,8 +65,13 @@ def scan_section(
     own_lsf = getattr(measured(rmtf_section), "lsf_own", None)
     dpi = work.scan_dpi
     # the charts are printed on a larger white page; Fresnel losses as in the analyses
+    wave = optics.engine == "wave"  # the scans through the kernels of the report's optics
     page = ScanSettings(
-        surround=1.0, fresnel=fresnel, kernel_rays=work.kernel_rays, sensor=design.electronics
+        surround=1.0,
+        fresnel=fresnel,
+        kernel_rays=work.kernel_rays,
+        sensor=design.electronics,
+        kernel="wave" if wave else "auto",
     )
     text, truth = text_chart(dpi)
     hm = shape_map("tilt:0:4", text.shape[0] * 25.4 / dpi, text.shape[1] * 25.4 / dpi)
@@ -125,7 +132,15 @@ def scan_section(
         if not own_lsf.ghosts and not own_lsf.fresnel:  # as the rmtf() call below
             periods = [period_of_dpi(d) for d in ref_dpi]
             sub = folded_subset(own_lsf, (0.5, 3.5), periods)
-    if sub is not None:
+    if wave:  # the wave engine's light in its band (own path and near crosstalk)
+        from ..analysis.responsivity import folded_lsf
+
+        near = folded_lsf(
+            design, z_mm=(0.5, 3.5), periods_um=[period_of_dpi(chart_dpi)], optics=optics,
+            ghosts=False,
+        )  # fmt: skip
+        ref = rmtf_from_lsf(near, design, dpi=ref_dpi, optics=optics, **ref_args)
+    elif sub is not None:
         ref = rmtf_from_lsf(sub, design, dpi=ref_dpi, **ref_args)
     else:
         ref = rmtf(
@@ -148,7 +163,7 @@ def scan_section(
                 "z_mm": z,
                 "x_mm": ((np.arange(mid.size) + 0.5) * r.pitch_um / 1000).tolist(),
                 "profile": mid.tolist(),
-                "rmtf_measured": blocks[0]["rmtf"] if blocks else float("nan"),
+                "rmtf_measured": _chart_block(blocks, chart_dpi),
                 "rmtf_computed_max": ref.rmtf_max[key][iz],
                 "rmtf_computed_min": ref.rmtf_min[key][iz],
             }
@@ -162,10 +177,19 @@ def scan_section(
     panels["scan_tilt"] = [("tilt: Z = 0 mm at the top, 4 mm at the bottom", tilt.image)]
     res["chart_dpi"] = float(chart_dpi)
     res["settings"] = (
+        f"{'wave' if wave else 'ray'}-optics kernels, "
         f"the design's sensor electronics, noise on, ghost light on, white surround, seed {seed}"
         + ("" if work.ocr else f"; {dpi:g}-dpi charts, no OCR (quick report)")
     )
     return ScanSection(data=res, panels=panels)
+
+
+def _chart_block(blocks: list[dict], chart_dpi: float) -> float:
+    """The RMTF of the chart's bar block: the longest block found at the chart's frequency
+    (a few periods of ripple beside it, a diffraction fringe at the chart's edge, are not
+    it); NaN where none is found."""
+    found = [b for b in blocks if abs(b["dpi"] / chart_dpi - 1) < 0.06]
+    return max(found, key=lambda b: b["n_periods"])["rmtf"] if found else float("nan")
 
 
 def _sfr(scan, edge, chart_dpi: float, sfr_xy) -> list[dict]:
