@@ -1,9 +1,12 @@
 """One responsivity, two engines: the used pixels' line-spread functions from ray or wave
 optics, behind one interface.
 
-The analyses that consume a pixel's responsivity on the object plane (RMTF and depth of
-field, the light it collects) ask :func:`folded_lsf` for the LSFs folded onto their chart
-periods, with an :class:`Optics` value that says which engine gives them:
+The analyses that consume a pixel's responsivity on the object plane take an
+:class:`Optics` value that says which engine gives it: the RMTF and depth of field ask
+:func:`folded_lsf` / :func:`folded_lsf_pair` for the LSFs folded onto their chart periods,
+the light :func:`pixel_light`; the spots (:func:`~opticalstamp.analysis.spots.spots`)
+and the scan kernels (:func:`~opticalstamp.imaging.kernels.scan_kernels`, source
+"wave") join the wave engine's maps with the traced maps beyond the band in the same way:
 
 * ``ray``: the exact tracer (:func:`~opticalstamp.analysis.lsf.traced_folded_lsf`), own
   and ghost paths, geometric optics;
