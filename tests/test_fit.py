@@ -383,3 +383,18 @@ def test_cli_bad_input_exit_2(tmp_path):
         r = CliRunner().invoke(app, ["fit", *args, "-o", out])
         assert r.exit_code == 2, (args, r.output)
         assert words in r.output, (args, r.output)
+
+
+def test_fit_says_when_its_ray_model_is_not_the_designs_optics():
+    """The fit's forward model is ray optics; where --optics auto takes wave optics for the
+    design (the prototype) its JSON and terminal warn, where ray optics holds they do not."""
+    from opticalstamp.design import load_design
+    from opticalstamp.design.variants import scale_to_dpi
+    from opticalstamp.studies.fitresult import fit_optics
+
+    paper = load_design("paper2016")
+    o = fit_optics(paper)
+    assert o["auto"]["engine"] == "wave" and "absorb the diffraction blur" in o["warning"]
+    coarse = scale_to_dpi(paper, 100)  # holes and lattice 3x over the same plates
+    o = fit_optics(coarse)
+    assert o["auto"]["engine"] == "ray" and o["warning"] is None

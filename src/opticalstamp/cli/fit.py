@@ -121,6 +121,7 @@ def result_lines(res) -> list[str]:
     """The fit as text: estimates with errors, parameters held at nominal, chi2, starts,
     degeneracies."""
     from ..studies.fit import HELD
+    from ..studies.fitresult import fit_optics
 
     lines = [
         f"fit of {res.design.name}: chi2 {res.chi2:.1f} for {res.dof} degrees of freedom "
@@ -140,6 +141,9 @@ def result_lines(res) -> list[str]:
     good = sum(1 for s in res.starts if s["delta_chi2"] < 1.0)
     lines.append(f"{good} of {len(res.starts)} starts reached the best minimum (delta chi2 < 1)")
     lines += [f"warning: {m}" for m in res.degeneracies]
+    optics = fit_optics(res.design)
+    if optics["warning"]:
+        lines.append(f"warning: {optics['warning']}")
     return lines
 
 

@@ -71,4 +71,26 @@ class FitResult:
             "error_scale": self.error_scale,
             "nuisance": self.nuisance,
             "starts": self.starts,
+            "optics": fit_optics(self.design),
         }
+
+
+def fit_optics(design: Design) -> dict:
+    """The fit's optics against the one the other commands pick for this design: the fit's
+    forward model is the paraxial own path (ray optics, fast enough for its thousands of
+    evaluations); where ``--optics auto`` picks wave optics for the design
+    (:func:`~opticalstamp.analysis.responsivity.resolve_optics`), the fitted geometry
+    absorbs the diffraction blur the model leaves out, and ``warning`` says so."""
+    from ..analysis.responsivity import resolve_optics
+
+    auto = resolve_optics(design, "auto")
+    warning = None
+    if auto.engine == "wave":
+        warning = (
+            "the fit's forward model is ray optics (the paraxial own path), but the other "
+            f"commands take wave optics for this design ({auto.reason}): the fitted "
+            "parameters absorb the diffraction blur the model leaves out; compare them "
+            "with care"
+        )
+    return {"forward_model": "paraxial own path (ray optics)", "auto": auto.to_dict(),
+            "warning": warning}  # fmt: skip
