@@ -41,7 +41,9 @@ from pathlib import Path
 #: name -> arguments after `opticalstamp` ({out}: a fresh output folder)
 COMMANDS = {
     "report": ["report", "--out", "{out}"],
+    "report-ray": ["report", "--optics", "ray", "--out", "{out}"],
     "report-quick": ["report", "--quick", "--out", "{out}"],
+    "report-quick-ray": ["report", "--quick", "--optics", "ray", "--out", "{out}"],
     "help": ["--help"],
     "ghosts": ["ghosts"],
 }
