@@ -274,9 +274,14 @@ def plot_efficiency(res):
         top = max(top, *vals)
         lab = "infinite object" if r == "inf" else f"object radius {r} mm"
         a1.plot([float(z) for z in zs], vals, "o-", color=f"C{i}", label=lab, ms=4)
-    a1.axhline(res.etendue_own_um2sr, color="k", lw=0.6, ls=":", label="own path")
-    a1.set_ylim(0, 1.15 * max(top, res.etendue_own_um2sr) or 1.0)  # no light: an axis still
-    a1.set_xlabel("object distance Z (mm)")
+    # the object-radius curves are ray optics (the ghost landings): under wave optics
+    # the line beside them is the rays' own path too, and the axis says so
+    optics = res.meta.get("optics") or {}
+    wave = optics.get("engine") == "wave"
+    own = optics["ray_etendue_own_um2sr"] if wave else res.etendue_own_um2sr
+    a1.axhline(own, color="k", lw=0.6, ls=":", label="own path")
+    a1.set_ylim(0, 1.15 * max(top, own) or 1.0)  # no light: an axis still
+    a1.set_xlabel("object distance Z (mm)" + ("; curves by ray optics" if wave else ""))
     a1.set_ylabel("etendue collected (µm² sr)")
     a1.set_title(
         f"own-path light {ratio_text(res.ratio_own)} of the F/{res.reference_f_number:g} "
