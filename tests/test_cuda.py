@@ -143,8 +143,9 @@ def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path, s
 
 def test_provenance_says_where_the_rays_were_traced():
     """A stamp's results say the device they were traced on (the CPU outside a run that
-    chose one; cuda under the simulator: tests/cuda/sim_device.py); a rod-lens array's say cpu whatever
-    the device (its GRIN tracer has no GPU kernel), e.g. side by side in a comparison."""
+    chose one; cuda under the simulator: tests/cuda/sim_device.py); a rod-lens array's
+    say cpu whatever the device (its GRIN tracer has no GPU kernel), e.g. side by side in a
+    comparison."""
     from opticalstamp.design import load_design
     from opticalstamp.device import using_device
     from opticalstamp.io.files import provenance
