@@ -138,6 +138,6 @@ def test_cli_no_design_message_names_the_constraints_with_counts():
 
 
 def test_cli_bad_optics_is_refused_naming_the_option():
-    res = runner.invoke(app, ["search", "--optics", "sound", "--population", "2"])
+    res = runner.invoke(app, ["search", "--optics", "sound", "--population", "4"])
     assert res.exit_code == 2
     assert "optics" in res.output and "ray, wave, auto" in res.output
