@@ -131,6 +131,10 @@ def test_report_page_shows_the_small_text_reads():
     assert "8 pt sans" in page and "2.5 pt sans" in page
     assert "Z = 4.5 mm" in page and "0.312" in page
     assert "tesseract not installed" in _scans_html(s | {"ocr": []}, 84.6)
+    # a quick report leaves OCR out on purpose: it does not blame Tesseract
+    quick = s | {"ocr": [], "settings": "wave-optics kernels, ...; no OCR (quick report)"}
+    page = _scans_html(quick, 84.6)
+    assert "tesseract not installed" not in page and "near crosstalk" in page
 
 
 # -- ocr-eval: reading -----------------------------------------------------------------------

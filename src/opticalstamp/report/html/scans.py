@@ -36,7 +36,16 @@ def scans_html(s: dict, pitch_um: float, ghost_span: str = "") -> str:
         "past the depth of field (<code>opticalstamp ocr-eval</code> gives more sizes and "
         "faces):</p>" + table(ocr_rows, ["text"] + [f"Z = {z:g} mm" for z in zs])
         if ocr_rows
+        else ""
+        if "no OCR (quick report)" in s["settings"]
         else "<p>(tesseract not installed: no OCR)</p>"
+    )
+    # under wave optics the scans' near field is the wave engine's band: own path and near
+    # crosstalk, which its light does not separate
+    near = (
+        "the wave engine's light in its band: own path and near crosstalk"
+        if s["settings"].startswith("wave-optics kernels")
+        else "own path"
     )
     prof = [
         [p["z_mm"], p["rmtf_measured"], p["rmtf_computed_min"], p["rmtf_computed_max"]]
@@ -48,9 +57,9 @@ the document moves one {pitch_um:.1f} um line per period, the rows are merged wi
 and dark/white shading correction is applied. See <code>opticalstamp scan</code>.</p>
 <img src="scan_text.png"><img src="scan_text_zoom.png">{ocr_p}
 <img src="scan_bars.png"><img src="scan_profiles.png">
-<p>RMTF measured on simulated {chart:g}-dpi scans (own path, ghost light off, noise on) against
-the RMTF computed from the folded line-spread functions (own path; minimum and maximum
-over chart positions). With ghost light on they differ for a reason, not an error: ghost
+<p>RMTF measured on simulated {chart:g}-dpi scans ({near}, ghost light off, noise on)
+against the RMTF computed from the folded line-spread functions ({near}; minimum and
+maximum over chart positions). With ghost light on they differ for a reason, not an error: ghost
 light comes from {ghost_span or "far from the pixel's axis"}, so a finite chart on a white
 page gets a different veiling background than the infinite chart of the computed RMTF.</p>
 {table(prof, ["Z (mm)", "measured on the scan", "computed min", "computed max"])}
