@@ -150,6 +150,7 @@ def map_kernel(
 
 
 def _with_ghost(k: ScanKernel, maps: TracedMaps, iz: int) -> ScanKernel:
+    """``k`` with the coarse ghost map of ``maps`` at its ``iz``-th distance."""
     return replace(
         k, ghost=maps.ghost[iz], ghost_lo_um=maps.coarse_lo_um, ghost_bin_um=maps.coarse_bin_um
     )
@@ -272,7 +273,7 @@ def stamp_kernel_sets(
     tracer: PixelTracer | None,
 ) -> list[list[list[ScanKernel]]]:
     """A stamp's kernels [set][row][level] for each set of distances (``source`` resolved:
-    "paraxial" or "trace"), from one trace per row where anything is traced."""
+    "paraxial", "trace" or "wave"), from one trace per row where anything is traced."""
     sampling = Sampling(_rays(source, n_rays), seed, fresnel)
     tr = tracer_for(design, sampling, tracer)  # one reverse path for every row
     band = None
@@ -315,14 +316,7 @@ def _row_kernels(
     ks = []
     for iz, z in enumerate(np.asarray(z_mm, dtype=np.float64)):
         k = paraxial_kernel(design, float(z))
-        if ghosts:
-            k = replace(
-                k,
-                ghost=maps.ghost[iz],
-                ghost_lo_um=maps.coarse_lo_um,
-                ghost_bin_um=maps.coarse_bin_um,
-            )
-        ks.append(k)
+        ks.append(_with_ghost(k, maps, iz) if ghosts else k)
     return ks
 
 
