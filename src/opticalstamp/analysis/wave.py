@@ -55,6 +55,7 @@ from .wavebase import (
     mask_field,
     point_sources,
     propagate,
+    rectangular,
     response_summary,
     stack_axes,
     stack_grid,
@@ -276,6 +277,7 @@ class LSFSource:
     sequences: list[str]
     modes: np.ndarray = field(repr=False)  # (q, nb) coherent modes of LSF_x (x_modes)
     light: float = 0.0
+    meta: dict = field(default_factory=dict)  # how the stack was traversed (2-D path)
 
     def lsf_x(self, z_mm) -> tuple[np.ndarray, np.ndarray, float, dict]:
         """As :func:`wave_lsf_x` at the heights ``z_mm`` (each <= ``z_max_mm``)."""
@@ -298,7 +300,13 @@ def lsf_source(
     sampling: WaveSampling | None = None,
 ) -> LSFSource:
     """The stack traversed once for the pixel: an :class:`LSFSource` for every Z up to
-    ``z_max_mm`` (the analyses that refine their heights ask it again and again)."""
+    ``z_max_mm`` (the analyses that refine their heights ask it again and again). Holes
+    that are not rectangles (circles) take the 2-D path
+    (:func:`~.wave2dlsf.lsf_source_2d`, on the run's device)."""
+    if not rectangular(design):
+        from .wave2dlsf import lsf_source_2d
+
+        return lsf_source_2d(design, z_max_mm, pixel=pixel, sampling=sampling)
     smp = wave_sampling(design) if sampling is None else sampling
     with one_blas_thread():
         terms, axes, _ = _stack(design, pixel, smp)

@@ -34,6 +34,7 @@ from scipy import special
 from ..design import Design
 from ..raytrace.stack import lattice_of, output_pitch
 from ..validate import InputError
+from .arrays import CPU, Backend, wave_backend
 from .wavebase import (
     WaveSampling,
     band_integral,
@@ -177,7 +178,8 @@ def transfer(
 
 @dataclass
 class _Stack:
-    """What the operator A needs: grids, source fields, transfer functions, masks.
+    """What the operator A needs: grids, source fields, transfer functions, masks, on the
+    backend ``bk`` (:mod:`.arrays`: NumPy or CuPy arrays).
 
     A maps source amplitudes (k, n0y, n0x) to the in-band spectrum of the field after
     the object-side mask, (k, nb) over the ``band_idx`` bins, scaled so that its squared
@@ -185,46 +187,62 @@ class _Stack:
 
     x: np.ndarray
     y: np.ndarray
-    ux: np.ndarray  # (nx, n0x) source fields at the first mask, x
-    uy: np.ndarray  # (ny, n0y)
-    first: np.ndarray | None  # exact-over-paraxial factor below the first mask
-    masks: list[np.ndarray]
-    steps: list[np.ndarray]  # transfer to mask i from mask i - 1 (i >= 1)
-    band_idx: tuple[np.ndarray, np.ndarray]  # (iy, ix) of the in-band bins
+    ux: object  # (nx, n0x) source fields at the first mask, x
+    uy: object  # (ny, n0y)
+    first: object | None  # exact-over-paraxial factor below the first mask
+    masks: list
+    steps: list  # transfer to mask i from mask i - 1 (i >= 1)
+    band_idx: tuple  # (iy, ix) of the in-band bins
+    bk: Backend = CPU
 
-    def forward(self, w: np.ndarray) -> np.ndarray:
-        """Source amplitudes w (k, n0y, n0x) -> in-band spectra after the top mask."""
-        f = np.einsum("ya,kab,xb->kyx", self.uy, w, self.ux, optimize=True)
+    def _top(self, w):
+        """Source amplitudes w (k, n0y, n0x) -> the fields just above the top mask."""
+        bk, xp = self.bk, self.bk.xp
+        f = xp.einsum("ya,kab,xb->kyx", self.uy, w, self.ux, optimize=True)
         if self.first is not None:
-            f = sfft.ifft2(sfft.fft2(f, workers=-1) * self.first, workers=-1)
+            f = bk.ifft2(bk.fft2(f) * self.first)
         f *= self.masks[0]
         for m, h in zip(self.masks[1:], self.steps, strict=True):
-            f = sfft.ifft2(sfft.fft2(f, workers=-1) * h, workers=-1)
+            f = bk.ifft2(bk.fft2(f) * h)
             f *= m
-        iy, ix = self.band_idx
-        return sfft.fft2(f, workers=-1, norm="ortho")[:, iy, ix]
+        return f
 
-    def adjoint(self, o: np.ndarray) -> np.ndarray:
-        """In-band spectra (k, nb) -> source amplitudes (k, n0y, n0x)."""
+    def forward(self, w, *, with_power: bool = False):
+        """Source amplitudes w (k, n0y, n0x) -> in-band spectra after the top mask;
+        ``with_power``: also the power of each field through the top mask before the
+        band cut (k,), over dx dy."""
+        f = self._top(w)
         iy, ix = self.band_idx
-        g = np.zeros((o.shape[0], self.y.size, self.x.size), dtype=np.complex128)
+        out = self.bk.fft2(f, norm="ortho")[:, iy, ix]
+        if not with_power:
+            return out
+        return out, (abs(f) ** 2).sum(axis=(1, 2))
+
+    def adjoint(self, o):
+        """In-band spectra (k, nb) -> source amplitudes (k, n0y, n0x)."""
+        bk, xp = self.bk, self.bk.xp
+        iy, ix = self.band_idx
+        g = xp.zeros((o.shape[0], self.y.size, self.x.size), dtype=xp.complex128)
         g[:, iy, ix] = o
-        g = sfft.ifft2(g, workers=-1, norm="ortho") * self.masks[-1]
+        g = bk.ifft2(g, norm="ortho") * self.masks[-1]
         for m, h in zip(self.masks[-2::-1], self.steps[::-1], strict=True):
-            g = sfft.ifft2(sfft.fft2(g, workers=-1) * h.conj(), workers=-1)
+            g = bk.ifft2(bk.fft2(g) * h.conj())
             g *= m
         if self.first is not None:
-            g = sfft.ifft2(sfft.fft2(g, workers=-1) * self.first.conj(), workers=-1)
-        return np.einsum("ya,kyx,xb->kab", self.uy.conj(), g, self.ux.conj(), optimize=True)
+            g = bk.ifft2(bk.fft2(g) * self.first.conj())
+        return xp.einsum("ya,kyx,xb->kab", self.uy.conj(), g, self.ux.conj(), optimize=True)
 
-    def field(self, o: np.ndarray) -> np.ndarray:
+    def field(self, o):
         """The band-limited field (ny, nx) on the stack grid of an in-band spectrum."""
-        g = np.zeros((self.y.size, self.x.size), dtype=np.complex128)
+        xp = self.bk.xp
+        g = xp.zeros((self.y.size, self.x.size), dtype=xp.complex128)
         g[self.band_idx] = o
-        return sfft.ifft2(g, workers=-1, norm="ortho")
+        return self.bk.ifft2(g, norm="ortho")
 
 
-def _stack(design, pixel, smp: WaveSampling, propagator: str) -> tuple[_Stack, list[Layer]]:
+def _stack(
+    design, pixel, smp: WaveSampling, propagator: str, bk: Backend = CPU
+) -> tuple[_Stack, list[Layer]]:
     lam, b = smp.wavelength_um, smp.band
     reach = 2 * lattice_of(design).pitch + 4 * (smp.margin_um + design.reference_plane_um * b)
     layers = layers_of(design, pixel, reach)
@@ -239,7 +257,7 @@ def _stack(design, pixel, smp: WaveSampling, propagator: str) -> tuple[_Stack, l
         fields.append(point_sources(g, x0, lam * w, lam, layers[0].reduced, b))
     first = None
     if propagator == "exact":
-        first = transfer(x, y, layers[0].slabs, lam, b, propagator, relative=True)
+        first = bk.put(transfer(x, y, layers[0].slabs, lam, b, propagator, relative=True))
     masks = []
     for lay in layers:
         r_i = lay.reduced * b + smp.margin_um + max(max(h.hw, h.hh) for h in lay.holes)
@@ -248,55 +266,69 @@ def _stack(design, pixel, smp: WaveSampling, propagator: str) -> tuple[_Stack, l
             for h in lay.holes
             if src[0][0] - r_i < h.cx < src[0][1] + r_i and src[1][0] - r_i < h.cy < src[1][1] + r_i
         ]
-        masks.append(mask_field_2d(x, y, near, b, lam))
-    steps = [transfer(x, y, lay.slabs, lam, b, propagator) for lay in layers[1:]]
+        masks.append(bk.put(mask_field_2d(x, y, near, b, lam)))
+    steps = [bk.put(transfer(x, y, lay.slabs, lam, b, propagator)) for lay in layers[1:]]
     ky = np.flatnonzero(in_band(sfft.fftfreq(y.size, y[1] - y[0]), lam, b))
     kx = np.flatnonzero(in_band(sfft.fftfreq(x.size, x[1] - x[0]), lam, b))
     idx = tuple(np.ix_(ky, kx)[i] * np.ones((ky.size, kx.size), int) for i in (0, 1))
-    st = _Stack(x, y, fields[0], fields[1], first, masks, steps, (idx[0].ravel(), idx[1].ravel()))
+    band_idx = (bk.put(idx[0].ravel()), bk.put(idx[1].ravel()))
+    ux, uy = bk.put(fields[0]), bk.put(fields[1])
+    st = _Stack(x, y, ux, uy, first, masks, steps, band_idx, bk)
     return st, layers
 
 
 def coherent_modes(
     st: _Stack, *, tol: float = RANGE_TOL, block: int = BLOCK, seed: int = 0, max_modes=4096
-) -> tuple[np.ndarray, dict]:
+) -> tuple[object, dict]:
     """Coherent modes of the in-band light after the top mask: (r, nb) in-band spectra
-    (:class:`_Stack`) whose fields' intensities add up to the pixel's responsivity
-    (um^2 sr per um^2), and what the range finder did.
+    (:class:`_Stack`, on its backend) whose fields' intensities add up to the pixel's
+    responsivity (um^2 sr per um^2), and what the range finder did.
 
     Blocks of complex Gaussian source vectors are pushed through A until a fresh block
     finds, on average, less than ``tol`` of the mean power of A w outside the range kept
     (an unbiased estimate of the relative Frobenius power left out); then B = E^H A by
     the adjoint, and the eigenvectors of B B^H give the modes, the weakest dropped while
-    their power stays below ``tol``.
+    their power stays below ``tol``. The same vectors estimate the power through the top
+    mask before the band cut (E |A_full w|^2 = |A_full|_F^2): ``info["transmitted"]``
+    and its standard error, the light a mask sends beyond the band being the difference
+    from the modes' power.
     """
+    bk, xp = st.bk, st.bk.xp
     rng = np.random.default_rng(seed)
     n0y, n0x = st.uy.shape[1], st.ux.shape[1]
-    q = np.zeros((0, st.band_idx[0].size), dtype=np.complex128)  # orthonormal rows
+    q = xp.zeros((0, st.band_idx[0].size), dtype=xp.complex128)  # orthonormal rows
     total, missing, tries = 0.0, np.inf, 0
+    through: list[np.ndarray] = []
+    step2 = float((st.x[1] - st.x[0]) * (st.y[1] - st.y[0]))
     while missing > tol * total and q.shape[0] < max_modes:
         w = rng.standard_normal((block, n0y, n0x)) + 1j * rng.standard_normal((block, n0y, n0x))
-        y = st.forward(w / np.sqrt(2))
+        y, full = st.forward(bk.put(w / np.sqrt(2)), with_power=True)
+        through.append(bk.host(full))
         tries += 1
-        total += (np.vdot(y, y).real / block - total) / tries  # running mean of |A w|^2
+        total += (float(xp.vdot(y, y).real) / block - total) / tries  # running mean |A w|^2
         for _ in range(2):  # project out the range found (twice: stable)
             y = y - (y @ q.conj().T) @ q
-        missing = np.vdot(y, y).real / block
-        p, v = np.linalg.eigh(y @ y.conj().T)  # orthonormalise the block (Gram)
-        good = p > 1e-24 * max(p.max(initial=0.0), 1e-300)
-        q = np.concatenate([q, (v[:, good] / np.sqrt(p[good])).conj().T @ y])
-    b = np.concatenate([st.adjoint(q[i : i + block]) for i in range(0, q.shape[0], block)])
+        missing = float(xp.vdot(y, y).real) / block
+        p, v = xp.linalg.eigh(y @ y.conj().T)  # orthonormalise the block (Gram)
+        good = p > 1e-24 * max(float(p.max()) if p.size else 0.0, 1e-300)
+        q = xp.concatenate([q, (v[:, good] / xp.sqrt(p[good])).conj().T @ y])
+    b = xp.concatenate([st.adjoint(q[i : i + block]) for i in range(0, q.shape[0], block)])
     bm = b.reshape(q.shape[0], -1).conj()  # B = E^H A, (r, n_src)
-    p, v = np.linalg.eigh(bm @ bm.conj().T)
-    p, v = np.clip(p[::-1], 0, None), v[:, ::-1]
-    keep = int(np.searchsorted(np.cumsum(p), (1 - tol) * p.sum())) + 1
-    keep = max(1, min(keep, p.size))
-    modes = (v[:, :keep] * np.sqrt(p[:keep])).T @ q
+    p, v = xp.linalg.eigh(bm @ bm.conj().T)
+    p, v = xp.clip(p[::-1], 0, None), v[:, ::-1]
+    ph = bk.host(p)
+    keep = int(np.searchsorted(np.cumsum(ph), (1 - tol) * ph.sum())) + 1
+    keep = max(1, min(keep, ph.size))
+    modes = (v[:, :keep] * xp.sqrt(p[:keep])).T @ q
+    full = np.concatenate(through) * step2  # um^2 sr per random vector
     info = {
         "range": int(q.shape[0]),
         "modes": keep,
         "blocks": tries,
         "missing_estimate": missing / total,
+        "transmitted": float(full.mean()),
+        "transmitted_se": float(full.std(ddof=1) / np.sqrt(full.size)) if full.size > 1 else 0.0,
+        "in_band": float(ph[:keep].sum()) * step2,
     }
     return modes, info
 
@@ -326,6 +358,49 @@ class WaveMaps:
         return response_summary(self) | {"meta": self.meta}
 
 
+@dataclass(frozen=True)
+class StackModes:
+    """A pixel's in-band light just above the object-side mask, as coherent modes
+    (:func:`coherent_modes`) on the stack grid of the backend that computed them."""
+
+    stack: _Stack
+    layers: list[Layer]
+    modes: object  # (r, nb) in-band spectra (Parseval-scaled, see _Stack)
+    info: dict
+    sampling: WaveSampling
+    propagator: str
+    note: str = ""
+
+    @property
+    def bk(self) -> Backend:
+        return self.stack.bk
+
+
+def stack_modes(
+    design: Design,
+    *,
+    pixel: tuple[int, int] = (0, 0),
+    sampling: WaveSampling | None = None,
+    propagator: str = "exact",
+    tol: float = RANGE_TOL,
+    seed: int = 0,
+    device: str | None = None,
+) -> StackModes:
+    """The stack traversed once for the pixel by the 2-D path: its coherent modes above
+    the object-side mask (see :func:`wave_response_2d` for the parameters; ``device``
+    "cpu" or "cuda", None: the run's device, :func:`~.arrays.wave_backend`)."""
+    if propagator not in PROPAGATORS:
+        raise InputError(f"propagator: one of {', '.join(PROPAGATORS)} (got {propagator!r})")
+    smp = wave_sampling(design) if sampling is None else sampling
+    lam, b, step = smp.wavelength_um, smp.band, smp.step_um
+    if step > lam / (6 * b) * (1 + 1e-9):
+        raise InputError(f"sampling: step {step:g} um is coarser than lambda / (6 band)")
+    bk, note = wave_backend(device)
+    st, layers = _stack(design, pixel, smp, propagator, bk)
+    modes, info = coherent_modes(st, tol=tol, seed=seed)
+    return StackModes(st, layers, modes, info, smp, propagator, note)
+
+
 def wave_response_2d(
     design: Design,
     z_mm=(0.0, 1.0),
@@ -338,6 +413,7 @@ def wave_response_2d(
     cell_um: float | None = None,
     bin_um: float = 2.0,
     map_half_um: float = 200.0,
+    device: str | None = None,
 ) -> WaveMaps:
     """Responsivity of a used pixel on the object plane at each Z: full 2-D path.
 
@@ -353,18 +429,22 @@ def wave_response_2d(
     seed : seed of the range finder's random vectors
     cell_um : side of the central cell (default: the output pitch)
     bin_um, map_half_um : bins and half width (um) of the maps
+    device : "cpu" (NumPy) or "cuda" (CuPy); None: the run's device (:mod:`.arrays`)
     """
-    if propagator not in PROPAGATORS:
-        raise InputError(f"propagator: one of {', '.join(PROPAGATORS)} (got {propagator!r})")
-    smp = wave_sampling(design) if sampling is None else sampling
     zs = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
     if zs.size == 0 or not np.all(np.isfinite(zs)) or zs.min() < 0:
         raise InputError("z_mm: object distances must be finite and >= 0")
+    sm = stack_modes(
+        design,
+        pixel=pixel,
+        sampling=sampling,
+        propagator=propagator,
+        tol=tol,
+        seed=seed,
+        device=device,
+    )
+    st, smp, bk, xp = sm.stack, sm.sampling, sm.bk, sm.bk.xp
     lam, b, step = smp.wavelength_um, smp.band, smp.step_um
-    if step > lam / (6 * b) * (1 + 1e-9):
-        raise InputError(f"sampling: step {step:g} um is coarser than lambda / (6 band)")
-    st, layers = _stack(design, pixel, smp, propagator)
-    modes, info = coherent_modes(st, tol=tol, seed=seed)
     gap = design.reference_gap
     n_obj = design.index(design.object_medium)
     top_red = gap.thickness_um / design.index(gap.medium)
@@ -378,26 +458,17 @@ def wave_response_2d(
     lsf_x, lsf_y = np.zeros((n_z, xf.size)), np.zeros((n_z, yf.size))
     etendue, cells = np.zeros(n_z), np.zeros(n_z)
     maps = np.zeros((n_z, edges.size - 1, edges.size - 1))
-    hs = [
-        transfer(
-            xf,
-            yf,
-            [(gap.thickness_um, design.index(gap.medium)), (z * 1e3, n_obj)],
-            lam,
-            b,
-            propagator,
-        )
-        for z in zs
-    ]
-    inten = np.zeros((n_z, yf.size, xf.size))
-    u = np.zeros((yf.size, xf.size), dtype=np.complex128)
-    for m in modes:  # one mode at a time: the object grid can be large
+    slabs = [[(gap.thickness_um, design.index(gap.medium)), (z * 1e3, n_obj)] for z in zs]
+    hs = [bk.put(transfer(xf, yf, sl, lam, b, propagator)) for sl in slabs]
+    inten = xp.zeros((n_z, yf.size, xf.size))
+    u = xp.zeros((yf.size, xf.size), dtype=xp.complex128)
+    for m in sm.modes:  # one mode at a time: the object grid can be large
         u[oy : oy + st.y.size, ox : ox + st.x.size] = st.field(m)
-        s = sfft.fft2(u, workers=-1)
+        s = bk.fft2(u)
         for iz in range(n_z):
-            inten[iz] += np.abs(sfft.ifft2(s * hs[iz], workers=-1)) ** 2
+            inten[iz] += abs(bk.ifft2(s * hs[iz])) ** 2
     for iz in range(n_z):
-        inten_z = inten[iz]
+        inten_z = bk.host(inten[iz])
         lsf_x[iz] = inten_z.sum(axis=0) * step
         lsf_y[iz] = inten_z.sum(axis=1) * step
         etendue[iz] = inten_z.sum() * step * step
@@ -406,6 +477,10 @@ def wave_response_2d(
         maps[iz] = _binned(xf, yf, inten_z, edges) / (bin_um * bin_um)
     lat = lattice_of(design)
     px, py = (float(v) for v in lat.centers(*pixel))
+    meta = {"propagator": propagator, "path": "2d", "cell_um": cell, "device": bk.name}
+    meta |= {"grid": (st.y.size, st.x.size), "object_grid": (yf.size, xf.size)} | sm.info
+    if sm.note:
+        meta["note"] = sm.note
     return WaveMaps(
         design.name,
         design.fingerprint(),
@@ -420,8 +495,7 @@ def wave_response_2d(
         edges,
         maps,
         smp,
-        {"propagator": propagator, "path": "2d", "cell_um": cell, "grid": (st.y.size, st.x.size)}
-        | info,
+        meta,
     )
 
 

@@ -104,17 +104,25 @@ def rectangular(design: Design) -> bool:
     return all(m.shape != "circle" for m in design.masks)
 
 
-def stack_axes(design: Design, pixel: tuple[int, int] = (0, 0), reach_um: float = 2000.0):
+def stack_axes(
+    design: Design,
+    pixel: tuple[int, int] = (0, 0),
+    reach_um: float = 2000.0,
+    *,
+    bounds: bool = False,
+):
     """The stack's two axes (x, y) as :class:`Plane`, holes within ``reach_um`` of the
     pixel's axis (whole rows of the lattice in y).
 
     Parameters
     ----------
-    design : Design with rectangular holes
+    design : Design with rectangular holes (any holes with ``bounds``)
     pixel : (row, k) of the used pixel
     reach_um : holes whose centre lies farther along x are left out
+    bounds : take each hole's bounding box (a circle's square): for the rules that a
+        box bounds (the own path's slopes, mirror symmetry), not for propagation
     """
-    if not rectangular(design):
+    if not (bounds or rectangular(design)):
         raise ValueError("the separable wave path needs rectangular holes (use wave2d)")
     lat = lattice_of(design)
     row, k = pixel
@@ -162,9 +170,10 @@ def min_index(design: Design) -> float:
 def own_slope(design: Design) -> float:
     """The largest |s_x| or |s_y| of the paraxial own path (rays through the sensitive
     area and every own hole): min over pairs of planes of (h_i + h_j + |o_i - o_j|) /
-    d_ij, over both axes (the larger)."""
+    d_ij, over both axes (the larger). A circular hole counts as its bounding square (an
+    upper bound)."""
     out = 0.0
-    for ax in stack_axes(design, reach_um=0.0):
+    for ax in stack_axes(design, reach_um=0.0, bounds=True):
         d = np.concatenate([[0.0], ax.heights])
         lo = [ax.source[0]] + [rows[0][np.argmin(np.abs(rows[0].mean(1)))][0] for rows in ax.holes]
         hi = [ax.source[1]] + [rows[0][np.argmin(np.abs(rows[0].mean(1)))][1] for rows in ax.holes]

@@ -336,8 +336,8 @@ def mirror_twin(
     mirror images. Near a line's ends, or with a mask misregistered in y, it is not."""
     if pixel[0] == other[0]:
         return pixel == other
-    a = stack_axes(design, pixel, reach_um=reach_um)
-    b = stack_axes(design, other, reach_um=reach_um)
+    a = stack_axes(design, pixel, reach_um=reach_um, bounds=True)  # a circle: its box
+    b = stack_axes(design, other, reach_um=reach_um, bounds=True)
     tol = 1e-9 * max(1.0, design.sensor.row_pitch_um)
     (ax, ay), (bx, by) = a, b
     if abs(ay.source[0] + ay.source[1]) > tol or not np.allclose(ax.source, bx.source, atol=tol):
