@@ -32,7 +32,7 @@ from .common import (
     save_plot,
     writable,
 )
-from .optics import OpticsOpt
+from .optics import OpticsOpt, optics_line
 
 DaskOpt = Annotated[
     str | None, typer.Option("--dask", help="Dask scheduler address, tcp://HOST:PORT")
@@ -420,21 +420,29 @@ def tolerance(
         ),
     ] = None,
     estimator: EstimatorOpt = "surrogate",
+    optics: OpticsOpt = "auto",
     workers: WorkersOpt = None,
     dask: DaskOpt = None,
     output: OutputOpt = None,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:
-    """Monte Carlo of assembly errors: RMTF, DOF, efficiency, ghosts, sensitivity, yield."""
+    """Monte Carlo of assembly errors: RMTF, DOF, efficiency, ghosts, sensitivity, yield.
+    The optics is chosen once, for the nominal design, and every sample follows it."""
+    from ..analysis.responsivity import resolve_optics
     from ..io.files import provenance, save_dataset
     from ..studies.search import journal_of
     from ..studies.tolerance import parse_spec, tolerance_dataset
     from ..studies.tolerance import tolerance as run
+    from ..studies.waveestimate import wave_estimator_text
 
     _check_estimator(estimator)
     _check_dask(dask)
     d = open_design(design)
+    try:  # once, for the nominal design; a bad or impossible optics before any work
+        opt = resolve_optics(d, optics)
+    except ValueError as err:
+        fail(f"--{err}")
     zs = float_list(z, "--z", 0.0, 10.0)
     try:
         parse_spec(spec, zs)
@@ -460,6 +468,7 @@ def tolerance(
             journal=journal_of(output),
             progress=not as_json,
             estimator=estimator,
+            optics=opt,
         )
     except (ValueError, OSError) as err:
         fail(str(err))
@@ -468,7 +477,14 @@ def tolerance(
         save_dataset(tolerance_dataset(r, d), output)
     dpi = r.dpi
     key = f"rmtf{dpi:g}"
-    lines = [f"{d.name}: {samples} samples ({data['n_failed']} failed)"]
+    wave = opt.engine == "wave"
+    lines = [
+        f"{d.name}: {samples} samples ({data['n_failed']} failed)",
+        "  "
+        + optics_line(r.meta["optics"])
+        + "; every sample by the same optics"
+        + (f" (the search's {wave_estimator_text()})" if wave and estimator == "surrogate" else ""),
+    ]
     for zz, pc in data[key].items():
         lines.append(
             f"  RMTF {dpi:g} dpi at Z = {zz} mm: median {pc['p50']:.3f} "
@@ -478,19 +494,20 @@ def tolerance(
     dp = data["dof_mm"]
     lines.append(
         f"  DOF median {dp['p50']:.2f} mm (5-95 %: {dp['p5']:.2f}-{dp['p95']:.2f}), "
-        f"nominal {r.nominal['dof_mm']:.2f} "
-        + ("(exact tracer)" if estimator == "trace" else "(surrogate)")
+        f"nominal {r.nominal['dof_mm']:.2f} " + _estimator_tag(estimator, wave)
     )
     ex = r.meta.get("nominal_exact")
     if ex:
         off = r.meta["nominal_disagrees"]
+        est = "wave estimator" if wave else "surrogate"
         lines.append(
-            f"  nominal by the exact tracer (figure of record): DOF {ex['dof_mm']:.2f} mm, "
-            f"efficiency 1/{1 / ex['efficiency_ratio']:.0f}, ghosts {ex['ghost_fraction']:.3f}"
+            f"  nominal by the {'exact wave figures' if wave else 'exact tracer'} (figure of "
+            f"record): DOF {ex['dof_mm']:.2f} mm, efficiency 1/{1 / ex['efficiency_ratio']:.0f}"
+            f", ghosts {ex['ghost_fraction']:.3f}"
             + (
-                f"; the surrogate is off beyond its stated accuracy in {', '.join(off)}"
+                f"; the {est} is off beyond its stated accuracy in {', '.join(off)}"
                 if off
-                else "; the surrogate agrees within its stated accuracy"
+                else f"; the {est} agrees within its stated accuracy"
             )
         )
     lines.append(
@@ -506,6 +523,13 @@ def tolerance(
         from ..report.plotting import plot_tolerance
 
         save_plot(plot_tolerance(r), plot)
+
+
+def _estimator_tag(estimator: str, wave: bool) -> str:
+    """What the samples' figures come from, in brackets."""
+    if estimator == "trace":
+        return "(exact wave figures)" if wave else "(exact tracer)"
+    return "(wave estimator)" if wave else "(surrogate)"
 
 
 @command()

@@ -149,7 +149,8 @@ def build_report(
     if paper_sections is None:
         paper_sections = is_paper_preset(design)
     work = report_work(quick, n_rays, z_mm, paper_sections)
-    jobs = study_jobs(design, seed, fresnel, work, dpi, tolerance_spec(parse_report_spec(spec)))
+    tol_spec = tolerance_spec(parse_report_spec(spec))
+    jobs = study_jobs(design, seed, fresnel, work, dpi, tol_spec, optics=opt)
     traced = dict(seed=seed, fresnel=fresnel)
     # the folder is replaced as a whole once everything is written, or not at all
     with replace_folder(Path(out_dir)) as tmp, Background(jobs, join_job) as background:

@@ -5,8 +5,10 @@ the budget of the report's :class:`~opticalstamp.report.work.StudyBudget`."""
 
 from __future__ import annotations
 
+import dataclasses
 from types import MappingProxyType
 
+from ..analysis.responsivity import RAY, Optics
 from ..design import Design, load_design
 from ..raytrace.stack import output_pitch
 from ..units import dpi_of_pitch
@@ -23,6 +25,13 @@ STUDY_PARTS = 2
 #: bracket).
 REPORT_ROD_CURVES = MappingProxyType(
     {"dpi": (100.0, 200.0), "heights_mm": tuple(0.25 * i - 1.5 for i in range(13))}
+)
+#: The report's search and tolerance study by wave optics (:func:`study_budget`): the
+#: search's wave estimator costs about 0.43 s a design against the ray surrogate's
+#: 0.07 s (the prototype, one core), so fewer designs and samples keep the studies
+#: within the time the report's sections take (benchmarks/bench_report.py).
+WAVE_STUDY_BUDGET = MappingProxyType(
+    {"search_population": 16, "search_generations": 6, "tolerance_samples": 60}
 )
 #: report --spec figures that the tolerance study evaluates -> its name for them
 _TOLERANCE_FIGURES = MappingProxyType(
@@ -45,11 +54,15 @@ def study_jobs(
     work: Work,
     dpi: float,
     tol_spec: str | None = None,
+    optics: Optics = RAY,
 ) -> dict:
     """The report's studies as background jobs: name -> list of (function, arguments),
     the tasks whose results make the job (:func:`join_job`). The parameter study of the
     paper's unstated parameters only with the paper's sections (``work.paper``); the
-    search and the tolerance study evaluate in closed form, which needs square holes."""
+    search and the tolerance study evaluate in closed form, which needs square holes.
+    ``optics``: the report's resolved optics, which the search judges every candidate
+    by and the tolerance study every sample by (with its budget,
+    :func:`study_budget`)."""
     if not work.studies:
         return {}
     jobs = {}
@@ -58,9 +71,20 @@ def study_jobs(
         jobs["parameter_study"] = [(run_study, (design, seed, fresnel, p)) for p in parts]
     jobs["rodlens"] = [(run_rodlens, (seed, fresnel, dpi))]
     if all(m.shape != "circle" for m in design.masks):
-        jobs["search"] = [(run_search, (design, seed, dpi, work.budget))]
-        jobs["tolerance"] = [(run_tolerance, (design, seed, dpi, tol_spec, work.budget))]
+        budget = study_budget(work.budget, optics)
+        jobs["search"] = [(run_search, (design, seed, dpi, budget, optics.engine))]
+        jobs["tolerance"] = [(run_tolerance, (design, seed, dpi, tol_spec, budget, optics))]
     return jobs
+
+
+def study_budget(budget: StudyBudget, optics: Optics) -> StudyBudget:
+    """The budget of the report's search and tolerance study by ``optics``: by wave
+    optics each evaluation (the search's wave estimator) costs about six times a ray
+    surrogate's, so the designs searched and the samples drawn are cut to
+    :data:`WAVE_STUDY_BUDGET` (the report's time: benchmarks/bench_report.py)."""
+    if optics.engine != "wave":
+        return budget
+    return dataclasses.replace(budget, **WAVE_STUDY_BUDGET)
 
 
 def join_job(name: str, results: list):
@@ -101,10 +125,11 @@ def run_rodlens(seed: int, fresnel: bool, dof_dpi: float):  # pragma: no cover -
 
 
 def run_search(
-    design: Design, seed: int, dof_dpi: float, budget: StudyBudget
+    design: Design, seed: int, dof_dpi: float, budget: StudyBudget, optics: str = "ray"
 ):  # pragma: no cover - background
     """The compact design search of a report (the CLI's `search` runs the full budget),
-    its front re-verified by the exact tracer."""
+    every candidate judged by ``optics`` (the report's engine, "ray" or "wave"), its
+    front re-verified by the exact tracer (by wave optics: the exact wave figures)."""
     from ..studies.search import search, verify_front
 
     dpi = dpi_of_pitch(output_pitch(design))
@@ -117,20 +142,38 @@ def run_search(
         seed=seed,
         ghost_rays=budget.search_ghost_rays,
         workers=1,
+        optics=optics,
     )
     return verify_front(
-        res, ghost_rays=budget.verify_ghost_rays, lsf_rays=budget.verify_lsf_rays, workers=1
+        res,
+        ghost_rays=budget.verify_ghost_rays,
+        lsf_rays=budget.verify_lsf_rays,
+        wave_ghost_rays=budget.verify_ghost_rays,
+        wave_lsf_rays=budget.verify_lsf_rays,
+        workers=1,
     )
 
 
 def run_tolerance(
-    design: Design, seed: int, dpi: float, spec: str | None, budget: StudyBudget
+    design: Design,
+    seed: int,
+    dpi: float,
+    spec: str | None,
+    budget: StudyBudget,
+    optics: Optics = RAY,
 ):  # pragma: no cover - a background process
-    """The report's tolerance study (the CLI's `tolerance` runs more samples)."""
+    """The report's tolerance study (the CLI's `tolerance` runs more samples), every
+    sample by the report's resolved ``optics``."""
     from ..studies.tolerance import tolerance
 
     return tolerance(
-        design, samples=budget.tolerance_samples, seed=seed, dpi=dpi, spec=spec, workers=1
+        design,
+        samples=budget.tolerance_samples,
+        seed=seed,
+        dpi=dpi,
+        spec=spec,
+        workers=1,
+        optics=optics,
     )
 
 

@@ -138,7 +138,8 @@ def _yield_doubt(tol: dict) -> str | None:
     return (
         f"the tolerance yield is left out: its estimator ({tol['meta'].get('estimator', '')}) "
         f"is off beyond its stated accuracy on the nominal design in {', '.join(off)} "
-        "(tolerance --estimator trace gives one from the exact tracer)"
+        "(tolerance --estimator trace evaluates every sample exactly: by the exact tracer, "
+        "or by wave optics the exact wave figures)"
     )
 
 

@@ -10,7 +10,11 @@ by (seed, sample index) so that results do not depend on workers or order:
   array, where it changes the air gap by (half the array length) x tan(tilt).
 
 Each sample is evaluated like a search candidate (:mod:`evaluate`): RMTF at the chosen
-dpi and distances, depth of field, light efficiency, ghost fraction. A one-at-a-time
+dpi and distances, depth of field, light efficiency, ghost fraction. The optics (ray,
+wave or auto) is resolved once, for the nominal design, and every sample is evaluated by
+that engine: by wave optics with the search's wave estimator
+(:func:`~opticalstamp.studies.waveestimate.evaluate_wave`), its nominal verified with the
+exact wave figures. A one-at-a-time
 sensitivity table (each error at +-1 sigma alone) ranks the sources; the yield is the
 fraction of samples that meet a specification such as ``dof>=2.2,ghost<=0.2``.
 """
@@ -23,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..analysis.responsivity import Optics, resolve_optics
 from ..defaults import TOLERANCE_SAMPLES, TOLERANCE_SIGMAS
 from ..design import Design, design_from_dict, stack_params, with_stack
 from ..design.resolution import dof_chart_dpi
@@ -32,6 +37,7 @@ from ..validate import check_seed
 from .evaluate import check_figures
 from .runner import run_tasks, task_key
 from .verify import ESTIMATORS, check_estimator, disagreements, evaluate_with, exact_figures
+from .waveestimate import EXACT_WAVE, WAVE_ESTIMATE, exact_wave_figures, wave_disagreements
 
 DEFAULT_SIGMAS = TOLERANCE_SIGMAS
 SPEC_RE = re.compile(r"^(dof|ghost_radius|ghost|efficiency|rmtf@[0-9.]+)(>=|<=)(-?[0-9.]+)$")
@@ -285,6 +291,7 @@ class ToleranceResult:
         attrs = {"design": self.design, "seed": self.seed, "spec": self.spec}
         attrs |= {f"sigma_{k}": float(v) for k, v in self.sigmas.items()}
         attrs |= {k: v for k, v in self.meta.items() if isinstance(v, int | float | str)}
+        attrs |= optics_attrs(self.meta)
         return xr.Dataset(
             data,
             coords={
@@ -315,6 +322,7 @@ def tolerance(
     verify: bool = True,
     estimator: str = "surrogate",
     device: str | None = None,
+    optics: str | Optics = "ray",
 ) -> ToleranceResult:
     """Monte Carlo of assembly errors, sensitivity table and yield (see module doc).
 
@@ -330,9 +338,22 @@ def tolerance(
     ``device``: where the samples trace their rays (:func:`~opticalstamp.device.run_device`,
     resolved once here; None: the device of the run in progress), handed to the workers in
     each task's payload.
+    ``optics``: "ray", "wave" or "auto" (or a resolved
+    :class:`~opticalstamp.analysis.responsivity.Optics`), resolved once for the nominal
+    design (:func:`~opticalstamp.analysis.responsivity.resolve_optics`) and applied to
+    every sample and every design of the sensitivity table: by wave optics each is
+    evaluated by the search's wave estimator
+    (:func:`~opticalstamp.studies.waveestimate.evaluate_wave`; with ``estimator`` "trace"
+    the exact wave figures), and ``verify`` checks the nominal against the exact wave
+    figures (:func:`~opticalstamp.studies.waveestimate.exact_wave_figures`) within the
+    estimator's stated accuracy (``WAVE_ACCURACY``). ``meta["optics"]``: the resolved
+    optics (:meth:`~opticalstamp.analysis.responsivity.Optics.to_dict`); each sample's
+    figures name their engine (``"optics"``). A sample the wave engine cannot do (a hole
+    perturbed until the pixel's acceptance cone cuts the band) is a failed sample.
     """
     check_estimator(estimator)
     check_seed(seed)
+    opt = resolve_optics(design, optics)
     dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     sg = DEFAULT_SIGMAS | (sigmas or {})
     if any(v < 0 for v in sg.values()):
@@ -349,6 +370,9 @@ def tolerance(
     }
     if estimator == "trace":
         options["estimator"] = "trace"
+    wave = opt.engine == "wave"
+    if wave:  # absent for ray optics: the tasks' keys of earlier journals hold
+        options["optics"] = "wave"
 
     where = run_device(device)
 
@@ -430,18 +454,46 @@ def tolerance(
         yield_fraction=yld,
         meta={
             "ghost_rays": ghost_rays,
-            "estimator": ESTIMATORS[estimator],
+            "estimator": _estimator_text(estimator, wave),
+            "optics": opt.to_dict(),
         }
-        | _nominal_exact(design, nominal, dpi, z_mm, seed, verify and estimator == "surrogate"),
+        | _nominal_exact(
+            design, nominal, dpi, z_mm, seed, verify and estimator == "surrogate", wave
+        ),
     )
 
 
-def _nominal_exact(design: Design, nominal: dict, dpi: float, z_mm, seed: int, verify: bool):
-    """The nominal design's exact figures beside the surrogate's (see :func:`tolerance`)."""
+def _estimator_text(estimator: str, wave: bool) -> str:
+    """How each sample is evaluated, in words (the ray estimators of :data:`ESTIMATORS`,
+    or their wave counterparts)."""
+    if wave:
+        return EXACT_WAVE if estimator == "trace" else WAVE_ESTIMATE
+    return ESTIMATORS[estimator]
+
+
+def _nominal_exact(
+    design: Design, nominal: dict, dpi: float, z_mm, seed: int, verify: bool, wave: bool = False
+):
+    """The nominal design's exact figures beside the estimate's (see :func:`tolerance`):
+    the exact tracer's, or by wave optics the exact wave figures."""
     if not verify:
         return {}
-    ex = exact_figures(design, dpi=dpi, rmtf_z_mm=tuple(float(z) for z in z_mm), seed=seed)
+    zs = tuple(float(z) for z in z_mm)
+    if wave:
+        ex = exact_wave_figures(design, dpi=dpi, rmtf_z_mm=zs, seed=seed)
+        return {"nominal_exact": ex, "nominal_disagrees": wave_disagreements(nominal, ex)}
+    ex = exact_figures(design, dpi=dpi, rmtf_z_mm=zs, seed=seed)
     return {"nominal_exact": ex, "nominal_disagrees": disagreements(nominal, ex)}
+
+
+def optics_attrs(meta: dict) -> dict:
+    """A study's optics as a dataset's plain attributes: ``optics`` (the engine that gave
+    the figures: "ray" or "wave"), ``optics_asked``, ``optics_reason`` (none for a study
+    run before the optics was recorded)."""
+    o = meta.get("optics")
+    if not o:
+        return {}
+    return {"optics": o["engine"], "optics_asked": o["asked"], "optics_reason": o["reason"]}
 
 
 def tolerance_dataset(res: ToleranceResult, design: Design):
@@ -481,5 +533,6 @@ def tolerance_dataset(res: ToleranceResult, design: Design):
             "yield": res.yield_fraction,
             "sensitivity": res.sensitivity,
             "nominal": res.nominal,
-        },
+        }
+        | optics_attrs(res.meta),
     )

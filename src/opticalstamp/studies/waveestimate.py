@@ -321,10 +321,15 @@ def optics_used_text(results: dict) -> str:
         for k, v in sorted(used.items())
     )
     if used.get("wave"):
-        a = WAVE_ACCURACY
-        text += (
-            f" (wave estimator, {FAST_ORDERS:g} diffraction orders; stated accuracy against "
-            f"the exact wave figures: depth of field {a['dof_mm']:g} mm, RMTF {a['rmtf']:g}, "
-            f"light {a['efficiency_ratio']:.0%}, ghost fraction {a['ghost_fraction']:g})"
-        )
+        text += f" ({wave_estimator_text()})"
     return text
+
+
+def wave_estimator_text() -> str:
+    """The wave estimator and its stated accuracy (:data:`WAVE_ACCURACY`), in words."""
+    a = WAVE_ACCURACY
+    return (
+        f"wave estimator, {FAST_ORDERS:g} diffraction orders; stated accuracy against "
+        f"the exact wave figures: depth of field {a['dof_mm']:g} mm, RMTF {a['rmtf']:g}, "
+        f"light {a['efficiency_ratio']:.0%}, ghost fraction {a['ghost_fraction']:g}"
+    )

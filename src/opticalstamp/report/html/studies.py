@@ -60,20 +60,29 @@ def search_html(
     ref = s["reference"]
     verified = "verified_by" in s["meta"]
     acc = s["meta"].get("surrogate_accuracy", {})
+    wave = s["meta"].get("optics") == "wave"
+    wacc = s["meta"].get("wave_accuracy", {})
     note = (
-        "Each point of the front was then traced exactly: the exact figures are the figures "
-        "of record, the surrogate's are beside them, and a point is flagged where they differ "
-        f"by more than the surrogate's measured accuracy (depth of field "
+        "The front was not re-verified."
+        if not verified
+        else "Each point of the front was then evaluated by the exact wave figures: they are "
+        "the figures of record, the wave estimator's are beside them (the columns "
+        "'surrogate'), and a point is flagged where they differ by more than the estimator's "
+        f"measured accuracy (depth of field {wacc.get('dof_mm', 0):g} mm; docs/search.md)."
+        if wave
+        else "Each point of the front was then traced exactly: the exact figures are the "
+        "figures of record, the surrogate's are beside them, and a point is flagged where they "
+        f"differ by more than the surrogate's measured accuracy (depth of field "
         f"{acc.get('dof_mm', 0):g} mm where the ghost fraction is below 0.2, "
         f"{acc.get('dof_mm_high_ghost', 0):g} mm above; docs/search.md)."
-        if verified
-        else "The front was not re-verified by the exact tracer."
     )
+    ranked = s["meta"].get("wave_estimator", "") if wave else s["meta"]["estimator"]
     return f"""<h2>Design search (paper §3)</h2>
 <p>NSGA-II over hole sizes and slab thicknesses ({s["n_evaluations"]} designs,
 {s["n_feasible"]} feasible: no ghost light within {s["meta"]["near_mm"]:g} mm, stack within
 {s["meta"]["budget_mm"]:g} mm; a compact run, `opticalstamp search` runs 480), ranked by the
-{html.escape(s["meta"]["estimator"])}, {html.escape(s["meta"].get("optics", "ray"))} optics.
+{html.escape(ranked)}, every candidate by
+{html.escape(s["meta"].get("optics", "ray"))} optics (the report's).
 {note} This design: efficiency {one_in(ref["efficiency_ratio"])}, depth of field
 {ref["dof_mm"]:.2f} mm at {s["meta"]["dof_dpi"]:g} dpi by the search's exact check
 ({headline_dof(rmtf)}), dominated by
@@ -98,6 +107,12 @@ not apply). Layers and slabs object side first.</p>
 {tol}"""
 
 
+def optics_engine(t: dict) -> str:
+    """The engine that gave a tolerance study's figures ("ray" for a study run before the
+    optics was recorded)."""
+    return (t["meta"].get("optics") or {}).get("engine", "ray")
+
+
 def tolerance_html(t: dict | None) -> str:
     """The tolerance study (paper §5): the RMTF's spread, the sensitivities, the yield
     (empty where it was not run)."""
@@ -113,17 +128,19 @@ def tolerance_html(t: dict | None) -> str:
     ]
     rm = [[z, v["p5"], v["p50"], v["p95"], t["nominal"]["rmtf_at"][z]] for z, v in t[key].items()]
     ex = t["meta"].get("nominal_exact")
+    wave = optics_engine(t) == "wave"
+    est = "wave estimator" if wave else "surrogate"
     nominal = ""
     if ex:
         off = t["meta"].get("nominal_disagrees") or []
         nominal = (
-            f" The nominal design traced exactly: depth of field {ex['dof_mm']:.2f} mm "
-            f"(surrogate {t['nominal']['dof_mm']:.2f} mm), ghost fraction "
-            f"{ex['ghost_fraction']:.3f}"
+            f" The nominal design {'by the exact wave figures' if wave else 'traced exactly'}"
+            f": depth of field {ex['dof_mm']:.2f} mm ({est} {t['nominal']['dof_mm']:.2f} mm), "
+            f"ghost fraction {ex['ghost_fraction']:.3f}"
             + (
-                f"; the surrogate is off beyond its accuracy in {', '.join(off)}."
+                f"; the {est} is off beyond its accuracy in {', '.join(off)}."
                 if off
-                else "; the surrogate agrees within its accuracy."
+                else f"; the {est} agrees within its accuracy."
             )
         )
     yld = (
@@ -136,7 +153,8 @@ def tolerance_html(t: dict | None) -> str:
 <p>{t["n_samples"]} Monte Carlo samples: misregistration {t["sigmas"]["misregistration_um"]:g}
 um, holes {t["sigmas"]["hole_um"]:g} µm, plates and gaps {t["sigmas"]["thickness_um"]:g} µm,
 tilt {t["sigmas"]["tilt_deg"]:g} deg (1 sigma), each evaluated by the
-{html.escape(t["meta"]["estimator"])}. {yld}{nominal}
+{html.escape(t["meta"]["estimator"])}; {optics_engine(t)} optics, the report's, for every
+sample. {yld}{nominal}
 Errors are named from the object side: dx1 is layer 1's x misregistration, slab1 the
 thickness of the slab under layer 1.</p>
 {table(rm, ["Z (mm)", f"RMTF {t['dpi']:g} dpi 5 %", "median", "95 %", "nominal"])}
