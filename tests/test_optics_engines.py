@@ -125,8 +125,6 @@ def test_rmtf_says_which_optics(paper):
 def test_bad_optics_are_refused(paper):
     with pytest.raises(InputError, match="optics: must be one of ray, wave, auto"):
         resolve_optics(paper, "waves")
-    with pytest.raises(InputError, match="fresnel"):
-        folded_lsf(paper, z_mm=ZS, periods_um=PER, optics=_wave(paper), fresnel=True)
     circles = with_unstated(paper, hole_shape="circle")
     with pytest.raises(InputError, match="rectangular holes only"):
         resolve_optics(circles, "wave")
@@ -196,8 +194,6 @@ def test_wave_kernels_refused_where_the_engine_does_not_apply(paper):
 
     with pytest.raises(ValueError, match="rectangular holes only"):
         scan_kernels(with_unstated(paper, hole_shape="circle"), [0.0], source="wave")
-    with pytest.raises(ValueError, match="no Fresnel losses"):
-        scan_kernels(paper, [0.0], source="wave", fresnel=True)
 
 
 def test_scan_with_wave_kernels(tmp_path):

@@ -57,6 +57,8 @@ class Optics:
     reason : why, in words (the validity rule's verdict for "auto")
     sampling : the wave engine's sampling (band, grid) where ``engine`` is "wave"
     rule : the validity rule's figures for "auto" (plain data), else None
+    fresnel : Fresnel losses in the wave engine (and in the traced light it is joined
+        with); the tracer takes its own ``fresnel`` argument
     """
 
     asked: str
@@ -64,6 +66,7 @@ class Optics:
     reason: str
     sampling: WaveSampling | None = None
     rule: dict | None = None
+    fresnel: bool = False
 
     @property
     def band(self) -> float | None:
@@ -77,6 +80,7 @@ class Optics:
             "band": self.band,
             "wavelength_um": None if self.sampling is None else self.sampling.wavelength_um,
             "rule": self.rule,
+            "fresnel": self.fresnel,
         }
 
 
@@ -85,9 +89,9 @@ RAY = Optics("ray", "ray", "asked for")
 
 def wave_unavailable(design: Design, band: float | None = None) -> str | None:
     """Why the wave engine cannot give this design's responsivity yet, or None: holes
-    that are not rectangular, or a pixel acceptance cone that cuts into the band (the
-    wave engine emits every direction of its band, |s_x|, |s_y| < B, up to |s| = B sqrt 2;
-    the cone is |s| <= n0 sin(half-angle) in the medium next to the pixel)."""
+    that are not rectangular, or an illumination of several channels. (The pixel's
+    acceptance cone and Fresnel losses are filters on its angular spectrum,
+    :mod:`.wavefilter`.)"""
     if not rectangular(design):
         return "the wave engine feeds the analyses for rectangular holes only (circles: not yet)"
     if design.electronics.illumination == "rgb":
@@ -95,16 +99,6 @@ def wave_unavailable(design: Design, band: float | None = None) -> str | None:
             "electronics.illumination is rgb: three channels, whose figures the analyses "
             "do not take one by one yet (opticalstamp wave --spectrum rgb shows them)"
         )
-    cut = design.sensor.acceptance_half_angle_deg
-    if cut < 90.0:
-        b = wave_sampling(design).band if band is None else band
-        s_cut = design.index(design.slabs[0].medium) * np.sin(np.radians(cut))
-        if s_cut < b * np.sqrt(2.0):
-            return (
-                f"the pixel's acceptance cone (sensor.acceptance_half_angle_deg = {cut:g}, "
-                f"|s| <= {s_cut:.3g}) cuts into the wave band (|s| up to {b * np.sqrt(2):.3g}); "
-                "the wave engine has no angular response yet"
-            )
     return None
 
 
@@ -116,9 +110,13 @@ def resolve_optics(
     ``wave`` for a design the wave engine cannot do raises :class:`InputError` naming
     the reason; ``auto`` picks ray there, and elsewhere follows the measured validity
     rule (:func:`~opticalstamp.analysis.validity.choose_optics`). ``fresnel`` (Fresnel
-    losses) and ``method`` "paraxial" (the ray closed form) are ray optics: ``auto``
-    picks ray for them and says so, :func:`folded_lsf` refuses them with ``wave``."""
+    losses) goes with either engine (the wave engine's are filters on its angular
+    spectrum, :mod:`.wavefilter`; the result carries it). ``method`` "paraxial" (the ray
+    closed form) is ray optics: ``auto`` picks ray for it and says so, :func:`folded_lsf`
+    refuses it with ``wave``."""
     if isinstance(optics, Optics):
+        if optics.engine == "wave" and optics.fresnel != bool(fresnel):
+            return replace(optics, fresnel=bool(fresnel))
         return optics
     if optics not in OPTICS:
         raise InputError(f"optics: must be one of {', '.join(OPTICS)} (got {optics!r})")
@@ -128,11 +126,9 @@ def resolve_optics(
         why = wave_unavailable(design)
         if why is not None:
             raise InputError(f"optics: 'wave' is not available for {design.name}: {why}")
-        return Optics("wave", "wave", "asked for", wave_sampling(design))
+        return Optics("wave", "wave", "asked for", wave_sampling(design), fresnel=bool(fresnel))
     if method == "paraxial":
         return Optics("auto", "ray", "the paraxial closed form asked for is ray optics")
-    if fresnel:
-        return Optics("auto", "ray", "Fresnel losses asked for: the wave engine has none yet")
     from .validity import choose_optics
 
     why = wave_unavailable(design)
@@ -146,7 +142,7 @@ def resolve_optics(
         "tolerance": choice.tolerance,
     }
     if choice.engine == "wave":
-        return Optics("auto", "wave", choice.reason, wave_sampling(design), rule)
+        return Optics("auto", "wave", choice.reason, wave_sampling(design), rule, bool(fresnel))
     return Optics("auto", "ray", choice.reason, None, rule)
 
 
@@ -173,8 +169,8 @@ def folded_lsf(
     optics: the wave engine's LSFs in its band plus, with ``ghosts``, the traced light
     outside it (:func:`join`); its method is
     "wave" and its standard errors those of the traced part (the wave part has no
-    sampling noise). Fresnel losses are the tracer's only: with wave optics ``fresnel``
-    is refused rather than applied to half the light.
+    sampling noise). ``fresnel`` applies to both parts alike: the wave engine's filters
+    (:mod:`.wavefilter`) and the traced light beyond the band.
     """
     if optics.engine == "ray":
         if method == "paraxial":
@@ -192,8 +188,8 @@ def folded_lsf(
         )
     if method == "paraxial":
         raise InputError("method: 'paraxial' is a ray-optics closed form; not with --optics wave")
-    _no_fresnel(fresnel)
-    wf = wave or wave_folds(design, optics, float(np.max(z_mm)))
+    optics = resolve_optics(design, optics, fresnel=fresnel)
+    wf = _folds(design, optics, wave, z_mm)
     if not ghosts:
         return wf.folded(z_mm, periods_um)
     both, _ = folded_lsf_pair(
@@ -203,6 +199,7 @@ def folded_lsf(
         optics=optics,
         n_rays=n_rays,
         seed=seed,
+        fresnel=fresnel,
         progress=progress,
         tracer=tracer,
         wave=wf,
@@ -210,13 +207,16 @@ def folded_lsf(
     return both
 
 
-def _no_fresnel(fresnel: bool) -> None:
-    """Fresnel losses are the tracer's only: refused with wave optics rather than applied
-    to half the light."""
-    if fresnel:
-        raise InputError(
-            "fresnel: the wave engine has no Fresnel losses yet; use --optics ray with --fresnel"
+def _folds(design: Design, optics: Optics, wave: WaveFolds | None, z_mm) -> WaveFolds:
+    """The wave folds to use: ``wave`` where given (made with the same Fresnel setting
+    as ``optics``, else the join would mix two models), else new ones."""
+    if wave is None:
+        return wave_folds(design, optics, float(np.max(z_mm)))
+    if getattr(wave, "fresnel", False) != optics.fresnel:
+        raise ValueError(
+            f"wave: folds made with fresnel={wave.fresnel}, asked for fresnel={optics.fresnel}"
         )
+    return wave
 
 
 def folded_lsf_pair(
@@ -240,7 +240,7 @@ def folded_lsf_pair(
     from .lsf import traced_folded_lsf_pair
 
     if optics.engine == "wave":
-        _no_fresnel(fresnel)
+        optics = resolve_optics(design, optics, fresnel=fresnel)
     both, own = traced_folded_lsf_pair(
         design,
         z_mm=z_mm,
@@ -254,7 +254,7 @@ def folded_lsf_pair(
     )
     if optics.engine == "ray":
         return both, own
-    wf = wave or wave_folds(design, optics, float(np.max(z_mm)))
+    wf = _folds(design, optics, wave, z_mm)
     return join(wf.folded(z_mm, periods_um), both, optics.band, _n_obj(design)), own
 
 
@@ -266,7 +266,7 @@ def wave_folds(design: Design, optics: Optics, z_max_mm: float) -> WaveFolds | N
         return None
     from .wavecompare import WaveFolds
 
-    return WaveFolds(design, z_max_mm, sampling=optics.sampling)
+    return WaveFolds(design, z_max_mm, sampling=optics.sampling, fresnel=optics.fresnel)
 
 
 def _n_obj(design: Design) -> float:
@@ -310,17 +310,27 @@ def pixel_light(
     the wave engine's in-band light plus the tracer's light outside the band, with the
     tracer's in-band light beside it (what ray optics gives for the same directions) and
     the light the object-side mask diffracts beyond the band (counted, not propagated:
-    an upper bound on the halo left out)."""
+    an upper bound on the halo left out). Fresnel losses as ``optics.fresnel`` says, on
+    both parts."""
     from .wavecompare import ray_in_band
     from .wavespectral import wave_response_spectral
 
     if optics.engine != "wave":
         raise ValueError("pixel_light: wave optics only (the ray figures are the ghost analysis')")
     # under the design's light (its illumination's spectrum), in one band at every wavelength
-    w = wave_response_spectral(design, [0.0], pixel=pixel, sampling=optics.sampling)
+    w = wave_response_spectral(
+        design, [0.0], pixel=pixel, sampling=optics.sampling, fresnel=optics.fresnel
+    )
     per = float(design.sensor.row_pitch_um)
     r = ray_in_band(
-        design, [0.0], optics.band, pixel=pixel, period_um=per, n_rays=n_rays, seed=seed
+        design,
+        [0.0],
+        optics.band,
+        pixel=pixel,
+        period_um=per,
+        n_rays=n_rays,
+        seed=seed,
+        fresnel=optics.fresnel,
     )
     wave = float(w.etendue_um2sr[0])
     far = r.traced_um2sr - r.own_um2sr - r.near_um2sr
@@ -332,4 +342,5 @@ def pixel_light(
         "lost_to_band_um2sr": float(w.budget[-1]["lost_to_band"]),
         "n_rays": n_rays,
         "seed": seed,
+        "fresnel": optics.fresnel,
     }

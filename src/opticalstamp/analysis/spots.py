@@ -204,7 +204,9 @@ def spots(
     if opt.engine == "wave":  # the in-band light by the wave engine, on its own bins
         from .wavespectral import wave_response_spectral
 
-        wave = wave_response_spectral(design, zs, pixel=pixel, sampling=opt.sampling)
+        wave = wave_response_spectral(
+            design, zs, pixel=pixel, sampling=opt.sampling, fresnel=opt.fresnel
+        )
         wave_maps = [
             wave.spot(iz, float(b), float(h))
             for iz, (h, b) in enumerate(zip(half, bins, strict=True))

@@ -33,7 +33,9 @@ carry all but ``mode_tol`` of the power (an SVD over every sequence at once, whi
 the cross terms). The full 2-D path (exact propagator, any hole shape) is in
 :mod:`.wave2d`; the sampling rules are in :func:`wave_sampling`.
 
-Fresnel transmission at index changes and multiple reflections are left out.
+Fresnel transmission at the index changes (option ``fresnel``) and the pixel's acceptance
+cone are filters on the angular spectrum, applied where they act between the masks as
+short sums of separable terms (:mod:`.wavefilter`); multiple reflections are left out.
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ from .wavebase import (
     Plane,
     WaveSampling,
     gauss_legendre,
+    in_band,
     kernel,
     mask_field,
     point_sources,
@@ -61,6 +64,7 @@ from .wavebase import (
     stack_grid,
     wave_sampling,
 )
+from .wavefilter import cone_cut, separable_filter
 from .waveobject import ObjectSide, lsf_x_from, object_side, responses_at, x_modes
 
 __all__ = ["WaveResponse", "WaveSampling", "wave_lsf_x", "wave_response", "wave_sampling"]
@@ -216,6 +220,7 @@ def wave_response(
     pixel: tuple[int, int] = (0, 0),
     sampling: WaveSampling | None = None,
     cell_um: float | None = None,
+    fresnel: bool = False,
 ) -> WaveResponse:
     """Responsivity of a used pixel on the object plane at each Z: separable paraxial path.
 
@@ -226,6 +231,7 @@ def wave_response(
     pixel : (row, k) of the used pixel (0 = A, 1 = B; k = 0 mid-array)
     sampling : :class:`WaveSampling` (default: :func:`wave_sampling` of the design)
     cell_um : side of the central cell (default: the output pitch, 84.6 um for the paper)
+    fresnel : Fresnel transmission losses at the index changes (:mod:`.wavefilter`)
 
     Returns
     -------
@@ -235,15 +241,16 @@ def wave_response(
 
     Notes
     -----
-    Not modelled yet: Fresnel transmission at index changes, the pixel's acceptance cone
-    (``sensor.acceptance_half_angle_deg``: every direction in the band is emitted), a
-    spectrum (the design's one wavelength).
+    The pixel's acceptance cone (``sensor.acceptance_half_angle_deg``) and, with
+    ``fresnel``, the interfaces' transmission are filters on the angular spectrum
+    (:mod:`.wavefilter`; ``meta["filters"]`` gives their separable terms and measured
+    errors). One wavelength: the design's (:mod:`.wavespectral` for a spectrum).
     """
     smp = wave_sampling(design) if sampling is None else sampling
     zs = _heights(z_mm)
     with one_blas_thread():
-        terms, axes, budget = _stack(design, pixel, smp)
-        return _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um)
+        terms, axes, budget, filters = _stack(design, pixel, smp, fresnel)
+        return _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um, filters)
 
 
 def wave_lsf_x(
@@ -252,6 +259,7 @@ def wave_lsf_x(
     *,
     pixel: tuple[int, int] = (0, 0),
     sampling: WaveSampling | None = None,
+    fresnel: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, float, dict]:
     """The x line-spread functions of a used pixel alone (what a chart varying along x
     needs), by the object side's x-only path (:func:`~.waveobject.lsf_x_at`): the same
@@ -263,7 +271,8 @@ def wave_lsf_x(
     (x_um (nx,), lsf_x (nz, nx) um sr per um, light um^2 sr, meta {"modes", "sequences"})
     """
     zs = _heights(z_mm)
-    return lsf_source(design, float(zs.max()), pixel=pixel, sampling=sampling).lsf_x(zs)
+    src = lsf_source(design, float(zs.max()), pixel=pixel, sampling=sampling, fresnel=fresnel)
+    return src.lsf_x(zs)
 
 
 @dataclass(frozen=True)
@@ -298,20 +307,27 @@ def lsf_source(
     *,
     pixel: tuple[int, int] = (0, 0),
     sampling: WaveSampling | None = None,
+    fresnel: bool = False,
 ) -> LSFSource:
     """The stack traversed once for the pixel: an :class:`LSFSource` for every Z up to
-    ``z_max_mm`` (the analyses that refine their heights ask it again and again). Holes
-    that are not rectangles (circles) take the 2-D path
-    (:func:`~.wave2dlsf.lsf_source_2d`, on the run's device)."""
+    ``z_max_mm`` (the analyses that refine their heights ask it again and again);
+    ``fresnel`` as :func:`wave_response`. Holes that are not rectangles (circles) take
+    the 2-D path (:func:`~.wave2dlsf.lsf_source_2d`, on the run's device), which has no
+    angular filters (Fresnel losses, acceptance cone) yet."""
     if not rectangular(design):
         from .wave2dlsf import lsf_source_2d
 
+        if fresnel or cone_cut(design) < math.inf:
+            raise InputError(
+                "the wave engine's 2-D path (circular holes) has no Fresnel losses or "
+                "acceptance cone yet (fresnel, sensor.acceptance_half_angle_deg)"
+            )
         return lsf_source_2d(design, z_max_mm, pixel=pixel, sampling=sampling)
     smp = wave_sampling(design) if sampling is None else sampling
     with one_blas_thread():
-        terms, axes, _ = _stack(design, pixel, smp)
+        terms, axes, _, filters = _stack(design, pixel, smp, fresnel)
+        terms = _leave(terms, axes, smp, filters)
         keys = list(terms)
-        terms = _band_only(terms, axes, smp)
         side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, z_max_mm)
         modes, light = x_modes(side)
     return LSFSource(side, float(z_max_mm), _names(keys), modes, light)
@@ -332,7 +348,10 @@ def _heights(z_mm) -> np.ndarray:
 
 
 def _names(keys) -> list[str]:
-    return ["".join("AB"[r] for r in k) for k in keys]
+    """The row sequences of the terms (once each: the terms of an angular filter share
+    their sequence)."""
+    names = ["".join("AB"[r] for r in k if isinstance(r, int)) for k in keys]
+    return list(dict.fromkeys(names))
 
 
 def _planes(axes) -> tuple[Plane, Plane]:
@@ -345,9 +364,35 @@ def stack_reach(design: Design, smp: WaveSampling) -> float:
     return 2 * lattice_of(design).pitch + 4 * (smp.margin_um + design.reference_plane_um * smp.band)
 
 
-def _stack(design: Design, pixel, smp: WaveSampling):
+def _filters(design: Design, axes: list[_Axis], smp: WaveSampling, fresnel: bool) -> list:
+    """Each group's angular filter (:mod:`.wavefilter`: group 0 at the source, group i in
+    the step to mask i, the last above the object-side mask) as per-term transfer
+    factors [(fx (nx,), fy (ny,))] on the stack grids' FFT bins, or None where it is 1."""
+    out = []
+    s_in = []
+    for ax in axes:
+        f = np.fft.fftfreq(ax.x.size, smp.step_um)
+        keep = np.flatnonzero(in_band(f, smp.wavelength_um, smp.band))
+        s_in.append((keep, smp.wavelength_um * f))
+    for g in range(axes[0].plane.heights.size + 1):
+        sx, sy = (s[k] for k, s in s_in)
+        flt = separable_filter(design, g, smp.band, sx, sy, fresnel=fresnel)
+        if flt is None:
+            out.append(None)
+            continue
+        terms = []
+        for a, b in zip(flt.a, flt.b, strict=True):
+            fa, fb = np.zeros(axes[0].x.size), np.zeros(axes[1].x.size)
+            fa[s_in[0][0]], fb[s_in[1][0]] = a, b
+            terms.append((fa, fb))
+        out.append((terms, flt.info))
+    return out
+
+
+def _stack(design: Design, pixel, smp: WaveSampling, fresnel: bool = False):
     """The source points stepped up through the stack: (terms {row sequence: (ux, uy)}
-    just above the object-side mask, the axes, the budget mask by mask)."""
+    just above the object-side mask, the axes, the budget mask by mask, the angular
+    filters (:func:`_filters`; the last one is the object side's))."""
     lam, b, step = smp.wavelength_um, smp.band, smp.step_um
     if step > lam / (6 * b) * (1 + 1e-9):
         raise InputError(
@@ -355,6 +400,7 @@ def _stack(design: Design, pixel, smp: WaveSampling):
         )
     planes = stack_axes(design, pixel, reach_um=stack_reach(design, smp))
     axes = [_axis(p, smp) for p in planes]
+    filters = _filters(design, axes, smp, fresnel)
     n_rows = design.sensor.rows
     # source points through the first slab(s) to the first mask
     fields = []
@@ -362,11 +408,13 @@ def _stack(design: Design, pixel, smp: WaveSampling):
         x0, w = gauss_legendre(*ax.plane.source, npts)
         fields.append(point_sources(ax.x, x0, lam * w, lam, ax.plane.heights[0], b))
     terms = {(): (fields[0], fields[1])}
+    if filters[0] is not None:  # the acceptance cone and the interfaces below mask 0
+        terms = _step_terms(terms, axes, smp, 0.0, filters[0], 0)
     budget = []
     heights = planes[0].heights
     for i in range(heights.size):
         if i > 0:
-            terms = _step_terms(terms, axes, smp, heights[i] - heights[i - 1])
+            terms = _step_terms(terms, axes, smp, heights[i] - heights[i - 1], filters[i], i)
         rec = {"mask": i, "incoming": _power(terms, step)}
         new = {}
         for hist, (ux, uy) in terms.items():
@@ -385,16 +433,35 @@ def _stack(design: Design, pixel, smp: WaveSampling):
         rec["sequences"] = _names(keys)
         rec["modes"] = (int(cx[0].shape[1]), int(cy[0].shape[1])) if keys else (0, 0)
         budget.append(rec)
-    return terms, axes, budget
+    return terms, axes, budget, filters
 
 
-def _step_terms(terms: dict, axes: list[_Axis], smp: WaveSampling, d: float) -> dict:
+def _step_terms(
+    terms: dict, axes: list[_Axis], smp: WaveSampling, d: float, filt=None, group: int = 0
+) -> dict:
+    """The terms over the reduced distance ``d``, through the angular filter ``filt``
+    (:func:`_filters`; a filter of K > 1 terms makes K terms of each, their keys marked
+    with the group and the filter's term)."""
     hs = [kernel(ax.x.size, smp.step_um, smp.wavelength_um, d, smp.band) for ax in axes]
-    return {k: (propagate(ux, hs[0]), propagate(uy, hs[1])) for k, (ux, uy) in terms.items()}
+    if filt is None:
+        return {k: (propagate(ux, hs[0]), propagate(uy, hs[1])) for k, (ux, uy) in terms.items()}
+    parts = filt[0]
+    out = {}
+    for k, (ux, uy) in terms.items():
+        for t, (fa, fb) in enumerate(parts):
+            key = k if len(parts) == 1 else k + (f"{group}.{t}",)
+            out[key] = (propagate(ux, hs[0] * fa), propagate(uy, hs[1] * fb))
+    return out
 
 
 def _band_only(terms: dict, axes: list[_Axis], smp: WaveSampling) -> dict:
     return _step_terms(terms, axes, smp, 0.0)
+
+
+def _leave(terms: dict, axes: list[_Axis], smp: WaveSampling, filters: list) -> dict:
+    """The in-band terms leaving the stack, through the interfaces above the object-side
+    mask (the last filter of :func:`_filters`)."""
+    return _step_terms(terms, axes, smp, 0.0, filters[-1], len(filters) - 1)
 
 
 def _power(terms: dict, step: float) -> float:
@@ -426,11 +493,11 @@ def _prune(new: dict, step: float, tol: float) -> dict:
     return {k: v for k, v in new.items() if total > 0 and pw[k] >= tol * total}
 
 
-def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveResponse:
+def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um, filters) -> WaveResponse:
     """From the object-side mask through the reference gap and object medium to every Z."""
     cell = output_pitch(design) if cell_um is None else float(cell_um)
+    terms = _leave(terms, axes, smp, filters)  # the in-band light leaving the stack grid
     keys = list(terms)
-    terms = _band_only(terms, axes, smp)  # the in-band light leaving the stack grid
     side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, zs.max())
     lsf_x, lsf_y, etendue, cells = responses_at(side, zs, cell)
     lat = lattice_of(design)
@@ -456,5 +523,6 @@ def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um) -> WaveRe
             "path": "separable",
             "cell_um": cell,
             "sequences": _names(keys),
+            "filters": [f[1] for f in filters if f is not None],
         },
     )

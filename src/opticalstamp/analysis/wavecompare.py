@@ -96,6 +96,7 @@ def ray_in_band(
     seed: int = 0,
     cell_um: float | None = None,
     tracer: PixelTracer | None = None,
+    fresnel: bool = False,
 ) -> RayInBand:
     """Tally a pixel's traced rays whose |s_x|, |s_y| < ``band`` at each object distance.
 
@@ -106,9 +107,10 @@ def ray_in_band(
     period_um : chart period the LSF is folded onto
     n_rays, seed : the tracer's sampling (importance sampled, exact 3-D refraction)
     cell_um : side of the central cell (default: the output pitch)
+    fresnel : Fresnel losses in the trace (without ``tracer``; a tracer brings its own)
     """
     zs = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
-    tr = tracer if tracer is not None else PixelTracer(design, Sampling(n_rays, seed))
+    tr = tracer if tracer is not None else PixelTracer(design, Sampling(n_rays, seed, fresnel))
     cell = output_pitch(design) if cell_um is None else float(cell_um)
     reach = (design.reference_plane_um + zs.max() * 1000.0) * band / np.sqrt(1 - band**2)
     half = np.ceil((reach + lattice_of(design).pitch) / RAY_BIN_UM) * RAY_BIN_UM
@@ -218,9 +220,10 @@ class WaveFolds:
         *,
         sampling: WaveSampling | None = None,
         spectrum: str | Spectrum | None = None,
+        fresnel: bool = False,
     ) -> None:
         self.design, self.z_max_mm = design, float(z_max_mm)
-        self.sampling, self.spectrum = sampling, spectrum
+        self.sampling, self.spectrum, self.fresnel = sampling, spectrum, bool(fresnel)
         lat = lattice_of(design)
         self.rows = [(float(lat.row_x[r]), float(lat.row_y[r])) for r in range(design.sensor.rows)]
         self._sources: list = []
@@ -247,6 +250,7 @@ class WaveFolds:
                         spectrum=spec,
                         pixel=(r, 0),
                         sampling=self.sampling,
+                        fresnel=self.fresnel,
                     )  # fmt: skip
                 )
         return self._sources

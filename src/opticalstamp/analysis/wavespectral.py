@@ -206,12 +206,13 @@ def wave_response_spectral(
     pixel: tuple[int, int] = (0, 0),
     sampling: WaveSampling | None = None,
     cell_um: float | None = None,
+    fresnel: bool = False,
 ) -> SpectralWaveResponse:
     """A used pixel's responsivity under a light of one channel.
 
     Parameters
     ----------
-    design, z_mm, pixel, cell_um : as :func:`~.wave.wave_response`
+    design, z_mm, pixel, cell_um, fresnel : as :func:`~.wave.wave_response`
     spectrum : a :class:`~.spectrum.Spectrum`, a light's name ("mono", "white", "red",
         "green", "blue") or None: the design's ``electronics.illumination`` ("rgb" has
         three channels: :func:`wave_response_channels`)
@@ -221,7 +222,14 @@ def wave_response_spectral(
     spec = one_channel(design, spectrum)
     smps = spectral_samplings(design, spec, sampling)
     parts = [
-        wave_response(at_wavelength(design, lam), z_mm, pixel=pixel, sampling=s, cell_um=cell_um)
+        wave_response(
+            at_wavelength(design, lam),
+            z_mm,
+            pixel=pixel,
+            sampling=s,
+            cell_um=cell_um,
+            fresnel=fresnel,
+        )
         for lam, s in zip(spec.wavelengths_um, smps, strict=True)
     ]
     w = spec.weights
@@ -305,11 +313,14 @@ class SpectralLSFSource:
         spectrum: str | Spectrum | None = None,
         pixel: tuple[int, int] = (0, 0),
         sampling: WaveSampling | None = None,
+        fresnel: bool = False,
     ) -> SpectralLSFSource:
         spec = one_channel(design, spectrum)
         smps = spectral_samplings(design, spec, sampling)
         sources = [
-            lsf_source(at_wavelength(design, lam), z_max_mm, pixel=pixel, sampling=s)
+            lsf_source(
+                at_wavelength(design, lam), z_max_mm, pixel=pixel, sampling=s, fresnel=fresnel
+            )
             for lam, s in zip(spec.wavelengths_um, smps, strict=True)
         ]
         cyc = [2 * s.band / s.wavelength_um for s in smps]

@@ -172,20 +172,22 @@ def traced_kernels(
 WAVE_BIN_UM = 4.0
 
 
-def wave_near_kernels(design: Design, z_mm, row: int) -> list[ScanKernel]:
+def wave_near_kernels(design: Design, z_mm, row: int, fresnel: bool = False) -> list[ScanKernel]:
     """One row's near-field kernels by wave optics at each height, the stack traversed
     once: the wave engine's map of the light in its band (own path, its diffraction,
     near crosstalk; :func:`~opticalstamp.analysis.wavespectral.wave_response_spectral`,
     the design's light) on ``WAVE_BIN_UM`` bins, SVD-separated (partial SVD).
     :func:`stamp_kernel_sets` adds the traced ghost map of the light beyond the band
-    (traced with ``outside_band``): the join of :mod:`~opticalstamp.analysis.responsivity`."""
+    (traced with ``outside_band``): the join of :mod:`~opticalstamp.analysis.responsivity`.
+    ``fresnel``: the wave engine's Fresnel losses (:mod:`~opticalstamp.analysis.wavefilter`),
+    as the traced part has them."""
     from ..analysis.responsivity import resolve_optics
     from ..analysis.wave import one_blas_thread
     from ..analysis.wavespectral import wave_response_spectral
 
     opt = resolve_optics(design, "wave")
     zs = np.asarray(z_mm, dtype=np.float64)
-    r = wave_response_spectral(design, zs, pixel=(row, 0), sampling=opt.sampling)
+    r = wave_response_spectral(design, zs, pixel=(row, 0), sampling=opt.sampling, fresnel=fresnel)
     out = []
     with one_blas_thread():  # thin products: BLAS's threads only spin (the engine's rule)
         for iz, z in enumerate(zs):
@@ -297,7 +299,7 @@ def stamp_kernel_sets(
         near = {}
         if source == "wave":  # every set's heights from one wave run of the row
             zs = sorted({float(z) for z_mm in z_sets for z in np.atleast_1d(z_mm)})
-            near = dict(zip(zs, wave_near_kernels(design, zs, row), strict=True))
+            near = dict(zip(zs, wave_near_kernels(design, zs, row, fresnel), strict=True))
         for ks, z_mm, m in zip(out, z_sets, maps, strict=True):
             if source == "wave":
                 row_k = [near[float(z)] for z in np.atleast_1d(z_mm)]

@@ -72,8 +72,6 @@ class Stamp:
             why = wave_unavailable(design)
             if why is not None:
                 raise ValueError(f"wave kernels: {why}")
-            if fresnel:
-                raise ValueError("wave kernels: the wave engine has no Fresnel losses yet")
         if source == "paraxial" and not rect:
             raise ValueError("paraxial kernels need rectangular holes (this design has circles)")
         return source
