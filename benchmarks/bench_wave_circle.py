@@ -78,7 +78,7 @@ def main() -> None:
             print(
                 f"circles, {device}, {light}: RMTF table (19 Z, rows A and B, {len(pers)} "
                 f"charts) {t:.2f} s (runs {', '.join(f'{x:.2f}' for x in times)}); "
-                f"DOF {res.dof_mm:.3f} mm",
+                f"DOF {res.dof_mm} mm",
                 flush=True,
             )
             out[light] = {"rmtf_table_s": t, "runs_s": times, "dof_mm": res.dof_mm}

@@ -120,20 +120,21 @@ def mask_field_2d(
     ky = np.abs(wavelength_um * ny) <= 2 * band
     fx, fy = nx[kx], ny[ky]
     a = np.zeros((fy.size, fx.size), dtype=np.complex128)
-    jinc = {}
+    rows: dict[tuple, np.ndarray] = {}  # holes of one shape and size on one line in y
     for h in holes:
         ex = np.exp(-2j * np.pi * fx * (h.cx - x[0]))
-        ey = np.exp(-2j * np.pi * fy * (h.cy - y[0]))
-        if h.shape == "circle":
-            if h.hw not in jinc:
-                rho = np.hypot(fy[:, None], fx[None, :])
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    j = h.hw * special.j1(2 * np.pi * h.hw * rho) / rho
-                jinc[h.hw] = np.where(rho == 0, np.pi * h.hw * h.hw, j)
-            a += jinc[h.hw] * ey[:, None] * ex[None, :]
+        key = (h.shape, h.hw, h.hh, h.cy)
+        rows[key] = rows[key] + ex if key in rows else ex
+    for (shape, hw, hh, cy), ex in rows.items():  # each row: its shape's FT x sum of shifts
+        ey = np.exp(-2j * np.pi * fy * (cy - y[0]))
+        if shape == "circle":
+            rho = np.hypot(fy[:, None], fx[None, :])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                j = hw * special.j1(2 * np.pi * hw * rho) / rho
+            a += np.where(rho == 0, np.pi * hw * hw, j) * ey[:, None] * ex[None, :]
         else:
-            sx = 2 * h.hw * np.sinc(2 * h.hw * fx) * ex
-            sy = 2 * h.hh * np.sinc(2 * h.hh * fy) * ey
+            sx = 2 * hw * np.sinc(2 * hw * fx) * ex
+            sy = 2 * hh * np.sinc(2 * hh * fy) * ey
             a += sy[:, None] * sx[None, :]
     full = np.zeros((y.size, x.size), dtype=np.complex128)
     full[np.ix_(ky, kx)] = a
@@ -209,14 +210,15 @@ class _Stack:
 
     def forward(self, w, *, with_power: bool = False):
         """Source amplitudes w (k, n0y, n0x) -> in-band spectra after the top mask;
-        ``with_power``: also the power of each field through the top mask before the
+        ``with_power``: also the power of each field after the top mask outside the
         band cut (k,), over dx dy."""
         f = self._top(w)
         iy, ix = self.band_idx
-        out = self.bk.fft2(f, norm="ortho")[:, iy, ix]
+        spec = self.bk.fft2(f, norm="ortho")
+        out = spec[:, iy, ix]
         if not with_power:
             return out
-        return out, (abs(f) ** 2).sum(axis=(1, 2))
+        return out, (abs(spec) ** 2).sum(axis=(1, 2)) - (abs(out) ** 2).sum(axis=1)
 
     def adjoint(self, o):
         """In-band spectra (k, nb) -> source amplitudes (k, n0y, n0x)."""
@@ -288,22 +290,21 @@ def coherent_modes(
     finds, on average, less than ``tol`` of the mean power of A w outside the range kept
     (an unbiased estimate of the relative Frobenius power left out); then B = E^H A by
     the adjoint, and the eigenvectors of B B^H give the modes, the weakest dropped while
-    their power stays below ``tol``. The same vectors estimate the power through the top
-    mask before the band cut (E |A_full w|^2 = |A_full|_F^2): ``info["transmitted"]``
-    and its standard error, the light a mask sends beyond the band being the difference
-    from the modes' power.
+    their power stays below ``tol``. The same vectors estimate the light the masks send
+    beyond the band (E |(1 - P_band) A_full w|^2 = |(1 - P_band) A_full|_F^2):
+    ``info["lost_to_band"]`` and its standard error (um^2 sr; counted, not propagated).
     """
     bk, xp = st.bk, st.bk.xp
     rng = np.random.default_rng(seed)
     n0y, n0x = st.uy.shape[1], st.ux.shape[1]
     q = xp.zeros((0, st.band_idx[0].size), dtype=xp.complex128)  # orthonormal rows
     total, missing, tries = 0.0, np.inf, 0
-    through: list[np.ndarray] = []
+    lost: list[np.ndarray] = []
     step2 = float((st.x[1] - st.x[0]) * (st.y[1] - st.y[0]))
     while missing > tol * total and q.shape[0] < max_modes:
         w = rng.standard_normal((block, n0y, n0x)) + 1j * rng.standard_normal((block, n0y, n0x))
-        y, full = st.forward(bk.put(w / np.sqrt(2)), with_power=True)
-        through.append(bk.host(full))
+        y, out = st.forward(bk.put(w / np.sqrt(2)), with_power=True)
+        lost.append(bk.host(out))
         tries += 1
         total += (float(xp.vdot(y, y).real) / block - total) / tries  # running mean |A w|^2
         for _ in range(2):  # project out the range found (twice: stable)
@@ -320,14 +321,14 @@ def coherent_modes(
     keep = int(np.searchsorted(np.cumsum(ph), (1 - tol) * ph.sum())) + 1
     keep = max(1, min(keep, ph.size))
     modes = (v[:, :keep] * xp.sqrt(p[:keep])).T @ q
-    full = np.concatenate(through) * step2  # um^2 sr per random vector
+    out = np.concatenate(lost) * step2  # um^2 sr per random vector
     info = {
         "range": int(q.shape[0]),
         "modes": keep,
         "blocks": tries,
         "missing_estimate": missing / total,
-        "transmitted": float(full.mean()),
-        "transmitted_se": float(full.std(ddof=1) / np.sqrt(full.size)) if full.size > 1 else 0.0,
+        "lost_to_band": float(out.mean()),
+        "lost_to_band_se": float(out.std(ddof=1) / np.sqrt(out.size)) if out.size > 1 else 0.0,
         "in_band": float(ph[:keep].sum()) * step2,
     }
     return modes, info
