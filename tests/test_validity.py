@@ -159,7 +159,7 @@ def test_choices(paper):
         assert c.predictor < ray_holds_above()
         assert c.fresnel_min == pytest.approx(min(f["fresnel_number"] for f in fresnel_numbers(d)))
     circ = choose_optics(with_hole_shape(paper, "circle"))
-    assert circ.engine == "ray" and "not available" in circ.reason
+    assert circ.engine == "ray" and "circular holes" in circ.reason
     assert circ.predicted_error["light"] > DEFAULT_LIGHT_TOL
     assert choose_optics(with_hole_shape(scale_to_dpi(paper, 100), "circle")).engine == "ray"
     for asked in ("ray", "wave"):

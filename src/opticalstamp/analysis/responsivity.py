@@ -37,7 +37,7 @@ from ..raytrace.pixel import PixelTracer
 from ..validate import InputError
 from .lsf import SLOPE_EDGES, FoldedLSF, traced_folded_lsf
 from .paraxial import paraxial_folded_lsf
-from .wavebase import WaveSampling, rectangular, wave_sampling
+from .wavebase import CIRCLE_MAPS, WaveSampling, rectangular, wave_sampling
 
 if TYPE_CHECKING:
     from .wavecompare import WaveFolds
@@ -87,13 +87,15 @@ class Optics:
 RAY = Optics("ray", "ray", "asked for")
 
 
-def wave_unavailable(design: Design, band: float | None = None) -> str | None:
-    """Why the wave engine cannot give this design's responsivity yet, or None: holes
-    that are not rectangular, or an illumination of several channels. (The pixel's
-    acceptance cone and Fresnel losses are filters on its angular spectrum,
-    :mod:`.wavefilter`.)"""
-    if not rectangular(design):
-        return "the wave engine feeds the analyses for rectangular holes only (circles: not yet)"
+def wave_unavailable(design: Design, band: float | None = None, *, maps: bool = True) -> str | None:
+    """Why the wave engine cannot give this design's responsivity yet, or None: an
+    illumination of several channels, or (with ``maps``: what ``auto`` and the analyses
+    that need 2-D maps ask) holes that are not rectangular, whose line-spread functions
+    and light the 2-D path gives (``--optics wave`` for the RMTF, the depth of field and
+    the light) but not yet their 2-D maps. (The pixel's acceptance cone and Fresnel
+    losses are filters on its angular spectrum, :mod:`.wavefilter`.)"""
+    if maps and not rectangular(design):
+        return CIRCLE_MAPS
     if design.electronics.illumination == "rgb":
         return (
             "electronics.illumination is rgb: three channels, whose figures the analyses "
@@ -123,7 +125,7 @@ def resolve_optics(
     if optics == "ray":
         return RAY
     if optics == "wave":
-        why = wave_unavailable(design)
+        why = wave_unavailable(design, maps=False)
         if why is not None:
             raise InputError(f"optics: 'wave' is not available for {design.name}: {why}")
         return Optics("wave", "wave", "asked for", wave_sampling(design), fresnel=bool(fresnel))
@@ -318,9 +320,20 @@ def pixel_light(
     if optics.engine != "wave":
         raise ValueError("pixel_light: wave optics only (the ray figures are the ghost analysis')")
     # under the design's light (its illumination's spectrum), in one band at every wavelength
-    w = wave_response_spectral(
-        design, [0.0], pixel=pixel, sampling=optics.sampling, fresnel=optics.fresnel
-    )
+    if rectangular(design):
+        w = wave_response_spectral(
+            design, [0.0], pixel=pixel, sampling=optics.sampling, fresnel=optics.fresnel
+        )
+        wave, lost = float(w.etendue_um2sr[0]), float(w.budget[-1]["lost_to_band"])
+    else:  # the 2-D path's light (and its estimate of the light sent beyond the band)
+        from .wavespectral import SpectralLSFSource
+
+        src = SpectralLSFSource.of(
+            design, 0.0, pixel=pixel, sampling=optics.sampling, fresnel=optics.fresnel
+        )
+        parts = list(zip(src.weights, src.sources, strict=True))
+        wave = float(sum(wi * s.light for wi, s in parts))
+        lost = float(sum(wi * s.meta["lost_to_band"] for wi, s in parts))
     per = float(design.sensor.row_pitch_um)
     r = ray_in_band(
         design,
@@ -332,14 +345,13 @@ def pixel_light(
         seed=seed,
         fresnel=optics.fresnel,
     )
-    wave = float(w.etendue_um2sr[0])
     far = r.traced_um2sr - r.own_um2sr - r.near_um2sr
     return {
         "etendue_um2sr": wave + far,
         "wave_in_band_um2sr": wave,
         "far_traced_um2sr": far,
         "ray_in_band_um2sr": float(r.own_um2sr + r.near_um2sr),
-        "lost_to_band_um2sr": float(w.budget[-1]["lost_to_band"]),
+        "lost_to_band_um2sr": lost,
         "n_rays": n_rays,
         "seed": seed,
         "fresnel": optics.fresnel,

@@ -64,7 +64,7 @@ from ..design import Design
 from ..design.variants import square_holes
 from ..validate import InputError
 from .paraxial import paraxial_etendue, paraxial_etendue_1d
-from .wavebase import fresnel_numbers, rectangular
+from .wavebase import CIRCLE_MAPS, fresnel_numbers, rectangular
 
 #: The engines ``choose_optics`` takes.
 OPTICS = ("ray", "wave", "auto")
@@ -313,11 +313,7 @@ def choose_optics(
     names = {"light": f"light ({tol['light']:.1%})", "rmtf": f"RMTF ({tol['rmtf']:.3f})"}
     beyond = " and ".join(names[k] for k in over)
     if not rectangular(design):
-        reason = (
-            f"{said}, beyond the tolerance for {beyond}; wave is not available for this "
-            "design (the wave engine needs rectangular holes, circles are not done yet): "
-            "ray, with that error"
-        )
+        reason = f"{said}, beyond the tolerance for {beyond}; {CIRCLE_MAPS}: ray, with that error"
         return OpticsChoice("ray", fmin, p, err, tol, reason)
     return OpticsChoice(
         "wave", fmin, p, err, tol, f"{said}, beyond the tolerance for {beyond}: wave"

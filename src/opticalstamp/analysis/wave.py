@@ -64,7 +64,7 @@ from .wavebase import (
     stack_grid,
     wave_sampling,
 )
-from .wavefilter import cone_cut, separable_filter
+from .wavefilter import separable_filter
 from .waveobject import ObjectSide, lsf_x_from, object_side, responses_at, x_modes
 
 __all__ = ["WaveResponse", "WaveSampling", "wave_lsf_x", "wave_response", "wave_sampling"]
@@ -312,17 +312,12 @@ def lsf_source(
     """The stack traversed once for the pixel: an :class:`LSFSource` for every Z up to
     ``z_max_mm`` (the analyses that refine their heights ask it again and again);
     ``fresnel`` as :func:`wave_response`. Holes that are not rectangles (circles) take
-    the 2-D path (:func:`~.wave2dlsf.lsf_source_2d`, on the run's device), which has no
-    angular filters (Fresnel losses, acceptance cone) yet."""
+    the 2-D path (:func:`~.wave2dlsf.lsf_source_2d`, on the run's device), whose angular
+    filters are exact (not separable sums)."""
     if not rectangular(design):
         from .wave2dlsf import lsf_source_2d
 
-        if fresnel or cone_cut(design) < math.inf:
-            raise InputError(
-                "the wave engine's 2-D path (circular holes) has no Fresnel losses or "
-                "acceptance cone yet (fresnel, sensor.acceptance_half_angle_deg)"
-            )
-        return lsf_source_2d(design, z_max_mm, pixel=pixel, sampling=sampling)
+        return lsf_source_2d(design, z_max_mm, pixel=pixel, sampling=sampling, fresnel=fresnel)
     smp = wave_sampling(design) if sampling is None else sampling
     with one_blas_thread():
         terms, axes, _, filters = _stack(design, pixel, smp, fresnel)

@@ -195,37 +195,40 @@ class _Stack:
     steps: list  # transfer to mask i from mask i - 1 (i >= 1)
     band_idx: tuple  # (iy, ix) of the in-band bins
     bk: Backend = CPU
+    top: object | None = None  # amplitude filter above the top mask on the in-band bins
 
     def _top(self, w):
-        """Source amplitudes w (k, n0y, n0x) -> the fields just above the top mask."""
+        """Source amplitudes w (k, n0y, n0x) -> the fields just below the top mask."""
         bk, xp = self.bk, self.bk.xp
         f = xp.einsum("ya,kab,xb->kyx", self.uy, w, self.ux, optimize=True)
         if self.first is not None:
             f = bk.ifft2(bk.fft2(f) * self.first)
-        f *= self.masks[0]
-        for m, h in zip(self.masks[1:], self.steps, strict=True):
-            f = bk.ifft2(bk.fft2(f) * h)
+        for m, h in zip(self.masks[:-1], self.steps, strict=True):
             f *= m
+            f = bk.ifft2(bk.fft2(f) * h)
         return f
 
     def forward(self, w, *, with_power: bool = False):
         """Source amplitudes w (k, n0y, n0x) -> in-band spectra after the top mask;
-        ``with_power``: also the power of each field after the top mask outside the
-        band cut (k,), over dx dy."""
+        ``with_power``: also the power each field sends beyond the band there (k,), over
+        dx dy: the power through the mask by the midpoint rule with its cells'
+        transmission (sum |u|^2 M, as the separable path's budget counts it: |M|^2 = M
+        for a sharp mask) less the in-band power."""
         f = self._top(w)
         iy, ix = self.band_idx
-        spec = self.bk.fft2(f, norm="ortho")
-        out = spec[:, iy, ix]
-        if not with_power:
-            return out
-        return out, (abs(spec) ** 2).sum(axis=(1, 2)) - (abs(out) ** 2).sum(axis=1)
+        through = (abs(f) ** 2 * self.masks[-1]).sum(axis=(1, 2)) if with_power else None
+        out = self.bk.fft2(f * self.masks[-1], norm="ortho")[:, iy, ix]
+        lost = through - (abs(out) ** 2).sum(axis=1) if with_power else None
+        if self.top is not None:
+            out = out * self.top
+        return (out, lost) if with_power else out
 
     def adjoint(self, o):
         """In-band spectra (k, nb) -> source amplitudes (k, n0y, n0x)."""
         bk, xp = self.bk, self.bk.xp
         iy, ix = self.band_idx
         g = xp.zeros((o.shape[0], self.y.size, self.x.size), dtype=xp.complex128)
-        g[:, iy, ix] = o
+        g[:, iy, ix] = o if self.top is None else o * self.top.conj()
         g = bk.ifft2(g, norm="ortho") * self.masks[-1]
         for m, h in zip(self.masks[-2::-1], self.steps[::-1], strict=True):
             g = bk.ifft2(bk.fft2(g) * h.conj())
@@ -242,8 +245,33 @@ class _Stack:
         return self.bk.ifft2(g, norm="ortho")
 
 
+def angular_filters(design: Design, x: np.ndarray, y: np.ndarray, lam: float, fresnel: bool):
+    """The amplitude filters on the angular spectrum of the grid (y, x), one per group of
+    interfaces between masks (:mod:`.wavefilter`: group 0 below the sensor-side mask with
+    the pixel's acceptance cone, group i between masks i - 1 and i, the last above the
+    object-side mask): exactly, as functions of |s| (no separable approximation in 2-D);
+    None where a group changes nothing."""
+    from .wavefilter import cone_cut, group_transmittance, interfaces
+
+    fx = sfft.fftfreq(x.size, x[1] - x[0])[None, :]
+    fy = sfft.fftfreq(y.size, y[1] - y[0])[:, None]
+    s = lam * np.sqrt(fx * fx + fy * fy)
+    n_groups = len(design.masks) + 1
+    out: list[np.ndarray | None] = [None] * n_groups
+    if fresnel:
+        for g in range(n_groups):
+            pairs = [(n1, n2) for gi, n1, n2 in interfaces(design) if gi == g]
+            if pairs:
+                out[g] = np.sqrt(group_transmittance(pairs, s))
+    cut = cone_cut(design)
+    if cut < math.inf:
+        cone = (s <= cut).astype(np.float64)
+        out[0] = cone if out[0] is None else out[0] * cone
+    return out
+
+
 def _stack(
-    design, pixel, smp: WaveSampling, propagator: str, bk: Backend = CPU
+    design, pixel, smp: WaveSampling, propagator: str, bk: Backend = CPU, fresnel: bool = False
 ) -> tuple[_Stack, list[Layer]]:
     lam, b = smp.wavelength_um, smp.band
     reach = 2 * lattice_of(design).pitch + 4 * (smp.margin_um + design.reference_plane_um * b)
@@ -257,9 +285,13 @@ def _stack(
     for g, (lo, hi), npts in zip((x, y), src, smp.source_points, strict=True):
         x0, w = gauss_legendre(lo, hi, npts)
         fields.append(point_sources(g, x0, lam * w, lam, layers[0].reduced, b))
+    filt = angular_filters(design, x, y, lam, fresnel)
     first = None
     if propagator == "exact":
-        first = bk.put(transfer(x, y, layers[0].slabs, lam, b, propagator, relative=True))
+        first = transfer(x, y, layers[0].slabs, lam, b, propagator, relative=True)
+    if filt[0] is not None:  # a filter commutes with free space: anywhere below mask 1
+        first = filt[0] if first is None else first * filt[0]
+    first = None if first is None else bk.put(first)
     masks = []
     for lay in layers:
         r_i = lay.reduced * b + smp.margin_um + max(max(h.hw, h.hh) for h in lay.holes)
@@ -269,13 +301,17 @@ def _stack(
             if src[0][0] - r_i < h.cx < src[0][1] + r_i and src[1][0] - r_i < h.cy < src[1][1] + r_i
         ]
         masks.append(bk.put(mask_field_2d(x, y, near, b, lam)))
-    steps = [bk.put(transfer(x, y, lay.slabs, lam, b, propagator)) for lay in layers[1:]]
+    steps = []
+    for i, lay in enumerate(layers[1:], start=1):
+        h = transfer(x, y, lay.slabs, lam, b, propagator)
+        steps.append(bk.put(h if filt[i] is None else h * filt[i]))
     ky = np.flatnonzero(in_band(sfft.fftfreq(y.size, y[1] - y[0]), lam, b))
     kx = np.flatnonzero(in_band(sfft.fftfreq(x.size, x[1] - x[0]), lam, b))
     idx = tuple(np.ix_(ky, kx)[i] * np.ones((ky.size, kx.size), int) for i in (0, 1))
     band_idx = (bk.put(idx[0].ravel()), bk.put(idx[1].ravel()))
     ux, uy = bk.put(fields[0]), bk.put(fields[1])
-    st = _Stack(x, y, ux, uy, first, masks, steps, band_idx, bk)
+    top = None if filt[-1] is None else bk.put(filt[-1][np.ix_(ky, kx)].ravel())
+    st = _Stack(x, y, ux, uy, first, masks, steps, band_idx, bk, top)
     return st, layers
 
 
@@ -386,10 +422,13 @@ def stack_modes(
     tol: float = RANGE_TOL,
     seed: int = 0,
     device: str | None = None,
+    fresnel: bool = False,
 ) -> StackModes:
     """The stack traversed once for the pixel by the 2-D path: its coherent modes above
     the object-side mask (see :func:`wave_response_2d` for the parameters; ``device``
-    "cpu" or "cuda", None: the run's device, :func:`~.arrays.wave_backend`)."""
+    "cpu" or "cuda", None: the run's device, :func:`~.arrays.wave_backend`; ``fresnel``:
+    the interfaces' Fresnel transmission, :func:`angular_filters`, which also apply the
+    pixel's acceptance cone)."""
     if propagator not in PROPAGATORS:
         raise InputError(f"propagator: one of {', '.join(PROPAGATORS)} (got {propagator!r})")
     smp = wave_sampling(design) if sampling is None else sampling
@@ -397,7 +436,7 @@ def stack_modes(
     if step > lam / (6 * b) * (1 + 1e-9):
         raise InputError(f"sampling: step {step:g} um is coarser than lambda / (6 band)")
     bk, note = wave_backend(device)
-    st, layers = _stack(design, pixel, smp, propagator, bk)
+    st, layers = _stack(design, pixel, smp, propagator, bk, fresnel)
     modes, info = coherent_modes(st, tol=tol, seed=seed)
     return StackModes(st, layers, modes, info, smp, propagator, note)
 
@@ -415,6 +454,7 @@ def wave_response_2d(
     bin_um: float = 2.0,
     map_half_um: float = 200.0,
     device: str | None = None,
+    fresnel: bool = False,
 ) -> WaveMaps:
     """Responsivity of a used pixel on the object plane at each Z: full 2-D path.
 
@@ -431,6 +471,8 @@ def wave_response_2d(
     cell_um : side of the central cell (default: the output pitch)
     bin_um, map_half_um : bins and half width (um) of the maps
     device : "cpu" (NumPy) or "cuda" (CuPy); None: the run's device (:mod:`.arrays`)
+    fresnel : Fresnel transmission at the index changes (:func:`angular_filters`; the
+        pixel's acceptance cone applies either way)
     """
     zs = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
     if zs.size == 0 or not np.all(np.isfinite(zs)) or zs.min() < 0:
@@ -443,6 +485,7 @@ def wave_response_2d(
         tol=tol,
         seed=seed,
         device=device,
+        fresnel=fresnel,
     )
     st, smp, bk, xp = sm.stack, sm.sampling, sm.bk, sm.bk.xp
     lam, b, step = smp.wavelength_um, smp.band, smp.step_um

@@ -66,15 +66,29 @@ def lsf_source_2d(
     tol: float = RANGE_TOL,
     seed: int = 0,
     device: str | None = None,
+    fresnel: bool = False,
+    propagator: str = "exact",
 ) -> LSFSource:
     """An :class:`~.wave.LSFSource` of a used pixel by the 2-D path (any hole shape):
     x line-spread functions at any Z up to ``z_max_mm`` from the stack traversed once.
     ``tol``, ``seed``: the range finder's (:func:`~.wave2d.coherent_modes`); ``device``:
     "cpu" or "cuda" (None: the run's, :mod:`.arrays`). The object side is paraxial, as
-    the separable path's; the stack's slabs are exact (angular spectrum)."""
+    the separable path's; the stack's slabs are exact (angular spectrum; ``propagator``
+    "paraxial" for checks against the separable path). ``fresnel``: the interfaces'
+    Fresnel transmission (:func:`~.wave2d.angular_filters`, which also apply the pixel's
+    acceptance cone)."""
     smp = wave_sampling(design) if sampling is None else sampling
     with one_blas_thread():
-        sm = stack_modes(design, pixel=pixel, sampling=smp, tol=tol, seed=seed, device=device)
+        sm = stack_modes(
+            design,
+            pixel=pixel,
+            sampling=smp,
+            tol=tol,
+            seed=seed,
+            device=device,
+            fresnel=fresnel,
+            propagator=propagator,
+        )
         ux, light = marginal_modes(sm, 0, smp.mode_tol)
         uy, light_y = marginal_modes(sm, 1, smp.mode_tol)
         uy = uy / np.sqrt(max(light_y, 1e-300))  # unit power: R = X(x) Y(y) / light

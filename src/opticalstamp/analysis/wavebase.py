@@ -40,6 +40,15 @@ MODE_TOL = 1e-10
 PRUNE_TOL = 1e-10
 
 
+#: Why the analyses that need a pixel's 2-D maps (spots, scan kernels, the report) keep
+#: ray optics for circular holes.
+CIRCLE_MAPS = (
+    "circular holes: the wave engine's 2-D path gives their line-spread functions and "
+    "light (rmtf, efficiency with --optics wave) but not yet their 2-D maps (spots, scan "
+    "kernels, the report), which take minutes a height on 2 CPU cores"
+)
+
+
 @dataclass(frozen=True)
 class WaveSampling:
     """How the wave engine samples one design (all lengths um).

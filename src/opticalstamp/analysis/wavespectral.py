@@ -26,9 +26,18 @@ from scipy import fft as sfft
 from scipy.signal import czt
 
 from ..design import Design
+from ..validate import InputError
 from .spectrum import Spectrum, channels, one_channel
 from .wave import WaveResponse, half_width, lsf_source, wave_response
-from .wavebase import SOURCE_EXTRA, WaveSampling, response_summary, stack_axes, wave_sampling
+from .wavebase import (
+    CIRCLE_MAPS,
+    SOURCE_EXTRA,
+    WaveSampling,
+    rectangular,
+    response_summary,
+    stack_axes,
+    wave_sampling,
+)
 
 __all__ = [
     "SpectralWaveResponse",
@@ -219,6 +228,8 @@ def wave_response_spectral(
     sampling : a :class:`~.wavebase.WaveSampling` at one wavelength, carried to each
         (:func:`spectral_samplings`); default the design's rules at each wavelength
     """
+    if not rectangular(design):
+        raise InputError(f"optics: 'wave' maps of {design.name}: {CIRCLE_MAPS}; use --optics ray")
     spec = one_channel(design, spectrum)
     smps = spectral_samplings(design, spec, sampling)
     parts = [

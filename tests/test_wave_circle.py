@@ -1,0 +1,157 @@
+"""The wave engine's 2-D path feeding the analyses (issue 23): line-spread functions for
+any hole shape (:mod:`opticalstamp.analysis.wave2dlsf`), exact angular filters, the
+array backend (:mod:`opticalstamp.analysis.arrays`)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from opticalstamp.analysis import wave, wavebase
+from opticalstamp.analysis.arrays import backend, cupy_found
+from opticalstamp.analysis.responsivity import folded_lsf, resolve_optics
+from opticalstamp.analysis.wave2d import wave_response_2d
+from opticalstamp.analysis.wave2dlsf import lsf_source_2d
+from opticalstamp.analysis.wavespectral import wave_response_spectral
+from opticalstamp.design import design_from_dict
+from opticalstamp.device import DeviceUnavailable
+from opticalstamp.validate import InputError
+from test_wave import _stack
+
+ZS = (0.0, 0.4)
+
+
+def _with(d, **sensor):
+    raw = d.model_dump()
+    raw["sensor"] |= sensor
+    return design_from_dict(raw)
+
+
+def _lsfs(src, zs=ZS):
+    x, lsf, light, _ = src.lsf_x(zs)
+    return x, lsf, light
+
+
+@pytest.fixture(scope="module")
+def squares():
+    """The small two-row stamp of test_wave, square holes, two masks misregistered."""
+    d = _stack((10.0, 10.0, 12.0), offsets=[(1.5, -1.0), (0.0, 0.0), (-2.0, 0.7)])
+    return d, wavebase.wave_sampling(d, band=0.2).refined(margin=0.5)
+
+
+@pytest.mark.parametrize("fresnel", [False, True], ids=["plain", "fresnel"])
+def test_2d_lsfs_equal_the_separable_path_on_squares(squares, fresnel):
+    """Square holes, where both paths apply: the 2-D path's x line-spread functions (the
+    marginal's coherent modes of the randomized 2-D modes, paraxial propagator) equal the
+    separable path's to 1e-4 of their peak and its light to 1e-5, with and without the
+    Fresnel filters (exact in 2-D; a separable sum within 1e-5 of peak in the separable
+    path)."""
+    d, smp = squares
+    sep = _lsfs(wave.lsf_source(d, max(ZS), sampling=smp, fresnel=fresnel))
+    two = _lsfs(lsf_source_2d(d, max(ZS), sampling=smp, fresnel=fresnel, propagator="paraxial"))
+    np.testing.assert_allclose(two[0], sep[0])
+    assert two[2] == pytest.approx(sep[2], rel=5e-5)
+    assert np.abs(two[1] - sep[1]).max() < 1e-4 * sep[1].max()
+
+
+def test_2d_fresnel_loses_what_the_interfaces_transmit(squares):
+    """The small stamp's interfaces (air/glass at the sensor-side mask, glass/air under
+    the reference gap): with Fresnel losses the 2-D light drops by about the normal
+    incidence transmittances' product (4 n1 n2 / (n1 + n2)^2 each), a little more at the
+    band's oblique directions."""
+    d, smp = squares
+    plain = lsf_source_2d(d, 0.1, sampling=smp).light
+    lossy = lsf_source_2d(d, 0.1, sampling=smp, fresnel=True).light
+    t0 = (4 * 1.52 / 2.52**2) ** 2
+    assert t0 * 0.99 < lossy / plain < t0
+
+
+def test_2d_cone_against_the_separable_staircase(squares):
+    """A 2-degree acceptance cone (|s| <= 0.035 inside a band of 0.2): the 2-D path
+    applies the disk exactly, the separable path its staircase of strips with the disk's
+    area: the light agrees to 0.5 %, the LSFs to 1 % of their peak."""
+    d, smp = squares
+    d = _with(d, acceptance_half_angle_deg=2.0)
+    sep = _lsfs(wave.lsf_source(d, max(ZS), sampling=smp))
+    two = _lsfs(lsf_source_2d(d, max(ZS), sampling=smp, propagator="paraxial"))
+    full = lsf_source_2d(_with(d, acceptance_half_angle_deg=90.0), 0.1, sampling=smp).light
+    assert two[2] < 0.9 * full  # the cone cuts
+    assert two[2] == pytest.approx(sep[2], rel=5e-3)
+    assert np.abs(two[1] - sep[1]).max() < 1e-2 * sep[1].max()
+
+
+def test_circle_marginals_equal_the_full_2d_object_side():
+    """Circular holes (not separable): the LSFs from the marginal's coherent modes equal
+    the 2-D intensity integrated over y on the full object grid (both paraxial above the
+    stack) to 1e-3 of their peak, and the light to 1e-3."""
+    d = _stack((10.0, 10.0, 12.0), shape="circle", offsets=[(1.5, -1.0), (0, 0), (-2.0, 0.7)])
+    smp = wavebase.wave_sampling(d, band=0.2).refined(margin=0.5)
+    src = lsf_source_2d(d, max(ZS), sampling=smp, propagator="paraxial")
+    x, lsf, light = _lsfs(src)
+    full = wave_response_2d(d, ZS, sampling=smp, propagator="paraxial")
+    assert light == pytest.approx(full.etendue_um2sr[0], rel=1e-3)
+    for iz in range(len(ZS)):
+        a = np.interp(full.x_um, x, lsf[iz])
+        assert np.abs(a - full.lsf_x[iz]).max() < 1e-3 * full.lsf_x[iz].max()
+    # a circle passes less than its bounding square, more than the inscribed half
+    sq = lsf_source_2d(_stack((10.0, 10.0, 12.0), offsets=[(1.5, -1.0), (0, 0), (-2.0, 0.7)]),
+                       0.1, sampling=smp, propagator="paraxial")  # fmt: skip
+    assert 0.3 * sq.light < light < sq.light
+
+
+def test_lost_to_band_estimate_against_the_separable_budget(squares):
+    """The 2-D range finder's estimate of the light the masks send beyond the band
+    (random vectors) against the separable path's exact budget: within 4 standard
+    errors."""
+    d, smp = squares
+    sep = wave.wave_response(d, (0.0,), sampling=smp).budget[-1]["lost_to_band"]
+    info = lsf_source_2d(d, 0.1, sampling=smp, propagator="paraxial").meta
+    assert abs(info["lost_to_band"] - sep) < 4 * info["lost_to_band_se"]
+    assert info["lost_to_band_se"] < 0.1 * sep
+
+
+def test_circles_take_wave_optics_where_asked_for():
+    """Circular holes: ``wave`` gives the 2-D path's LSFs (folded onto a chart, as the
+    RMTF asks), equal to the marginal source's; ``auto`` keeps ray optics and says why
+    (their 2-D maps are not done); a wave spot map is refused naming the reason."""
+    d = _stack((10.0, 10.0, 12.0), shape="circle")
+    opt = resolve_optics(d, "wave")
+    assert opt.engine == "wave"
+    smp = wavebase.wave_sampling(d, band=0.2).refined(margin=0.5)
+    f = folded_lsf(d, z_mm=[0.0, 0.3], periods_um=[60.0], optics=replace(opt, sampling=smp),
+                   ghosts=False)  # fmt: skip
+    x, lsf, light = _lsfs(lsf_source_2d(d, 0.3, sampling=smp), (0.0, 0.3))
+    assert f.h[0][0, 0].sum(axis=-1) == pytest.approx(np.trapezoid(lsf, x, axis=-1), rel=1e-3)
+    auto = resolve_optics(d, "auto")
+    assert auto.engine == "ray" and "circular" in auto.reason
+    with pytest.raises(InputError, match="circular holes"):
+        wave_response_spectral(d, (0.0,), sampling=smp)
+
+
+@pytest.mark.skipif(cupy_found(), reason="CuPy is installed here")
+def test_cuda_without_cupy_is_refused_naming_it():
+    with pytest.raises(DeviceUnavailable, match="CuPy"):
+        backend("cuda")
+
+
+def _gpu() -> bool:
+    if not cupy_found():
+        return False
+    try:
+        backend("cuda")
+    except DeviceUnavailable:
+        return False
+    return True
+
+
+@pytest.mark.skipif(not _gpu(), reason="no CuPy GPU")
+def test_cuda_backend_gives_the_cpu_figures():
+    """The same 2-D path on CuPy arrays: the CPU's LSFs and light to 1e-9 (relative)."""
+    d = _stack((10.0, 10.0, 12.0), shape="circle")
+    smp = wavebase.wave_sampling(d, band=0.2).refined(margin=0.5)
+    cpu = _lsfs(lsf_source_2d(d, max(ZS), sampling=smp, device="cpu"))
+    gpu = _lsfs(lsf_source_2d(d, max(ZS), sampling=smp, device="cuda"))
+    assert gpu[2] == pytest.approx(cpu[2], rel=1e-9)
+    assert np.abs(gpu[1] - cpu[1]).max() < 1e-9 * cpu[1].max()
