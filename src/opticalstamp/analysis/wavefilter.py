@@ -27,11 +27,15 @@ terms sum_t a_t(s_x) b_t(s_y) on the band |s_x|, |s_y| < B. The smooth Fresnel p
 taken from the SVD of G sampled on the band (Nystrom-extended to the grids' frequency
 bins), with the fewest terms whose largest error over every bin is below ``FILTER_TOL``
 of the filter's peak (measured on the bins against the exact filter and recorded). The
-cone's disk is not low-rank (its SVD converges slowly); it is a staircase of strips in
-s_y, each with the chord in s_x that gives the strip the disk's exact area, so the
-cone's etendue is kept exactly and what moves is the shape of its rim, by less than a
-strip's step in s; the power of the difference from the disk is recorded. Where nothing
-changes the index and the cone holds the band, every filter is 1.
+cone's disk is not low-rank (its SVD converges slowly: 1 % of the power left out at 8
+terms, 0.2 % at 32); it is a staircase of ``CONE_STEPS`` strips of whole rows of s_y
+bins (equal steps in angle along the rim), each times a row of s_x bins that carries,
+over the strip, exactly the power of the disk on those bins (1 out to a chord, the next
+pair of bins at a fractional amplitude). The cone's etendue is kept exactly; what moves
+is the shape of its rim, by up to a strip's step in s (the power of the difference
+from the disk, ``power_error``, is 1.5 % of the disk's at 16 strips and halves with each
+doubling). Where nothing changes the index and the cone holds the band, every filter
+is 1.
 """
 
 from __future__ import annotations
@@ -46,7 +50,7 @@ from ..design import Design
 #: Largest error of the separable Fresnel filter over the band, relative to its peak.
 FILTER_TOL = 1e-5
 #: Strips of the acceptance cone's staircase over the cone's rim inside the band.
-CONE_STEPS = 12
+CONE_STEPS = 16
 #: Samples per axis of the band for the SVD (Nystrom nodes).
 SVD_NODES = 161
 
@@ -141,26 +145,41 @@ def _svd_terms(g, band: float, sx: np.ndarray, sy: np.ndarray, sub, k_max: int =
     return a, b, err, exact
 
 
-def _staircase(cut: float, band: float, steps: int) -> list[tuple[float, float, float]]:
-    """Strips (y_lo, y_hi, chord) over 0 <= |s_y| < min(cut, band): the chord is the
-    mean of min(sqrt(cut^2 - s_y^2), band) over the strip (the disk's area in it)."""
+def _staircase(cut: float, band: float, steps: int) -> list[tuple[float, float]]:
+    """Strips (y_lo, y_hi) over 0 <= |s_y| < min(cut, band): ``steps`` equal steps in
+    angle along the disk's rim inside the band, and one strip below them where the disk
+    holds the band's whole width."""
     top = min(cut, band)
-    flat = math.sqrt(max(cut * cut - band * band, 0.0))  # the chord is the band's below
-    phi_lo = math.asin(min(flat / cut, 1.0))
-    phi_hi = math.asin(top / cut)
-    ys = [0.0] if flat <= 0 else [0.0, flat]
-    ys += list(cut * np.sin(np.linspace(phi_lo, phi_hi, steps + 1))[1:])
+    flat = math.sqrt(max(cut * cut - band * band, 0.0))
+    phi = np.linspace(math.asin(min(flat / cut, 1.0)), math.asin(top / cut), steps + 1)
+    ys = ([0.0] if flat <= 0 else [0.0, flat]) + list(cut * np.sin(phi)[1:])
+    return [(lo, hi) for lo, hi in zip(ys[:-1], ys[1:], strict=True) if hi > lo]
 
-    def area(y):  # integral_0^y min(sqrt(cut^2 - t^2), band) dt
-        y = min(y, top)
-        if y <= flat:
-            return band * y
-        f = cut * cut * (math.asin(y / cut) - math.asin(flat / cut)) / 2
-        f += (y * math.sqrt(cut * cut - y * y) - flat * math.sqrt(cut * cut - flat * flat)) / 2
-        return band * flat + f
 
-    pairs = zip(ys[:-1], ys[1:], strict=True)
-    return [(lo, hi, (area(hi) - area(lo)) / (hi - lo)) for lo, hi in pairs if hi > lo]
+def _cone_terms(cut: float, band: float, sx: np.ndarray, sy: np.ndarray, steps: int):
+    """The cone's disk |s| <= ``cut`` on the bins as strips of whole rows of s_y (the
+    strips of :func:`_staircase`), each times a row of s_x whose power over the strip
+    is the disk's on those bins exactly: 1 out to a chord, the next pair of bins at the
+    amplitude that carries the remainder. Returns (ca (K, nx), cb (K, ny))."""
+    ax, ay = np.abs(sx), np.abs(sy)
+    levels, mult = np.unique(ax, return_counts=True)  # |s_x| of the bins, and how many
+    cum = np.cumsum(mult)
+    ca, cb = [], []
+    for lo, hi in _staircase(cut, band, steps):
+        rows = (ay >= lo) & (ay < hi) & (ay <= cut)
+        if not rows.any():
+            continue
+        chords = np.sqrt(np.clip(cut * cut - ay[rows] ** 2, 0.0, None))
+        counts = cum[np.searchsorted(levels, chords, side="right") - 1]  # bins with |s_x| <= chord
+        mean = counts.mean()  # the disk's bins per row over the strip
+        j = int(np.searchsorted(cum, mean + 1e-9, side="right"))  # levels wholly inside
+        row = (ax < levels[j]).astype(float) if j < levels.size else np.ones(sx.size)
+        if j < levels.size:
+            inside = cum[j - 1] if j else 0
+            row[ax == levels[j]] = np.sqrt(max(mean - inside, 0.0) / mult[j])
+        ca.append(row)
+        cb.append(rows.astype(float))
+    return np.array(ca), np.array(cb)
 
 
 def separable_filter(
@@ -194,14 +213,11 @@ def separable_filter(
         exact = np.ones((sx[sub[0]].size, sy[sub[1]].size))
     info = {"group": group, "interfaces": pairs, "cone": None, "terms": int(a.shape[0])}
     if cuts:
-        strips = _staircase(cut, band, CONE_STEPS)
-        ca = np.stack([(np.abs(sx) <= c).astype(float) for _, _, c in strips])
-        ay = np.abs(sy)
-        cb = np.stack([((ay >= lo) & (ay < hi)).astype(float) for lo, hi, _ in strips])
+        ca, cb = _cone_terms(cut, band, sx, sy, CONE_STEPS)
         a = (ca[:, None, :] * a[None]).reshape(-1, sx.size)
         b = (cb[:, None, :] * b[None]).reshape(-1, sy.size)
         exact = exact * (np.hypot(sx[sub[0]][:, None], sy[sub[1]][None, :]) <= cut)
-        info |= {"cone": cut, "terms": int(a.shape[0]), "cone_strips": len(strips)}
+        info |= {"cone": cut, "terms": int(a.shape[0]), "cone_strips": int(ca.shape[0])}
     approx = a[:, sub[0]].T @ b[:, sub[1]]
     peak = float(np.abs(exact).max())
     den = float(np.sum(exact**2))
