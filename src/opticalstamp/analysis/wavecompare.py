@@ -474,12 +474,6 @@ def comparison_lines(c: WaveRayComparison) -> list[str]:
             f"          {w['rmtf'][i]:.3f} / {r['rmtf'][i]:.3f}"
         )
     m = c.meta
-    acc = m.get("acceptance_half_angle_deg", 90.0)
-    if acc < 90.0:
-        out.append(
-            f"note: the pixel's acceptance cone ({acc:g}°) is applied to the rays only; "
-            "the wave engine takes every direction in its band"
-        )
     out.append(
         f"time: wave {m['seconds_wave']:.1f} s, ray {m['seconds_ray']:.1f} s ({m['rows']} rows)"
     )

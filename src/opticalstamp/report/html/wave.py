@@ -62,17 +62,11 @@ def wave_html(w: dict | None, fresnel_losses: bool = False) -> str:
         "wave − ray",
     ]
     dl = "n/a" if v["light_difference"] is None else f"{v['light_difference'] * 100:+.1f} %"
-    acc = w["meta"].get("acceptance_half_angle_deg", 90.0)
     notes = []
-    if acc < 90.0:
-        notes.append(
-            f"the pixel's acceptance cone ({acc:g}°) applies to the rays only; the wave "
-            "engine takes every direction of its band"
-        )
     if fresnel_losses:
         notes.append(
             "Fresnel transmission losses, on in the other sections, are off on both sides "
-            "here (the wave engine does not model them yet)"
+            "here (the comparison isolates diffraction)"
         )
     note = "".join(f" Note: {html.escape(n)}." for n in notes)
     light_words = f"at λ = {s['wavelength_um']:g} µm in the band"
