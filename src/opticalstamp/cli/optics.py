@@ -22,7 +22,8 @@ def optics_line(meta: dict) -> str:
     o = meta
     if o["engine"] == "ray":
         return f"optics: ray (geometric; {o['reason']})"
+    losses = ", Fresnel losses in both" if o.get("fresnel") else ""
     return (
         f"optics: wave at {o['wavelength_um']:g} µm, band |s| < {o['band']:.3f}, far ghosts "
-        f"traced ({o['reason']})"
+        f"traced{losses} ({o['reason']})"
     )
