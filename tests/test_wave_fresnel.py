@@ -259,3 +259,18 @@ def test_cli_rmtf_by_wave_optics_with_fresnel_losses():
     assert r.exit_code == 0, r.output
     data = json.loads(r.output)
     assert data["meta"]["optics"]["engine"] == "wave" and data["meta"]["optics"]["fresnel"]
+
+
+def test_wave_scan_kernels_with_fresnel_losses(paper):
+    """Scan kernels by wave optics with Fresnel losses: the near-field part is the wave
+    engine's in-band light with the losses (within 0.2 % of wave_response's, as without
+    them in tests/test_optics_engines.py), the ghost part the traced light beyond the
+    band with the losses (grazing: it falls to less than half)."""
+    from opticalstamp.imaging.kernels import scan_kernels
+
+    k0, k1 = (
+        scan_kernels(paper, [0.0], source="wave", n_rays=1 << 16, fresnel=f) for f in (False, True)
+    )
+    light = wave.wave_response(paper, (0.0,), fresnel=True).etendue_um2sr[0]
+    assert k1[0][0].own_etendue == pytest.approx(light, rel=2e-3)
+    assert k1[0][0].ghost_etendue < 0.5 * k0[0][0].ghost_etendue
