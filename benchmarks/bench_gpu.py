@@ -35,7 +35,8 @@ def device_name(device: str) -> str:
     if device == "cuda":
         from numba import cuda
 
-        return cuda.get_current_device().name.decode()
+        name = cuda.get_current_device().name
+        return name.decode() if isinstance(name, bytes) else str(name)
     return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores"
 
 

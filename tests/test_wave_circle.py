@@ -101,6 +101,16 @@ def test_circle_marginals_equal_the_full_2d_object_side():
     assert 0.3 * sq.light < light < sq.light
 
 
+def test_single_precision_operator_gives_the_double_figures(squares):
+    """The stack operator's FFTs in complex64 (the default) against complex128: the light
+    and the LSFs to 1e-6 (relative to the peak)."""
+    d, smp = squares
+    one = _lsfs(lsf_source_2d(d, 0.2, sampling=smp, precision="single"), (0.0, 0.2))
+    two = _lsfs(lsf_source_2d(d, 0.2, sampling=smp, precision="double"), (0.0, 0.2))
+    assert one[2] == pytest.approx(two[2], rel=1e-6)
+    assert np.abs(one[1] - two[1]).max() < 1e-6 * two[1].max()
+
+
 def test_lost_to_band_estimate_against_the_separable_budget(squares):
     """The 2-D range finder's estimate of the light the masks send beyond the band
     (random vectors) against the separable path's exact budget: within 4 standard
@@ -148,10 +158,11 @@ def _gpu() -> bool:
 
 @pytest.mark.skipif(not _gpu(), reason="no CuPy GPU")
 def test_cuda_backend_gives_the_cpu_figures():
-    """The same 2-D path on CuPy arrays: the CPU's LSFs and light to 1e-9 (relative)."""
+    """The same 2-D path on CuPy arrays, in double precision: the CPU's LSFs and light to
+    1e-9 (relative)."""
     d = _stack((10.0, 10.0, 12.0), shape="circle")
     smp = wavebase.wave_sampling(d, band=0.2).refined(margin=0.5)
-    cpu = _lsfs(lsf_source_2d(d, max(ZS), sampling=smp, device="cpu"))
-    gpu = _lsfs(lsf_source_2d(d, max(ZS), sampling=smp, device="cuda"))
+    cpu = _lsfs(lsf_source_2d(d, max(ZS), sampling=smp, device="cpu", precision="double"))
+    gpu = _lsfs(lsf_source_2d(d, max(ZS), sampling=smp, device="cuda", precision="double"))
     assert gpu[2] == pytest.approx(cpu[2], rel=1e-9)
     assert np.abs(gpu[1] - cpu[1]).max() < 1e-9 * cpu[1].max()

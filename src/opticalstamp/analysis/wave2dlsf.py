@@ -38,8 +38,7 @@ def marginal_modes(sm: StackModes, axis: int, tol: float):
     fields on that axis's stack grid (n, q), on the host: sum_k |u_k|^2 is the marginal
     (um sr per um), all but ``tol`` of its power; and the marginal's power (um^2 sr)."""
     st, bk, xp = sm.stack, sm.bk, sm.bk.xp
-    ny_in = int(np.unique(bk.host(st.band_idx[0])).size)
-    nx_in = st.band_idx[0].size // ny_in
+    ny_in, nx_in = st.ky.size, st.kx.size
     g = sm.modes.reshape(-1, ny_in, nx_in)
     a = g.reshape(-1, nx_in) if axis == 0 else xp.swapaxes(g, 1, 2).reshape(-1, ny_in)
     # mutual intensity of the incoherent 1-D spectra (rows): J = a^T conj(a) = sum p v v^H
@@ -48,7 +47,7 @@ def marginal_modes(sm: StackModes, axis: int, tol: float):
     keep = max(1, min(int(np.searchsorted(np.cumsum(p), (1 - tol) * p.sum())) + 1, p.size))
     grid = st.x if axis == 0 else st.y
     step = float(grid[1] - grid[0])
-    bins = np.unique(bk.host(st.band_idx[1 - axis]))  # the axis's in-band FFT bins
+    bins = bk.host(st.kx if axis == 0 else st.ky)  # the axis's in-band FFT bins
     full = np.zeros((keep, grid.size), dtype=np.complex128)
     full[:, bins] = (v[:, :keep] * np.sqrt(p[:keep] * step)).T
     from scipy import fft as sfft
@@ -68,6 +67,7 @@ def lsf_source_2d(
     device: str | None = None,
     fresnel: bool = False,
     propagator: str = "exact",
+    precision: str = "single",
 ) -> LSFSource:
     """An :class:`~.wave.LSFSource` of a used pixel by the 2-D path (any hole shape):
     x line-spread functions at any Z up to ``z_max_mm`` from the stack traversed once.
@@ -76,7 +76,7 @@ def lsf_source_2d(
     the separable path's; the stack's slabs are exact (angular spectrum; ``propagator``
     "paraxial" for checks against the separable path). ``fresnel``: the interfaces'
     Fresnel transmission (:func:`~.wave2d.angular_filters`, which also apply the pixel's
-    acceptance cone)."""
+    acceptance cone); ``precision``: the stack operator's (:func:`~.wave2d.stack_modes`)."""
     smp = wave_sampling(design) if sampling is None else sampling
     with one_blas_thread():
         sm = stack_modes(
@@ -88,6 +88,7 @@ def lsf_source_2d(
             device=device,
             fresnel=fresnel,
             propagator=propagator,
+            precision=precision,
         )
         ux, light = marginal_modes(sm, 0, smp.mode_tol)
         uy, light_y = marginal_modes(sm, 1, smp.mode_tol)
