@@ -317,7 +317,7 @@ def test_cli_fit_writes_a_usable_design_and_report(tmp_path):
     r = CliRunner().invoke(
         app,
         ["fit", *args, "-o", str(out), "--free", "layer2.x,ref", "--starts", "1", "--json"]
-        + ["--report", str(rep)],
+        + ["--report", str(rep), "--optics", "ray"],  # the scans' kernels: paraxial
     )
     assert r.exit_code == 0, r.output
     data = json.loads(r.stdout)
@@ -386,15 +386,14 @@ def test_cli_bad_input_exit_2(tmp_path):
 
 
 def test_fit_says_when_its_ray_model_is_not_the_designs_optics():
-    """The fit's forward model is ray optics; where --optics auto takes wave optics for the
-    design (the prototype) its JSON and terminal warn, where ray optics holds they do not."""
+    """A ray-optics fit of a design for which --optics auto takes wave optics (the
+    prototype) warns; where ray optics holds, or the fit was by wave optics, it does not."""
     from opticalstamp.design import load_design
     from opticalstamp.design.variants import scale_to_dpi
     from opticalstamp.studies.fitresult import fit_optics
 
     paper = load_design("paper2016")
-    o = fit_optics(paper)
-    assert o["auto"]["engine"] == "wave" and "absorb the diffraction blur" in o["warning"]
+    assert "absorb the diffraction blur" in fit_optics(paper, {"engine": "ray"})
+    assert fit_optics(paper, {"engine": "wave"}) is None
     coarse = scale_to_dpi(paper, 100)  # holes and lattice 3x over the same plates
-    o = fit_optics(coarse)
-    assert o["auto"]["engine"] == "ray" and o["warning"] is None
+    assert fit_optics(coarse, {"engine": "ray"}) is None

@@ -21,6 +21,7 @@ from .common import (
     writable,
 )
 from .metrics import DpiOpt, LinearOpt, read_scan_image
+from .optics import OpticsOpt
 
 
 def _image_spec(text: str) -> tuple[Path, float]:
@@ -121,7 +122,7 @@ def result_lines(res) -> list[str]:
     """The fit as text: estimates with errors, parameters held at nominal, chi2, starts,
     degeneracies."""
     from ..studies.fit import HELD
-    from ..studies.fitresult import fit_optics
+    from ..studies.fitresult import fit_optics, optics_words
 
     lines = [
         f"fit of {res.design.name}: chi2 {res.chi2:.1f} for {res.dof} degrees of freedom "
@@ -140,10 +141,11 @@ def result_lines(res) -> list[str]:
         lines.append(f"{n:12s} pinned at {v:g}")
     good = sum(1 for s in res.starts if s["delta_chi2"] < 1.0)
     lines.append(f"{good} of {len(res.starts)} starts reached the best minimum (delta chi2 < 1)")
+    lines.append(optics_words(res.optics))
     lines += [f"warning: {m}" for m in res.degeneracies]
-    optics = fit_optics(res.design)
-    if optics["warning"]:
-        lines.append(f"warning: {optics['warning']}")
+    warning = fit_optics(res.design, res.optics)
+    if warning:
+        lines.append(f"warning: {warning}")
     return lines
 
 
@@ -179,6 +181,7 @@ def fit_cmd(
         ),
     ] = 32,
     seed: SeedOpt = 0,
+    optics: OpticsOpt = "auto",
     dpi: DpiOpt = None,
     linear: LinearOpt = None,
     as_json: JsonOpt = False,
@@ -191,7 +194,9 @@ def fit_cmd(
     ] = None,
 ) -> None:
     """Fit the design to scans of charts: misregistration, thicknesses, holes, sensitive
-    area and the true reference plane, with errors and the degeneracies named."""
+    area and the true reference plane, with errors and the degeneracies named. The optics
+    is chosen once, for the nominal design, as the other commands choose it."""
+    from ..analysis.responsivity import resolve_optics
     from ..design.files import design_toml
     from ..design.model import Design
     from ..imaging.kernels import kernel_source
@@ -211,6 +216,10 @@ def fit_cmd(
             "this design does not admit (circular holes, or own-path rays steeper than "
             "the paraxial limit); make its holes square (opticalstamp.design.square_holes)"
         )
+    try:  # once, for the nominal design; a bad or impossible optics before any work
+        opt = resolve_optics(d, optics)
+    except ValueError as err:
+        fail(f"--{err}")
     obs, use = _observations(images, dpi, linear, calibration_lines)
     from ..imaging.scan import scan_pitch
     from ..units import dpi_of_pitch
@@ -219,7 +228,15 @@ def fit_cmd(
     if abs(use - want) > 0.01 * want:
         fail(f"IMAGE: {use:g} dpi, the design's merged line is {want:g} dpi (--design {design})")
     try:
-        res = fit(d, obs, free=_names(free, "--free"), pinned=_pins(pin), starts=starts, seed=seed)
+        res = fit(
+            d,
+            obs,
+            free=_names(free, "--free"),
+            pinned=_pins(pin),
+            starts=starts,
+            seed=seed,
+            optics=opt,
+        )
     except FitError as err:
         fail(str(err))
     text = design_toml(

@@ -15,8 +15,11 @@ import json
 from pathlib import Path
 
 from ..design import Design
+from ..studies.fitresult import optics_words
 from ..validate import InputError
 
+#: What the RMTF curves of each optics are (the fit's model's).
+CURVES = {"ray": "paraxial own path", "wave": "the wave engine's light in its band"}
 #: What a fit.json must hold for the section.
 FIT_KEYS = ("design", "design_fingerprint", "fitted_fingerprint", "parameters", "chi2", "dof")
 
@@ -58,9 +61,11 @@ def fit_section(fit: dict, design: Design) -> dict:
         ``rows`` (parameter, nominal, fitted, error or the held words), ``held``,
         ``degeneracies``, ``reduced_chi2``, ``error_scale``, ``this_design`` ("fitted": the
         report is of the fitted design, "nominal": of the design fitted, None: another),
-        ``rmtf`` (measured points, nominal and fitted curves) and ``residuals`` (per
-        image: name, kind, height, rms and the normalised residuals).
+        ``rmtf`` (measured points, nominal and fitted curves), ``residuals`` (per
+        image: name, kind, height, rms and the normalised residuals), ``optics`` (the
+        fit's record), ``optics_text`` (it in words) and ``curves`` (what the curves are).
     """
+    optics = fit.get("optics") or {}
     fp = design.fingerprint()
     this = {fit["fitted_fingerprint"]: "fitted", fit["design_fingerprint"]: "nominal"}.get(fp)
     rows = []
@@ -90,6 +95,11 @@ def fit_section(fit: dict, design: Design) -> dict:
         "error_scale": fit.get("error_scale"),
         "rmtf": fit.get("rmtf"),
         "residuals": residuals,
+        "optics": optics,
+        "optics_text": optics_words(optics)
+        + "."
+        + (f" Warning: {optics['warning']}" if optics.get("warning") else ""),
+        "curves": CURVES[optics.get("engine", "ray")],
     }
 
 

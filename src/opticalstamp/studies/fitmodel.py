@@ -39,6 +39,8 @@ TABLE_UM = 0.25
 SMEAR_SUBS = 9
 #: Step (um) of the nodes of the cross spread of a slanted edge (times its slope).
 CROSS_UM = 6.0
+#: Mass under which the cross spread's bins are merged into one node (Spread.nodes).
+NODE_MASS = 2e-3
 
 
 @dataclass(frozen=True)
@@ -118,24 +120,35 @@ class Spread:
 
     def nodes(self, cum: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(positions, weights) of a distribution from its cumulative on ``u``, on
-        CROSS_UM bins."""
+        CROSS_UM bins; bins lighter than NODE_MASS (the far tails of a wave spread)
+        merged in order into nodes of about that mass at their mean position (the cross
+        term is a small correction there, slope x position, and each node costs a pass
+        over the edge's pixels)."""
         k0 = np.floor(self.u[0] / CROSS_UM)  # a fixed grid, as the table's
         edges = (k0 + np.arange(int(np.ceil((self.u[-1] - self.u[0]) / CROSS_UM)) + 2)) * CROSS_UM
         c = np.interp(edges, self.u, cum)
         w = np.diff(c)
         mid = (edges[1:] + edges[:-1]) / 2
         keep = w > 1e-9
-        return mid[keep], w[keep] / w[keep].sum()
+        mid, w = mid[keep], w[keep]
+        # a bin of NODE_MASS or more starts a node of its own (its mass before it lies in
+        # an earlier quantum than its successor's)
+        g = np.floor((np.cumsum(w) - w) / NODE_MASS).astype(np.int64)
+        g = np.unique(g, return_inverse=True)[1]
+        mass = np.bincount(g, w)
+        return np.bincount(g, w * mid) / mass, mass / mass.sum()
 
 
-def spread(design: Design, z_mm: float, smear_um: float) -> Spread:
-    """The own path's spread of ``design`` at ``z_mm`` above its reference plane."""
+def spread(design: Design, z_mm: float, smear_um: float, reach_um: float = 0.0) -> Spread:
+    """The own path's spread of ``design`` at ``z_mm`` above its reference plane, tabulated
+    on the fixed grid k ``TABLE_UM`` out to its support or ``reach_um``, whichever is
+    wider."""
     half = 0.0
     for axis in (0, 1):
         lo, hi = paraxial_support(design, z_mm, axis)
         half = max(half, abs(lo), abs(hi))
     half = half + smear_um / 2 + 2 * TABLE_UM
-    n = int(np.ceil(half / TABLE_UM))
+    n = max(int(np.ceil(half / TABLE_UM)), int(np.ceil(reach_um / TABLE_UM)))
     u = np.arange(-n, n + 1) * TABLE_UM  # on a fixed grid: no jump as the support moves
     cx = paraxial_cumulative(design, z_mm, u, 0)
     subs = ((np.arange(SMEAR_SUBS) + 0.5) / SMEAR_SUBS - 0.5) * smear_um
@@ -148,7 +161,13 @@ def spread(design: Design, z_mm: float, smear_um: float) -> Spread:
     gx, gy = cx[-1], cy[-1]
     if not (gx > 0 and gy > 0):
         raise ValueError(f"no own-path light reaches the pixel at Z = {z_mm:g} mm")
-    return Spread(u, cx / gx, cy / gy, half)
+    return Spread(u, cx / gx, cy / gy, max(half, reach_um))
+
+
+def spreads(design: Design, zs, smear_um: float, phys=None) -> dict[float, Spread]:
+    """The fast model (:func:`spread`, the paraxial own path) at each height: {Z: spread}
+    (``phys``, the physical values that made ``design``, is not needed here)."""
+    return {float(z): spread(design, float(z), smear_um) for z in zs}
 
 
 def smear_of(design: Design) -> float:

@@ -42,6 +42,7 @@ class FitResult:
     theta: np.ndarray = field(repr=False, default=None)
     held: dict[str, float] = field(default_factory=dict)
     held_combinations: list[dict[str, float]] = field(default_factory=list)
+    optics: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {
@@ -71,26 +72,45 @@ class FitResult:
             "error_scale": self.error_scale,
             "nuisance": self.nuisance,
             "starts": self.starts,
-            "optics": fit_optics(self.design),
+            "optics": self.optics | {"warning": fit_optics(self.design, self.optics)},
         }
 
 
-def fit_optics(design: Design) -> dict:
-    """The fit's optics against the one the other commands pick for this design: the fit's
-    forward model is the paraxial own path (ray optics, fast enough for its thousands of
-    evaluations); where ``--optics auto`` picks wave optics for the design
-    (:func:`~opticalstamp.analysis.responsivity.resolve_optics`), the fitted geometry
-    absorbs the diffraction blur the model leaves out, and ``warning`` says so."""
+def fit_optics(design: Design, optics: dict) -> str | None:
+    """A warning where the fit's optics (``optics``: :attr:`FitResult.optics`) is not the
+    one the other commands pick for this design: a ray-optics fit (the paraxial own path)
+    of a design for which ``--optics auto`` takes wave optics
+    (:func:`~opticalstamp.analysis.responsivity.resolve_optics`), whose fitted geometry
+    absorbs the diffraction blur the model leaves out. None where they agree."""
     from ..analysis.responsivity import resolve_optics
 
+    if optics.get("engine", "ray") != "ray":
+        return None
     auto = resolve_optics(design, "auto")
-    warning = None
     if auto.engine == "wave":
-        warning = (
+        return (
             "the fit's forward model is ray optics (the paraxial own path), but the other "
             f"commands take wave optics for this design ({auto.reason}): the fitted "
-            "parameters absorb the diffraction blur the model leaves out; compare them "
-            "with care"
+            "parameters absorb the diffraction blur the model leaves out; fit with "
+            "--optics wave (or auto) to compare them with the other commands' figures"
         )
-    return {"forward_model": "paraxial own path (ray optics)", "auto": auto.to_dict(),
-            "warning": warning}  # fmt: skip
+    return None
+
+
+def optics_words(o: dict | None) -> str:
+    """A fit's optics in words (its ``optics`` record, fit.json's): which forward model,
+    why, and under wave optics how its defect correction converged."""
+    o = o or {}
+    if o.get("engine", "ray") != "wave":
+        why = o.get("reason", "the fit's model before it chose its optics")
+        return f"optics: ray, the paraxial own path ({why})"
+    sc = o.get("scheme", {})
+    moves = ", ".join(f"{m:.2g}" for m in sc.get("moves_in_errors", []))
+    state = "converged" if sc.get("converged") else "NOT converged"
+    return (
+        f"optics: wave at {o['wavelength_um']:g} um, the wave engine's light in its band "
+        f"|s| < {o['band']:.3f} (own path, diffraction, near crosstalk; {o['reason']}); "
+        f"the wave model's optimum by defect correction, {state} ({sc.get('stopped')}) in "
+        f"{sc.get('rounds')} rounds (each round's largest move: {moves} errors), "
+        f"{sc.get('wave_runs')} wave runs; errors from the wave model's Jacobian"
+    )

@@ -34,7 +34,8 @@ def fit_html(sec: dict | None) -> str:
     if sec.get("rmtf") and sec["rmtf"].get("points"):
         figs += (
             "<p>RMTF against height: measured (dots), the nominal design (dashed) and the "
-            "fitted design (solid), paraxial own path (paper Fig. 11 with its dots).</p>"
+            f"fitted design (solid), {html.escape(sec.get('curves', 'paraxial own path'))} "
+            "(paper Fig. 11 with its dots).</p>"
             '<img src="fit_rmtf.png" alt="RMTF against height, measured and modelled">'
         )
     if sec.get("residuals"):
@@ -47,7 +48,8 @@ def fit_html(sec: dict | None) -> str:
 <p>The design fitted to a prototype's scans of charts (<code>opticalstamp fit</code>,
 docs/fit.md) at {images or "the images given"}. {which} {chi}. Lengths in µm; ref: how far
 Z = 0 really lies above the drawn reference plane. A parameter the images did not determine
-is held at its nominal value in the fitted design.</p>
+is held at its nominal value in the fitted design.
+{html.escape(sec.get("optics_text", ""))}</p>
 {rows}{f"<ul>{notes}</ul>" if notes else ""}
 {figs}
 """

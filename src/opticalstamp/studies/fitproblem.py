@@ -1,0 +1,336 @@
+"""A fit's problem (issue 24): the parameters' layout, the residuals of the images' data
+under a forward model, and their Jacobian.
+
+The residuals are the noise-weighted differences between each image's data
+(:mod:`.fitdata`) and the model's values: per bar block ``black + (white - black) F``,
+F the fraction of the pixel's spread on white (:func:`~.fitmodel.bar_fraction`), per
+edge region the same along the edge's normal (:func:`~.fitmodel.edge_fraction`). The
+spread at each height comes from the problem's forward model: by default the fast model
+(:func:`~.fitmodel.spreads`, the paraxial own path); the wave fit passes its own
+(:mod:`.fitwave`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..design import Design
+from ..validate import InputError
+from .fitdata import Observation
+from .fitmodel import (
+    Param,
+    Spread,
+    bar_fraction,
+    design_params,
+    edge_fraction,
+    smear_of,
+    spreads,
+    with_params,
+)
+
+#: A forward model: (design, heights in mm, motion smear in um, the physical values that
+#: made the design) -> {Z: spread}.
+Model = Callable[[Design, list, float], dict[float, Spread]]
+
+#: The residual of every datum where the parameters make no design or no light.
+BAD_RESIDUAL = 1e4
+#: Weight of a held direction's residual (its distance from nominal in assembly scales):
+#: its error becomes 1e-4 scales, a constraint.
+HOLD_WEIGHT = 1e4
+#: How far (relative) a bar block's period may move from the one measured.
+PERIOD_TOL = 0.03
+
+
+class FitError(InputError):
+    """A fit that cannot be set up: the message names the argument."""
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where each parameter sits in the vector the optimiser moves.
+
+    ``free``: the physical parameters fitted; ``fixed``: the value of every physical
+    parameter (pinned or nominal where not free); ``nuis``: per observation, the slice of
+    its nuisance parameters and their names.
+    """
+
+    params: tuple[Param, ...]
+    free: tuple[int, ...]
+    fixed: np.ndarray
+    nuis: tuple[tuple[slice, tuple[str, ...]], ...]
+
+    @property
+    def n_free(self) -> int:
+        return len(self.free)
+
+    def physical(self, theta: np.ndarray) -> np.ndarray:
+        v = self.fixed.copy()
+        v[list(self.free)] = theta[: self.n_free]
+        return v
+
+
+def _nuisance_names(obs: Observation) -> tuple[str, ...]:
+    if obs.kind == "bars":
+        names = []
+        for i, _ in enumerate(obs.blocks):
+            b = f"block{i + 1}"
+            names += [f"{b}.phase_um", f"{b}.period_um", f"{b}.black", f"{b}.white"]
+        return tuple(names)
+    names = []
+    for e in obs.edges:
+        a = "xy"[e.axis]
+        names += [f"edge_{a}.pos_um", f"edge_{a}.slope", f"edge_{a}.black", f"edge_{a}.white"]
+    return tuple(names)
+
+
+def nuisance_start(obs: Observation) -> np.ndarray:
+    if obs.kind == "bars":
+        v = []
+        for b in obs.blocks:
+            v += [b.phase_um, b.period_um, float(b.value.min()), float(b.value.max())]
+        return np.array(v)
+    v = []
+    for e in obs.edges:
+        lo, hi = np.percentile(e.value, [5, 95])
+        v += [e.pos_um, e.slope, float(lo), float(hi)]
+    return np.array(v)
+
+
+def predict(obs: Observation, sp, nuis: np.ndarray) -> np.ndarray:
+    """The model's values of an observation's data (concatenated as in :func:`data_of`)."""
+    out = []
+    if obs.kind == "bars":
+        for i, b in enumerate(obs.blocks):
+            phase, per, black, white = nuis[4 * i : 4 * i + 4]
+            out.append(black + (white - black) * bar_fraction(sp, b.x_um, per, phase))
+        return np.concatenate(out)
+    for i, e in enumerate(obs.edges):
+        pos, slope, black, white = nuis[4 * i : 4 * i + 4]
+        out.append(black + (white - black) * edge_fraction(sp, e, pos, slope))
+    return np.concatenate(out)
+
+
+def _phase_search(obs: Observation, sp, nuis: np.ndarray, n: int = 24) -> np.ndarray:
+    """Bar images' nuisance with each block's phase the best of ``n`` over its period
+    (black and white levels solved linearly per trial, shading held)."""
+    nuis = nuis.copy()
+    for i, b in enumerate(obs.blocks):
+        per = nuis[4 * i + 1]
+        best = (np.inf, nuis[4 * i : 4 * i + 4])
+        for ph in nuis[4 * i] + per * np.arange(n) / n:
+            f = bar_fraction(sp, b.x_um, per, ph)
+            m = np.column_stack([1 - f, f]) / np.sqrt(b.var)[:, None]
+            c, *_ = np.linalg.lstsq(m, b.value / np.sqrt(b.var), rcond=None)
+            cost = float(np.sum((m @ c - b.value / np.sqrt(b.var)) ** 2))
+            if c[1] > c[0] and cost < best[0]:  # white above black
+                best = (cost, np.array([ph % per, per, c[0], c[1]]))
+        nuis[4 * i : 4 * i + 4] = best[1]
+    return nuis
+
+
+def data_of(obs: Observation) -> tuple[np.ndarray, np.ndarray]:
+    """(values, standard deviations) of an observation's data."""
+    items = obs.blocks if obs.kind == "bars" else obs.edges
+    v = np.concatenate([it.value for it in items])
+    s = np.sqrt(np.concatenate([it.var for it in items]))
+    return v, np.maximum(s, 1e-9)
+
+
+class Problem:
+    """A fit's residuals and Jacobian, with the spreads cached by physical values."""
+
+    def __init__(
+        self,
+        design: Design,
+        observations: list[Observation],
+        layout: Layout,
+        hold: np.ndarray | None = None,
+        prior: float = 0.0,
+        model: Model = spreads,
+    ):
+        """``hold``: (m, free) directions, in units of each parameter's assembly scale,
+        along which the fit is held at nominal (rows of weight HOLD_WEIGHT appended to
+        the residuals); ``prior``: the weight of every free parameter's distance from
+        nominal in assembly scales (a search's first stage; 0: none); ``model``: the
+        forward model, (design, heights, smear, physical values) -> {Z: spread} (default
+        the fast one,
+        :func:`~.fitmodel.spreads`)."""
+        self.model = model
+        self.design = design
+        self.obs = observations
+        self.lay = layout
+        self.smear = smear_of(design)
+        self.data = [data_of(o) for o in observations]
+        self.n_data = sum(v.size for v, _ in self.data)
+        nf = layout.n_free
+        self.hold = np.zeros((0, nf)) if hold is None else np.asarray(hold).reshape(-1, nf)
+        self._nominal = layout.fixed[list(layout.free)]
+        self._scales = np.array([layout.params[j].scale for j in layout.free])
+        self.prior = float(prior)
+        self._cache: dict[bytes, list] = {}
+
+    def penalty(self, theta: np.ndarray) -> np.ndarray:
+        """The held directions' residuals (HOLD_WEIGHT x their distance from nominal) and
+        the prior's."""
+        d = (theta[: self.lay.n_free] - self._nominal) / self._scales
+        out = HOLD_WEIGHT * self.hold @ d
+        return np.concatenate([out, self.prior * d]) if self.prior else out
+
+    def spreads(self, phys: np.ndarray) -> list:
+        """Each observation's spread at these physical values, or None where the design
+        is not one (a rule broken) or passes no light (the optimiser is sent back)."""
+        key = phys.tobytes()
+        if key not in self._cache:
+            if len(self._cache) > 64:
+                self._cache.clear()
+            try:
+                d = with_params(self.design, list(self.lay.params), phys)
+                by_z = self.model(d, sorted({o.z_mm for o in self.obs}), self.smear, phys)
+                self._cache[key] = [by_z[o.z_mm] for o in self.obs]
+            except ValueError:  # DesignError is one too
+                self._cache[key] = None
+        return self._cache[key]
+
+    def residual_of(self, i: int, sp, theta: np.ndarray) -> np.ndarray:
+        sl, _ = self.lay.nuis[i]
+        v, s = self.data[i]
+        return (predict(self.obs[i], sp, theta[sl]) - v) / s
+
+    def residuals(self, theta: np.ndarray) -> np.ndarray:
+        sps = self.spreads(self.lay.physical(theta))
+        if sps is None:
+            data = np.full(self.n_data, BAD_RESIDUAL)
+        else:
+            data = np.concatenate([self.residual_of(i, sp, theta) for i, sp in enumerate(sps)])
+        return np.concatenate([data, self.penalty(theta)])
+
+    def steps(self, theta: np.ndarray) -> np.ndarray:
+        h = np.empty(theta.size)
+        for k, j in enumerate(self.lay.free):
+            h[k] = 1e-3 * self.lay.params[j].scale
+        for sl, names in self.lay.nuis:
+            for k, n in zip(range(sl.start, sl.stop), names, strict=True):
+                h[k] = 1e-2 if n.endswith("phase_um") or n.endswith("pos_um") else 1e-5
+                if n.endswith("period_um"):
+                    h[k] = 1e-4
+        return h
+
+    def jacobian(self, theta: np.ndarray) -> np.ndarray:
+        """Forward differences: every image for a physical column, one image's residuals
+        for its own nuisance columns (the spreads reused)."""
+        r0 = self.residuals(theta)
+        sps = self.spreads(self.lay.physical(theta))
+        sizes = [self.data[i][0].size for i in range(len(self.obs))]
+        starts = np.concatenate([[0], np.cumsum(sizes)])
+        jac = np.zeros((r0.size, theta.size))
+        h = self.steps(theta)
+        for k in range(self.lay.n_free):
+            t = theta.copy()
+            p = self.lay.params[self.lay.free[k]]
+            step = h[k] if t[k] + h[k] <= p.hi else -h[k]
+            t[k] += step
+            jac[:, k] = (self.residuals(t) - r0) / step
+        for i, (sl, _) in enumerate(self.lay.nuis):
+            a, b = starts[i], starts[i + 1]
+            for k in range(sl.start, sl.stop):
+                t = theta.copy()
+                t[k] += h[k]
+                jac[a:b, k] = (self.residual_of(i, sps[i], t) - r0[a:b]) / h[k]
+        return jac
+
+    def physical_columns(self, theta: np.ndarray, rel: float) -> np.ndarray:
+        """The Jacobian's physical columns by central differences, steps ``rel`` x each
+        parameter's assembly scale (one-sided at a bound): for a model too costly for
+        :meth:`jacobian`'s forward differences at every step, or one whose last digits
+        jitter at their tiny steps (the wave engine's grids)."""
+        cols = []
+        for k in range(self.lay.n_free):
+            p = self.lay.params[self.lay.free[k]]
+            h = rel * p.scale
+            lo, hi = max(theta[k] - h, p.lo), min(theta[k] + h, p.hi)
+            a, b = theta.copy(), theta.copy()
+            a[k], b[k] = lo, hi
+            cols.append((self.residuals(b) - self.residuals(a)) / (hi - lo))
+        return np.column_stack(cols) if cols else np.zeros((self.n_data, 0))
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The physical parameters' bounds; a bar block's period within PERIOD_TOL of
+        the one measured (a wider step could jump to an alias of the bars), black and
+        white levels in [-0.5, 1.5]."""
+        n = sum(sl.stop - sl.start for sl, _ in self.lay.nuis)
+        lo = np.full(self.lay.n_free + n, -np.inf)
+        hi = np.full(self.lay.n_free + n, np.inf)
+        for k, j in enumerate(self.lay.free):
+            lo[k], hi[k] = self.lay.params[j].lo, self.lay.params[j].hi
+        for o, (sl, names) in zip(self.obs, self.lay.nuis, strict=True):
+            start = nuisance_start(o)
+            for k, n, v in zip(range(sl.start, sl.stop), names, start, strict=True):
+                if n.endswith("period_um"):
+                    lo[k], hi[k] = v * (1 - PERIOD_TOL), v * (1 + PERIOD_TOL)
+                elif n.endswith("phase_um"):
+                    per = start[k - sl.start + 1]
+                    lo[k], hi[k] = -2 * per, 3 * per
+                elif n.endswith("black") or n.endswith("white"):
+                    lo[k], hi[k] = -0.5, 1.5
+        return lo, hi
+
+    def fit_nuisance(self, theta: np.ndarray) -> np.ndarray:
+        """Each image's nuisance parameters fitted with the physical ones held: the bar
+        blocks' phases first by a search over one period (a block past the RMTF's zero
+        shows its bars in reverse), then every nuisance parameter by least squares."""
+        theta = theta.copy()
+        lo, hi = self.bounds()
+        sps = self.spreads(self.lay.physical(theta))
+        if sps is None:
+            return theta
+        for i, (sl, _) in enumerate(self.lay.nuis):
+            if self.obs[i].kind == "bars":
+                theta[sl] = _phase_search(self.obs[i], sps[i], theta[sl])
+
+            def res(nu, i=i, sl=sl):
+                t = theta.copy()
+                t[sl] = nu
+                return self.residual_of(i, sps[i], t)
+
+            nu0 = np.clip(theta[sl], lo[sl] + 1e-9, hi[sl] - 1e-9)
+            theta[sl] = least_squares(res, nu0, bounds=(lo[sl], hi[sl]), x_scale="jac").x
+        return theta
+
+
+def layout_for(
+    design: Design,
+    observations: list[Observation],
+    free: list[str] | None = None,
+    pinned: dict[str, float] | None = None,
+) -> Layout:
+    """The parameters of a fit: ``free`` names (default: every physical parameter not
+    pinned), ``pinned`` {name: value} held (``ref``: the offset in um)."""
+    params = tuple(design_params(design))
+    names = [p.name for p in params]
+    pinned = dict(pinned or {})
+    for n in list(pinned) + list(free or []):
+        if n not in names:
+            raise FitError(f"--free/--pin: unknown parameter {n!r} (this design has {names})")
+    fixed = np.array([0.0 if p.offset else p.nominal for p in params])
+    for n, v in pinned.items():
+        j = names.index(n)
+        if not params[j].lo <= v <= params[j].hi:
+            raise FitError(
+                f"--pin {n}={v:g}: outside [{params[j].lo:g}, {params[j].hi:g}] for this design"
+            )
+        fixed[j] = v
+    chosen = names if free is None else list(free)
+    both = set(chosen) & set(pinned) if free is not None else set()
+    if both:
+        raise FitError(f"--free/--pin: {sorted(both)} both free and pinned")
+    idx = tuple(j for j, n in enumerate(names) if n in chosen and n not in pinned)
+    nuis, at = [], len(idx)
+    for o in observations:
+        nn = _nuisance_names(o)
+        nuis.append((slice(at, at + len(nn)), nn))
+        at += len(nn)
+    return Layout(params, idx, fixed, tuple(nuis))

@@ -1,0 +1,173 @@
+"""Wave optics in the fit (issue 24): the wave engine's responsivity as the forward model.
+
+Where the other commands take wave optics for a design (``--optics auto``:
+:func:`~opticalstamp.analysis.responsivity.resolve_optics`), the fit's spread of a pixel
+at each height is the wave engine's (:func:`~opticalstamp.analysis.wavespectral.
+wave_response_spectral`, the design's light, at the nominal design's sampling for every
+perturbed design, so that the grids and the band do not jump as the parameters move):
+the light in its band, the own path with its diffraction and the near crosstalk, as the
+x and y marginals (the y one smeared by the document's motion, as the fast model's).
+
+One wave run (every height at once) costs about 0.5 s on the prototype, a hundred times
+the fast model's; a fit evaluates its model thousands of times. So the fit works by
+*defect correction*: the wave model is the fast one (:func:`~.fitmodel.spread`, the
+paraxial own path) plus the difference of the two, per height, evaluated at one set of
+parameters and held fixed (:class:`Corrected`) while the fast model's Jacobian drives the
+optimiser; the difference is then evaluated again at the new optimum, until the
+parameters move by less than a small fraction of their errors (:mod:`.fit`). At that fixed
+point the model is the wave model exactly, and its optimum the wave model's to the extent
+that the two Jacobians agree; the final errors come from the wave model's own Jacobian.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..analysis.wavebase import WaveSampling
+from ..design import Design
+from .fitmodel import SMEAR_SUBS, TABLE_UM, Param, Spread, spread, with_params
+
+#: Light left beyond a wave spread's table on each side of each marginal: the table stops
+#: where the cumulative reaches it, and is renormalised to 0..1 on its grid.
+WAVE_TAIL = 1e-5
+#: Step (assembly scales) of the forward differences of the wave model's correction.
+STEP = 0.1
+
+
+def _cumulative(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Normalised cumulative trapezoid integral of the density ``p`` sampled on ``x``."""
+    c = np.concatenate([[0.0], np.cumsum((p[1:] + p[:-1]) / 2)]) * (x[1] - x[0])
+    if not c[-1] > 0:
+        raise ValueError("no in-band light reaches the object plane")
+    return c / c[-1]
+
+
+def _reach(x: np.ndarray, c: np.ndarray, tail: float) -> float:
+    """Half width about the axis beyond which at most ``tail`` of the light lies on each
+    side."""
+    lo = x[min(np.searchsorted(c, tail), x.size - 1)]
+    hi = x[min(np.searchsorted(c, 1 - tail), x.size - 1)]
+    return float(max(-lo, hi))
+
+
+def wave_spread(
+    x_um: np.ndarray,
+    lsf_x: np.ndarray,
+    y_um: np.ndarray,
+    lsf_y: np.ndarray,
+    smear_um: float,
+    reach_um: float = 0.0,
+) -> Spread:
+    """A :class:`~.fitmodel.Spread` from the wave engine's marginals at one height: on the
+    fast model's fixed grid (k ``TABLE_UM``) out to where all but ``WAVE_TAIL`` of the
+    light lies on each side, or ``reach_um`` if wider; along y smeared over ``smear_um``
+    (``SMEAR_SUBS`` sub-positions, as :func:`~.fitmodel.spread`)."""
+    cxw, cyw = _cumulative(x_um, lsf_x), _cumulative(y_um, lsf_y)
+    half = max(_reach(x_um, cxw, WAVE_TAIL), _reach(y_um, cyw, WAVE_TAIL) + smear_um / 2)
+    n = max(math.ceil((half + 2 * TABLE_UM) / TABLE_UM), math.ceil(reach_um / TABLE_UM))
+    u = np.arange(-n, n + 1) * TABLE_UM
+    cx = np.interp(u, x_um, cxw)
+    subs = ((np.arange(SMEAR_SUBS) + 0.5) / SMEAR_SUBS - 0.5) * smear_um
+    cy = np.mean([np.interp(u + s, y_um, cyw) for s in subs], axis=0)
+    cx = (cx - cx[0]) / (cx[-1] - cx[0])
+    cy = (cy - cy[0]) / (cy[-1] - cy[0])
+    return Spread(u, cx, cy, n * TABLE_UM)
+
+
+@dataclass(frozen=True)
+class WaveModel:
+    """The wave engine as the fit's forward model: (design, heights, smear) -> {Z:
+    spread}, every design at one ``sampling`` (the nominal design's)."""
+
+    sampling: WaveSampling
+
+    def __call__(self, design: Design, zs, smear_um: float, phys=None) -> dict[float, Spread]:
+        from ..analysis.wavespectral import wave_response_spectral
+
+        zs = [float(z) for z in zs]
+        r = wave_response_spectral(design, zs, sampling=self.sampling)
+        return {
+            z: wave_spread(r.x_um, r.lsf_x[i], r.y_um, r.lsf_y[i], smear_um)
+            for i, z in enumerate(zs)
+        }
+
+    def correction(
+        self, design: Design, params: list[Param], phys: np.ndarray, free, zs, smear_um: float
+    ) -> Corrected:
+        """The wave model minus the fast one at the physical values ``phys`` of
+        ``design``'s ``params``, and its derivative in each parameter of ``free`` (forward
+        differences of ``STEP`` assembly scales): 1 + len(free) wave runs."""
+        zs = [float(z) for z in zs]
+        at = np.asarray(phys, dtype=np.float64)
+        points = [at]
+        steps = []
+        for j in free:
+            p = params[j]
+            h = STEP * p.scale if at[j] + STEP * p.scale <= p.hi else -STEP * p.scale
+            points.append(at.copy())
+            points[-1][j] += h
+            steps.append(h)
+        waves, fasts = [], []
+        for v in points:
+            d = with_params(design, params, v)
+            waves.append(self(d, zs, smear_um))
+            fasts.append({z: spread(d, z, smear_um) for z in zs})
+        table = {}
+        for z in zs:
+            n = max((x[z].u.size - 1) // 2 for x in waves + fasts)
+            w = [_widen(x[z], n) for x in waves]
+            f = [_widen(x[z], n) for x in fasts]
+            base = (w[0].cx - f[0].cx, w[0].cy - f[0].cy)
+            slopes = [
+                ((wk.cx - w[0].cx - fk.cx + f[0].cx) / h, (wk.cy - w[0].cy - fk.cy + f[0].cy) / h)
+                for wk, fk, h in zip(w[1:], f[1:], steps, strict=True)
+            ]
+            table[z] = (base, slopes)
+        return Corrected(table, at, tuple(free))
+
+
+def _widen(sp: Spread, n: int) -> Spread:
+    """A spread's table padded (0 before, 1 after) out to k ``TABLE_UM``, |k| <= n."""
+    m = (sp.u.size - 1) // 2
+    pad = max(n - m, 0)
+
+    def ext(c):
+        return np.concatenate([np.zeros(pad), c, np.ones(pad)])
+
+    k = m + pad
+    return Spread(np.arange(-k, k + 1) * TABLE_UM, ext(sp.cx), ext(sp.cy), k * TABLE_UM)
+
+
+@dataclass(frozen=True)
+class Corrected:
+    """The fast model plus the wave model's difference from it, to first order about the
+    physical values ``at``: at each height Z, ``table[Z]`` = ((dcx, dcy), slopes), the
+    wave spread's cumulatives minus the fast one's at ``at`` and their derivatives in the
+    parameters ``free`` (indices into the physical values), on k ``TABLE_UM``, |k| <= n
+    (0 at both ends: the cumulatives agree there, 0 and 1). At ``at`` its spreads and
+    their derivatives are the wave model's."""
+
+    table: dict
+    at: np.ndarray
+    free: tuple[int, ...]
+
+    def __call__(self, design: Design, zs, smear_um: float, phys=None) -> dict[float, Spread]:
+        dv = np.zeros(len(self.free)) if phys is None else (phys - self.at)[list(self.free)]
+        out = {}
+        for z in zs:
+            (dcx, dcy), slopes = self.table[float(z)]
+            n = (dcx.size - 1) // 2
+            f = spread(design, float(z), smear_um, reach_um=n * TABLE_UM)
+            dx, dy = dcx.copy(), dcy.copy()
+            for (sx, sy), v in zip(slopes, dv, strict=True):
+                dx += v * sx
+                dy += v * sy
+            o = (f.u.size - 1) // 2 - n  # the fast grid may reach further: 0 there
+            cx, cy = f.cx.copy(), f.cy.copy()
+            cx[o : o + dx.size] += dx
+            cy[o : o + dy.size] += dy
+            out[float(z)] = Spread(f.u, cx, cy, f.half_um)
+        return out
