@@ -28,7 +28,7 @@ from scipy.signal import czt
 from ..design import Design
 from ..validate import InputError
 from .spectrum import Spectrum, channels, one_channel
-from .wave import WaveResponse, half_width, lsf_source, wave_response
+from .wave import WaveResponse, half_width, lsf_source, stack_reach, wave_response
 from .wavebase import (
     CIRCLE_MAPS,
     SOURCE_EXTRA,
@@ -42,6 +42,7 @@ from .wavebase import (
 __all__ = [
     "SpectralWaveResponse",
     "at_wavelength",
+    "mirror_rows",
     "mirror_twin",
     "spectral_lsf_x",
     "spectral_samplings",
@@ -374,3 +375,24 @@ def mirror_twin(
             if not np.allclose(hy_a, -hy_b[:, ::-1], atol=tol):
                 return False
     return True
+
+
+def mirror_rows(
+    design: Design, sampling: WaveSampling | None = None, spectrum: str | Spectrum | None = None
+) -> list[int | None]:
+    """For each row of used pixels, the earlier row whose view it sees mirrored in y
+    (:func:`mirror_twin` at k = 0, within the widest reach of the light's wavelengths,
+    :func:`~.wave.stack_reach`; only a row computed on its own is a twin), or None where
+    it has none and is computed on its own; row A's is None. ``sampling``, ``spectrum``:
+    as :func:`wave_response_spectral`."""
+    spec = one_channel(design, spectrum)
+    smps = spectral_samplings(design, spec, sampling)
+    reach = max(
+        stack_reach(at_wavelength(design, lam), s)
+        for lam, s in zip(spec.wavelengths_um, smps, strict=True)
+    )
+    out: list[int | None] = []
+    for r in range(design.sensor.rows):
+        own = (q for q in range(r) if out[q] is None)
+        out.append(next((q for q in own if mirror_twin(design, (q, 0), (r, 0), reach)), None))
+    return out

@@ -197,6 +197,18 @@ def wave_near_kernels(design: Design, z_mm, row: int, fresnel: bool = False) -> 
     return out
 
 
+def mirrored_y(k: ScanKernel) -> ScanKernel:
+    """``k`` mirrored in Y (R(X, -Y)): its Y factors reversed on a grid symmetric about the
+    pixel's axis (a wave kernel's: :func:`wave_near_kernels`), the cumulative tables
+    cum'(i) = cum(n) - cum(n - i); the ghost map is the caller's (the traced one of
+    the row)."""
+    n = k.cum_y.shape[1] - 1
+    if abs(2 * k.lo_um + n * k.bin_um) > 1e-9 * max(1.0, abs(k.lo_um)):
+        raise ValueError("kernels: a grid not symmetric about the pixel's axis")
+    cum_y = k.cum_y[:, -1:] - k.cum_y[:, ::-1]
+    return replace(k, cum_y=cum_y)
+
+
 def kernel_source(design: AnyDesign, source: str = "auto", fresnel: bool = False) -> str:
     """What ``source`` means for this design: "paraxial" or "trace" (see :func:`scan_kernels`;
     each kind of design says, :func:`~opticalstamp.imaging.kinds.scanner_of`).
@@ -278,11 +290,13 @@ def stamp_kernel_sets(
     "paraxial", "trace" or "wave"), from one trace per row where anything is traced."""
     sampling = Sampling(_rays(source, n_rays), seed, fresnel)
     tr = tracer_for(design, sampling, tracer)  # one reverse path for every row
-    band = None
+    band, twins, wave_rows = None, [], {}
     if source == "wave":  # the tracer keeps the light beyond the wave engine's band
         from ..analysis.responsivity import resolve_optics
+        from ..analysis.wavespectral import mirror_rows
 
-        band = resolve_optics(design, "wave").band
+        opt = resolve_optics(design, "wave")
+        band, twins = opt.band, mirror_rows(design, opt.sampling)
     out = [[] for _ in z_sets]
     for row in range(design.sensor.rows):
         maps = [None] * len(z_sets)
@@ -299,7 +313,12 @@ def stamp_kernel_sets(
         near = {}
         if source == "wave":  # every set's heights from one wave run of the row
             zs = sorted({float(z) for z_mm in z_sets for z in np.atleast_1d(z_mm)})
-            near = dict(zip(zs, wave_near_kernels(design, zs, row, fresnel), strict=True))
+            twin = twins[row]
+            if twin is None:
+                near = dict(zip(zs, wave_near_kernels(design, zs, row, fresnel), strict=True))
+                wave_rows[row] = near
+            else:  # row A's view mirrored in y (the nominal staggered lattice)
+                near = {z: mirrored_y(k) for z, k in wave_rows[twin].items()}
         for ks, z_mm, m in zip(out, z_sets, maps, strict=True):
             if source == "wave":
                 row_k = [near[float(z)] for z in np.atleast_1d(z_mm)]

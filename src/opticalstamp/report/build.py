@@ -46,7 +46,7 @@ from .html import page
 from .light import custom_area_scales, efficiency_section, signal_and_noise
 from .optics import concept_section, diffraction_section, ghost_section, psf_section, spot_section
 from .quality import rmtf_section
-from .restoration import restoration_section
+from .restoration import restoration_heights, restoration_section
 from .scans import scan_section
 from .section import as_data, measure, measured, needs
 from .studies import (
@@ -184,11 +184,13 @@ def build_report(
             rmtf_section=rm,
             chart_dpi=dpi,
             optics=opt,
+            also_z_mm=restoration_heights(work),  # one build of the kernels for both
         )
         clock.lap("scans")
         restoration = run(
-            restoration_section, design, work, **traced, tracer=tracer, dof_dpi=dpi, optics=opt
-        )
+            restoration_section, design, work, **traced, tracer=tracer, dof_dpi=dpi, optics=opt,
+            kernels=getattr(measured(scans), "kernels", None),
+        )  # fmt: skip
         clock.lap("restoration")
         fitted = None if fit is None else measure(fit_section, fit, design)
         figures = section_figures(

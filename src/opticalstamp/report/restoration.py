@@ -13,6 +13,20 @@ from .work import Work
 
 #: the type size (points) of the restored text crops
 PANEL_POINTS = 6.0
+#: the heights (mm) of the restored text crops
+PANEL_Z_MM = (2.5, 3.5, 4.5)
+#: the study's heights (mm) in a quick report
+QUICK_STUDY_Z_MM = (1.5, 3.0, 4.5)
+
+
+def restoration_heights(work: Work) -> tuple[float, ...]:
+    """The heights (mm) the section scans at (each its own scan): those of its study and
+    its text crops; kernels built for them (:func:`restoration_section`'s ``kernels``)
+    serve it whole."""
+    from ..studies.restoration import STUDY_Z_MM
+
+    study = QUICK_STUDY_Z_MM if not work.studies else STUDY_Z_MM
+    return tuple(dict.fromkeys(float(z) for z in study + PANEL_Z_MM))
 
 
 @dataclass(frozen=True)
@@ -37,10 +51,15 @@ def restoration_section(
     tracer: PixelTracer,
     dof_dpi: float,
     optics: Optics = RAY,
+    kernels=None,
 ) -> RestorationSection:
     """Restoration with the known blur: the study against height (on the ``dof_dpi``
     chart), text crops raw and restored, OCR of small text before and after (a quick
-    report: Wiener only, three heights, no OCR)."""
+    report: Wiener only, three heights, no OCR). ``kernels``: a
+    :class:`~opticalstamp.imaging.kernels.KernelCache` of this design with this section's
+    settings and seed holding each of :func:`restoration_heights` (the scans' section
+    builds them with its own: one build of each row's kernels per report); default: built
+    here."""
     import numpy as np
 
     from ..imaging.charts import clear_crop, text_chart
@@ -69,18 +88,20 @@ def restoration_section(
     methods = ("wiener",) if quick else METHODS
     study = restoration_study(
         design,
-        z_mm=(1.5, 3.0, 4.5) if quick else STUDY_Z_MM,
+        z_mm=QUICK_STUDY_Z_MM if quick else STUDY_Z_MM,
         methods=methods,
         settings=page,
         seed=seed,
         tracer=tracer,
         dpi=dof_dpi,
+        kernels=kernels,
     )
     dpi = work.scan_dpi
-    panel_z = (2.5, 3.5, 4.5)
+    panel_z = PANEL_Z_MM
     # OCR where it tells: 2.5-pt text past the depth of field, 6-pt text at the end
     reads = ((2.5, 3.5), (2.5, 4.5), (6.0, 4.5)) if work.ocr and tesseract_available() else ()
-    kernels = prepare_kernels(design, z_mm=panel_z, settings=page, seed=seed, tracer=tracer)
+    if kernels is None:
+        kernels = prepare_kernels(design, z_mm=panel_z, settings=page, seed=seed, tracer=tracer)
     ocr_methods = ("wiener",) if quick else ("wiener", "tv")
     panels, ocr = [], []
     charts = {

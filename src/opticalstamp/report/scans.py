@@ -4,7 +4,7 @@ bar chart, slanted-edge SFR)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ..analysis.responsivity import RAY, Optics
 from ..design import Design
@@ -16,11 +16,14 @@ from .work import Work
 @dataclass(frozen=True)
 class ScanSection:
     """The simulated scans: ``data``, report.json's "scans" (OCR, profiles, SFR, the
-    chart, the settings), and ``panels``, the scanned images the figures show (figure
-    name without .png -> list of (title, image))."""
+    chart, the settings), ``panels``, the scanned images the figures show (figure
+    name without .png -> list of (title, image)), and ``kernels``, the
+    :class:`~opticalstamp.imaging.kernels.KernelCache` they were scanned with (holding
+    the heights of ``also_z_mm`` too)."""
 
     data: dict
     panels: dict
+    kernels: object = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         return self.data
@@ -36,6 +39,7 @@ def scan_section(
     rmtf_section=None,
     chart_dpi: float = 200.0,
     optics: Optics = RAY,
+    also_z_mm: tuple[float, ...] = (),
 ) -> ScanSection:
     """Simulated scans of the built-in charts (paper Figs. 8, 9, 12) and their measures.
 
@@ -44,7 +48,11 @@ def scan_section(
     own-path folded LSF at 0.5 and 3.5 mm and ``chart_dpi`` gives the computed RMTF here
     where it was traced alike (same rays, no Fresnel losses): that RMTF is then not traced
     again. A measurement that the scan does not allow (an edge too blurred for an SFR) is
-    reported as not measurable, with the reason, and the section goes on.
+    reported as not measurable, with the reason, and the section goes on. ``also_z_mm``:
+    heights of later scans at one height each (the restoration's,
+    :func:`~opticalstamp.report.restoration.restoration_heights`) whose kernels are built
+    with these, each row's wave kernels by one run of the wave engine; the section's
+    ``kernels`` hold them.
     """
     import numpy as np
 
@@ -82,7 +90,9 @@ def scan_section(
     # the kernels of every scan below, from one trace per pixel row
     kernels = prepare_kernels(
         design,
-        z_mm=tuple(dict.fromkeys((0.5, 1.5, 2.5, 3.5) + (small_z if ocr else ()))),
+        z_mm=tuple(
+            dict.fromkeys((0.5, 1.5, 2.5, 3.5) + (small_z if ocr else ()) + tuple(also_z_mm))
+        ),
         height_maps=[hm],
         settings=page,
         seed=seed,
@@ -181,7 +191,7 @@ def scan_section(
         f"the design's sensor electronics, noise on, ghost light on, white surround, seed {seed}"
         + ("" if work.ocr else f"; {dpi:g}-dpi charts, no OCR (quick report)")
     )
-    return ScanSection(data=res, panels=panels)
+    return ScanSection(data=res, panels=panels, kernels=kernels)
 
 
 def _chart_block(blocks: list[dict], chart_dpi: float) -> float:

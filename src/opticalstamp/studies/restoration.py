@@ -76,16 +76,22 @@ def restoration_study(
     cnr_floor: float = CNR_FLOOR,
     model_error: float = MODEL_ERROR,
     tracer=None,
+    kernels=None,
 ) -> dict:
     """Amplitude, contrast to noise, overshoot and noise gain against height, raw and per
     method, and each one's restored depth of field (see the module's docstring); ``dpi``:
-    the chart (default 2/3 of the design's resolution, as the depth of field's)."""
+    the chart (default 2/3 of the design's resolution, as the depth of field's);
+    ``kernels``: a :class:`~opticalstamp.imaging.kernels.KernelCache` built for these
+    settings, seed and heights (each Z its own scan), e.g. the report's scans' (default:
+    built here)."""
     dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     st = settings or ScanSettings(sensor=design.electronics)
     zs = [float(z) for z in z_mm]
     chart = bar_chart(CHART_DPI, chart_dpi=(dpi,), block_mm=6.0, height_mm=6.0)
     white = np.ones((240, 360), np.float32)
-    cache = prepare_kernels(design, z_mm=zs, settings=st, seed=seed, tracer=tracer)
+    cache = kernels
+    if cache is None:
+        cache = prepare_kernels(design, z_mm=zs, settings=st, seed=seed, tracer=tracer)
     names = ["raw", *methods]
     series = {n: {"amplitude_rel": [], "cnr": [], "overshoot": [], "noise_gain": []} for n in names}
     transfer, sigmas, cases = [], [], []
