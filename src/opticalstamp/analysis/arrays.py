@@ -46,6 +46,16 @@ class Backend:
     def ifft2(self, a, norm: str | None = None):
         return self._fft.ifft2(a, norm=norm, **self._kw())
 
+    def j1(self, a):
+        """The Bessel function J1 on this backend's arrays."""
+        if self.name == "cuda":
+            from cupyx.scipy import special as cspecial
+
+            return cspecial.j1(a)
+        from scipy import special
+
+        return special.j1(a)
+
     def put(self, a):
         """A host array on this backend's device."""
         return self.xp.asarray(a)

@@ -29,7 +29,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import fft as sfft
-from scipy import special
 
 from ..design import Design
 from ..raytrace.stack import lattice_of, output_pitch
@@ -109,36 +108,40 @@ def layers_of(design: Design, pixel: tuple[int, int], reach_um: float) -> list[L
 
 
 def mask_field_2d(
-    x: np.ndarray, y: np.ndarray, holes, band: float, wavelength_um: float
-) -> np.ndarray:
+    x: np.ndarray, y: np.ndarray, holes, band: float, wavelength_um: float, bk: Backend = CPU
+):
     """A mask's transmission on the grid (y, x), low-passed exactly to |lambda nu_x|,
     |lambda nu_y| <= 2 band from the holes' Fourier transforms (the 2-D counterpart of
-    :func:`.wave.mask_field`): shape (y.size, x.size), real."""
+    :func:`.wave.mask_field`): shape (y.size, x.size), real, on the backend ``bk``."""
+    xp = bk.xp
     dx, dy = x[1] - x[0], y[1] - y[0]
     nx, ny = sfft.fftfreq(x.size, dx), sfft.fftfreq(y.size, dy)
-    kx = np.abs(wavelength_um * nx) <= 2 * band
-    ky = np.abs(wavelength_um * ny) <= 2 * band
+    kx = np.flatnonzero(np.abs(wavelength_um * nx) <= 2 * band)
+    ky = np.flatnonzero(np.abs(wavelength_um * ny) <= 2 * band)
     fx, fy = nx[kx], ny[ky]
-    a = np.zeros((fy.size, fx.size), dtype=np.complex128)
+    a = xp.zeros((fy.size, fx.size), dtype=np.complex128)
     rows: dict[tuple, np.ndarray] = {}  # holes of one shape and size on one line in y
     for h in holes:
         ex = np.exp(-2j * np.pi * fx * (h.cx - x[0]))
         key = (h.shape, h.hw, h.hh, h.cy)
         rows[key] = rows[key] + ex if key in rows else ex
+    rho = None
     for (shape, hw, hh, cy), ex in rows.items():  # each row: its shape's FT x sum of shifts
         ey = np.exp(-2j * np.pi * fy * (cy - y[0]))
         if shape == "circle":
-            rho = np.hypot(fy[:, None], fx[None, :])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                j = hw * special.j1(2 * np.pi * hw * rho) / rho
-            a += np.where(rho == 0, np.pi * hw * hw, j) * ey[:, None] * ex[None, :]
+            if rho is None:
+                rho = bk.put(np.hypot(fy[:, None], fx[None, :]))
+                zero = rho == 0
+                safe = xp.where(zero, 1.0, rho)
+            disk = xp.where(zero, np.pi * hw * hw, hw * bk.j1(2 * np.pi * hw * rho) / safe)
+            a += disk * bk.put(ey)[:, None] * bk.put(ex)[None, :]
         else:
             sx = 2 * hw * np.sinc(2 * hw * fx) * ex
             sy = 2 * hh * np.sinc(2 * hh * fy) * ey
-            a += sy[:, None] * sx[None, :]
-    full = np.zeros((y.size, x.size), dtype=np.complex128)
-    full[np.ix_(ky, kx)] = a
-    return sfft.ifft2(full, workers=-1).real / (dx * dy)
+            a += bk.put(np.outer(sy, sx))
+    full = xp.zeros((y.size, x.size), dtype=np.complex128)
+    full[bk.put(ky)[:, None], bk.put(kx)] = a
+    return bk.ifft2(full).real / (dx * dy)
 
 
 def transfer(
@@ -150,16 +153,21 @@ def transfer(
     propagator: str,
     *,
     relative: bool = False,
+    bins: tuple | None = None,
 ) -> np.ndarray:
     """Transfer function through ``slabs`` ((t, n), ...) on the FFT frequencies of the
-    grid, band |lambda f_x|, |lambda f_y| < band (0 outside): shape (y.size, x.size).
+    grid, band |lambda f_x|, |lambda f_y| < band (0 outside): shape (y.size, x.size), or
+    on the FFT bins ``bins`` = (ky, kx) alone: shape (ky.size, kx.size).
 
     exact: prod exp(2 pi i t (sqrt((n / lambda)^2 - f^2) - n / lambda)); paraxial:
     prod exp(-i pi lambda t f^2 / n). ``relative``: exact over paraxial (no band).
     """
     lam = wavelength_um
-    fx = sfft.fftfreq(x.size, x[1] - x[0])[None, :]
-    fy = sfft.fftfreq(y.size, y[1] - y[0])[:, None]
+    fx = sfft.fftfreq(x.size, x[1] - x[0])
+    fy = sfft.fftfreq(y.size, y[1] - y[0])
+    if bins is not None:
+        fy, fx = fy[bins[0]], fx[bins[1]]
+    fx, fy = fx[None, :], fy[:, None]
     f2 = fx * fx + fy * fy
     phase = np.zeros_like(f2)
     for t, n in slabs:
@@ -202,6 +210,7 @@ class _Stack:
     bk: Backend = CPU
     top: object | None = None  # amplitude filter above the top mask on the in-band bins
     dtype: object = np.complex128  # of the operator's fields (complex64: "single")
+    pruned: bool = True  # 1-D FFTs on the in-band rows/columns (else full 2-D FFTs)
 
     @property
     def band_idx(self) -> tuple:
@@ -211,12 +220,18 @@ class _Stack:
 
     def _spec(self, f, norm: str | None = None):
         """Fields (k, ny, nx) -> their spectra on the in-band bins (k, ny_in, nx_in)."""
+        if not self.pruned:
+            return self.bk.fft2(f, norm=norm)[..., self.ky[:, None], self.kx]
         a = self.bk.fft(f, axis=-1, norm=norm)[..., self.kx]
         return self.bk.fft(a, axis=-2, norm=norm)[..., self.ky, :]
 
     def _field(self, s, norm: str | None = None):
         """In-band spectra (k, ny_in, nx_in) -> the fields (k, ny, nx)."""
         xp = self.bk.xp
+        if not self.pruned:
+            b = xp.zeros(s.shape[:-2] + (self.y.size, self.x.size), dtype=s.dtype)
+            b[..., self.ky[:, None], self.kx] = s
+            return self.bk.ifft2(b, norm=norm)
         a = xp.zeros(s.shape[:-2] + (self.y.size, s.shape[-1]), dtype=s.dtype)
         a[..., self.ky, :] = s
         a = self.bk.ifft(a, axis=-2, norm=norm)
@@ -272,16 +287,21 @@ class _Stack:
         return self._field(o, norm="ortho")[0]
 
 
-def angular_filters(design: Design, x: np.ndarray, y: np.ndarray, lam: float, fresnel: bool):
+def angular_filters(
+    design: Design, x: np.ndarray, y: np.ndarray, lam: float, fresnel: bool, bins=None
+):
     """The amplitude filters on the angular spectrum of the grid (y, x), one per group of
     interfaces between masks (:mod:`.wavefilter`: group 0 below the sensor-side mask with
     the pixel's acceptance cone, group i between masks i - 1 and i, the last above the
     object-side mask): exactly, as functions of |s| (no separable approximation in 2-D);
-    None where a group changes nothing."""
+    None where a group changes nothing. ``bins`` = (ky, kx): on those FFT bins alone."""
     from .wavefilter import cone_cut, group_transmittance, interfaces
 
-    fx = sfft.fftfreq(x.size, x[1] - x[0])[None, :]
-    fy = sfft.fftfreq(y.size, y[1] - y[0])[:, None]
+    fx = sfft.fftfreq(x.size, x[1] - x[0])
+    fy = sfft.fftfreq(y.size, y[1] - y[0])
+    if bins is not None:
+        fy, fx = fy[bins[0]], fx[bins[1]]
+    fx, fy = fx[None, :], fy[:, None]
     s = lam * np.sqrt(fx * fx + fy * fy)
     n_groups = len(design.masks) + 1
     out: list[np.ndarray | None] = [None] * n_groups
@@ -326,16 +346,15 @@ def _stack(
     for g, (lo, hi), npts in zip((x, y), src, smp.source_points, strict=True):
         x0, w = gauss_legendre(lo, hi, npts)
         fields.append(point_sources(g, x0, lam * w, lam, layers[0].reduced, b))
-    filt = angular_filters(design, x, y, lam, fresnel)
     ky = np.flatnonzero(in_band(sfft.fftfreq(y.size, y[1] - y[0]), lam, b))
     kx = np.flatnonzero(in_band(sfft.fftfreq(x.size, x[1] - x[0]), lam, b))
-    band = np.ix_(ky, kx)
+    filt = angular_filters(design, x, y, lam, fresnel, (ky, kx))  # on the in-band bins
     first = None
     if propagator == "exact":
-        first = transfer(x, y, layers[0].slabs, lam, b, propagator, relative=True)
+        first = transfer(x, y, layers[0].slabs, lam, b, propagator, relative=True, bins=(ky, kx))
     if filt[0] is not None:  # a filter commutes with free space: anywhere below mask 1
         first = filt[0] if first is None else first * filt[0]
-    first = None if first is None else bk.put(first[band].astype(cdt))
+    first = None if first is None else bk.put(first.astype(cdt))
     masks = []
     for lay in layers:
         r_i = lay.reduced * b + smp.margin_um + max(max(h.hw, h.hh) for h in lay.holes)
@@ -344,13 +363,13 @@ def _stack(
             for h in lay.holes
             if src[0][0] - r_i < h.cx < src[0][1] + r_i and src[1][0] - r_i < h.cy < src[1][1] + r_i
         ]
-        masks.append(bk.put(mask_field_2d(x, y, near, b, lam).astype(rdt)))
+        masks.append(mask_field_2d(x, y, near, b, lam, bk).astype(rdt))
     steps = []
     for i, lay in enumerate(layers[1:], start=1):
-        h = transfer(x, y, lay.slabs, lam, b, propagator)
-        steps.append(bk.put((h if filt[i] is None else h * filt[i])[band].astype(cdt)))
+        h = transfer(x, y, lay.slabs, lam, b, propagator, bins=(ky, kx))
+        steps.append(bk.put((h if filt[i] is None else h * filt[i]).astype(cdt)))
     ux, uy = bk.put(fields[0].astype(cdt)), bk.put(fields[1].astype(cdt))
-    top = None if filt[-1] is None else bk.put(filt[-1][band].ravel())
+    top = None if filt[-1] is None else bk.put(filt[-1].ravel())
     st = _Stack(x, y, ux, uy, first, masks, steps, bk.put(ky), bk.put(kx), bk, top, cdt)
     return st, layers
 
