@@ -13,7 +13,8 @@ machine changes far less than the wall time. The report's own section times (rep
 ``section_elapsed_s``) of its median run are kept too, and the load average before each
 run, since other work on the machine slows every wall time here. Prints a table and,
 with ``--out``, writes it as JSON with provenance (version, git commit, Python, numba,
-cores, date).
+cores, date). ``--interleave`` runs the commands in turn, one run of each per round, so
+that the commands compared (the report by ray and by wave optics) see the same load.
 
 benchmarks/bench_report.json holds a measurement before and after the report's work was
 arranged to compute nothing twice (report: 51.8 s -> 31.6 s on the 2-core machine). A
@@ -91,13 +92,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--runs", type=int, default=3, help="runs per command (median)")
     ap.add_argument("--out", type=Path, help="write the results as JSON here")
     ap.add_argument("--only", nargs="*", choices=list(COMMANDS), help="these commands only")
+    ap.add_argument(
+        "--interleave",
+        action="store_true",
+        help="run the commands in turn, one run of each per round (so that each sees the "
+        "same load on a shared machine), instead of all runs of one command, then the next",
+    )
     args = ap.parse_args(argv)
     results = {}
+    names = [n for n in COMMANDS if not args.only or n in args.only]
     with tempfile.TemporaryDirectory() as tmp:
+        all_runs: dict[str, list[dict]] = {n: [] for n in names}
+        if args.interleave:
+            for _ in range(args.runs):
+                for name in names:
+                    all_runs[name].append(run_once(COMMANDS[name], Path(tmp)))
         for name, cmd in COMMANDS.items():
-            if args.only and name not in args.only:
+            if name not in names:
                 continue
-            runs = [run_once(cmd, Path(tmp)) for _ in range(args.runs)]
+            runs = all_runs[name] or [run_once(cmd, Path(tmp)) for _ in range(args.runs)]
             times = [r["s"] for r in runs]
             cpu = [r["cpu_s"] for r in runs]
             median = sorted(runs, key=lambda r: r["s"])[len(runs) // 2]
@@ -131,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
                 "cpu_count": os.cpu_count(),
                 "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                 "runs": args.runs,
+                "interleaved": args.interleave,
             },
             "commands": {k: " ".join(["opticalstamp", *v]) for k, v in COMMANDS.items()},
             "results": results,
