@@ -27,11 +27,13 @@ REPORT_ROD_CURVES = MappingProxyType(
     {"dpi": (100.0, 200.0), "heights_mm": tuple(0.25 * i - 1.5 for i in range(13))}
 )
 #: The report's search and tolerance study by wave optics (:func:`study_budget`): the
-#: search's wave estimator costs about 0.43 s a design against the ray surrogate's
-#: 0.07 s (the prototype, one core), so fewer designs and samples keep the studies
-#: within the time the report's sections take (benchmarks/bench_report.py).
+#: search's wave estimator costs about six times the ray surrogate a design (1,000
+#: tolerance samples of the prototype: 466 CPU-s against 74), so the report searches 40
+#: designs (not 240) and draws 50 samples (not 200): 71 CPU-s for both studies against
+#: 35 by ray optics at the full budget, the whole report 160 CPU-s against 117
+#: (benchmarks/bench_tolerance_optics.py --studies, bench_report.py; docs/search.md).
 WAVE_STUDY_BUDGET = MappingProxyType(
-    {"search_population": 16, "search_generations": 6, "tolerance_samples": 60}
+    {"search_population": 10, "search_generations": 4, "tolerance_samples": 50}
 )
 #: report --spec figures that the tolerance study evaluates -> its name for them
 _TOLERANCE_FIGURES = MappingProxyType(
