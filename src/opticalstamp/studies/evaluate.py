@@ -29,6 +29,7 @@ from ..analysis.paraxial import paraxial_etendue, paraxial_folded_lsf
 from ..analysis.rmtf import DEFAULT_Z_MM, depth_of_field, period_of_dpi, rmtf_curves
 from ..defaults import WINDOW_UM
 from ..design import Design
+from ..design.resolution import dof_chart_dpi
 from ..raytrace.stack import output_pitch
 from ..validate import InputError, check_number
 
@@ -80,7 +81,7 @@ def diffraction_spill(design: Design, wavelength_um: float | None = None) -> flo
 def evaluate_design(
     design: Design,
     *,
-    dpi: float = 200.0,
+    dpi: float | None = None,
     z_mm=DEFAULT_Z_MM,
     rmtf_z_mm=RMTF_Z_MM,
     dof_threshold: float = 0.3,
@@ -100,6 +101,7 @@ def evaluate_design(
     ghost etendue, no Fresnel losses; diffraction at ``wavelength_um`` (default: the
     design's wavelength).
     """
+    dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     if wavelength_um is None:
         wavelength_um = design.wavelength_um
     zs = np.asarray(z_mm, dtype=np.float64)

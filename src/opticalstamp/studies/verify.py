@@ -22,6 +22,7 @@ from ..analysis.efficiency import reference_etendue
 from ..analysis.ghosts import analyse_ghosts
 from ..analysis.rmtf import DEFAULT_Z_MM, rmtf
 from ..design import Design
+from ..design.resolution import dof_chart_dpi
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import output_pitch
 from ..validate import InputError
@@ -57,7 +58,7 @@ SURROGATE_ACCURACY = MappingProxyType(
 def exact_figures(
     design: Design,
     *,
-    dpi: float = 200.0,
+    dpi: float | None = None,
     z_mm=DEFAULT_Z_MM,
     rmtf_z_mm=(1.0, 2.0, 3.0),
     dof_threshold: float = 0.3,
@@ -74,6 +75,7 @@ def exact_figures(
     threshold or reaches 20 mm, so the depth of field is a crossing, not the end of the
     range (``dof_open_ended`` says when it is).
     """
+    dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     tracer = PixelTracer(design, replay=True)
     g = analyse_ghosts(design, z_mm=GHOST_Z_MM, n_rays=ghost_rays, seed=seed, tracer=tracer)
     zs = np.asarray(z_mm, dtype=np.float64)
@@ -117,7 +119,7 @@ def exact_figures(
 def evaluate_exact(
     design: Design,
     *,
-    dpi: float = 200.0,
+    dpi: float | None = None,
     rmtf_z_mm=(1.0, 2.0, 3.0),
     near_mm: float = 1.0,
     seed: int = 0,
@@ -131,6 +133,7 @@ def evaluate_exact(
     and ``tolerance --estimator trace``): ghosts, light, RMTF and depth of field traced
     (:func:`exact_figures`), the diffraction spill in closed form, and with ``restored``
     the restored depth of field in closed form at the traced ghost fraction."""
+    dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     from .evaluate import diffraction_spill
 
     out = exact_figures(

@@ -39,6 +39,7 @@ from ..analysis.efficiency import reference_etendue
 from ..analysis.rmtf import DEFAULT_Z_MM, period_of_dpi, refine_results, rmtf_from_lsf
 from ..analysis.wavebase import wave_sampling
 from ..design import Design
+from ..design.resolution import dof_chart_dpi
 from ..raytrace.pixel import PixelTracer, Sampling
 from ..raytrace.stack import output_pitch
 from .evaluate import GHOST_Z_MM, RMTF_Z_MM, Z_LIMIT_MM, diffraction_spill, extended_z
@@ -137,7 +138,7 @@ def _joined_lsf(design: Design, zs: np.ndarray, per: float, smp, n_rays: int, se
 def evaluate_wave(
     design: Design,
     *,
-    dpi: float = 200.0,
+    dpi: float | None = None,
     z_mm=DEFAULT_Z_MM,
     rmtf_z_mm=RMTF_Z_MM,
     dof_threshold: float = 0.3,
@@ -161,6 +162,7 @@ def evaluate_wave(
     diffraction spill (closed form, at ``wavelength_um``) is reported, not judged; the
     restored depth of field (``restored``) is the closed form at this ghost fraction.
     """
+    dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     smp = wave_sampling(design, orders=orders)
     tracer = PixelTracer(design, Sampling(ghost_rays, seed), replay=True)
     far = far_light(design, smp.band, n_rays=ghost_rays, seed=seed, tracer=tracer)
@@ -221,7 +223,7 @@ EXACT_WAVE_LSF_RAYS = 1 << 19
 def exact_wave_figures(
     design: Design,
     *,
-    dpi: float = 200.0,
+    dpi: float | None = None,
     z_mm=DEFAULT_Z_MM,
     rmtf_z_mm=RMTF_Z_MM,
     dof_threshold: float = 0.3,
@@ -238,6 +240,7 @@ def exact_wave_figures(
     curve crosses, up to 20 mm), the near-ghost test on the traced light beyond the full
     band (:func:`far_light`, ``ghost_rays``). No diffraction spill (it is not estimated).
     """
+    dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     from ..analysis.efficiency import efficiency
     from ..analysis.ghosts import analyse_ghosts
     from ..analysis.responsivity import resolve_optics
