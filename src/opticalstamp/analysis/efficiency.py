@@ -22,6 +22,7 @@ import numpy as np
 
 from ..defaults import RSE_GHOST, RSE_OWN
 from ..design import Design, with_sensitive_area
+from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import output_pitch
 from .ghosts import GhostResult, analyse_ghosts
 from .own_etendue import own_etendue, rectangular_holes
@@ -121,6 +122,7 @@ def efficiency(
     ghosts: GhostResult | None = None,
     progress: bool = False,
     optics: str | Optics = "ray",
+    tracer: PixelTracer | None = None,
 ) -> EfficiencyResult:
     """Light efficiency of one used pixel (paper Fig. 13), with and without ghost light.
 
@@ -143,6 +145,11 @@ def efficiency(
     the band (:func:`~opticalstamp.analysis.responsivity.pixel_light`); ``meta["optics"]``
     holds the breakdown and the ray figures they replace. The object-radius and
     sensitive-area studies stay geometric (ray optics), and say so there.
+
+    ``tracer``: a :class:`~opticalstamp.raytrace.pixel.PixelTracer` of ``design`` whose
+    pilots and kept rays the design's own traces reuse (the ghost analysis where
+    ``ghosts`` is None, the traced light of :func:`pixel_light`): rays its other analyses
+    traced already are not traced again.
     """
     ref = {"pixel_um": output_pitch(design)} | dict(reference or {})
     g_ref = reference_etendue(**ref)
@@ -155,6 +162,7 @@ def efficiency(
         rse_own=rse_own,
         rse_ghost=rse_ghost,
         progress=progress,
+        tracer=tracer,
     )
     exact = rectangular_holes(design)
     pixel = ("AB".index(g.pixel["row"]), int(g.pixel["k"]))
@@ -201,7 +209,7 @@ def efficiency(
     optics_meta = opt.to_dict()
     own_method = "quadrature" if exact else "trace"
     if opt.engine == "wave":
-        light = pixel_light(design, opt, pixel=pixel, seed=seed)
+        light = pixel_light(design, opt, pixel=pixel, seed=seed, tracer=tracer)
         optics_meta |= light | {
             "ray_etendue_um2sr": tot,
             "ray_etendue_own_um2sr": g_own,

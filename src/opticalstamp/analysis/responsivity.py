@@ -33,7 +33,7 @@ import numpy as np
 
 from ..defaults import RAYS_LSF
 from ..design import Design
-from ..raytrace.pixel import PixelTracer
+from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 from ..validate import InputError
 from .lsf import SLOPE_EDGES, FoldedLSF, traced_folded_lsf
 from .paraxial import paraxial_folded_lsf
@@ -307,13 +307,15 @@ def pixel_light(
     pixel: tuple[int, int] = (0, 0),
     n_rays: int = RAYS_LSF,
     seed: int = 0,
+    tracer: PixelTracer | None = None,
 ) -> dict:
     """A used pixel's light from a uniform Lambertian object (um^2 sr) by wave optics:
     the wave engine's in-band light plus the tracer's light outside the band, with the
     tracer's in-band light beside it (what ray optics gives for the same directions) and
     the light the object-side mask diffracts beyond the band (counted, not propagated:
     an upper bound on the halo left out). Fresnel losses as ``optics.fresnel`` says, on
-    both parts."""
+    both parts. ``tracer``: a tracer of ``design`` whose pilots and kept rays to reuse
+    (the ghost analysis's: the traced part then traces only the rays it has not)."""
     from .wavecompare import ray_in_band
     from .wavespectral import wave_response_spectral
 
@@ -335,6 +337,7 @@ def pixel_light(
         wave = float(sum(wi * s.light for wi, s in parts))
         lost = float(sum(wi * s.meta["lost_to_band"] for wi, s in parts))
     per = float(design.sensor.row_pitch_um)
+    sampling = Sampling(n_rays, seed, optics.fresnel)
     r = ray_in_band(
         design,
         [0.0],
@@ -344,6 +347,7 @@ def pixel_light(
         n_rays=n_rays,
         seed=seed,
         fresnel=optics.fresnel,
+        tracer=None if tracer is None else tracer_for(design, sampling, tracer),
     )
     far = r.traced_um2sr - r.own_um2sr - r.near_um2sr
     return {

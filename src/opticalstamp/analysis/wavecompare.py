@@ -23,7 +23,7 @@ import numpy as np
 from ..defaults import RAYS_LSF
 from ..design import Design
 from ..design.resolution import dof_chart_dpi
-from ..raytrace.pixel import PixelTracer, Sampling
+from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 from ..raytrace.stack import lattice_of, output_pitch
 from ..units import period_of_dpi
 from .lsf import FOLD_BIN_UM, FoldedLSF
@@ -119,21 +119,21 @@ def ray_in_band(
     lsf = np.zeros((zs.size, edges.size - 1))
     folded = np.zeros((zs.size, nb))
     inside = np.zeros(zs.size)
-    own = near = traced = 0.0
-    for pb in tr.trace(pixel, n_rays):
-        b = pb.rays
-        ok = (np.abs(b.sx) < band) & (np.abs(b.sy) < band)
-        w = pb.w
-        traced += w.sum()
-        own += w[ok & pb.own].sum()
-        near += w[ok & ~pb.own].sum()
-        w = w[ok]
-        for iz, z in enumerate(zs):
-            dx, dy = pb.offsets(z * 1000.0)
-            dx, dy = dx[ok], dy[ok]
-            lsf[iz] += np.histogram(dx, edges, weights=w)[0]
-            folded[iz] += np.histogram(np.mod(dx, period_um), nb, (0.0, period_um), weights=w)[0]
-            inside[iz] += w[(np.abs(dx) <= cell / 2) & (np.abs(dy) <= cell / 2)].sum()
+    # tallied over the rays of every batch at once: the sums do not depend on how the
+    # tracer splits the rays into batches (a kept chunk, a cut of one, a new trace)
+    pbs = list(tr.trace(pixel, n_rays))
+    w = _joined([pb.w for pb in pbs], np.float64)
+    mine = _joined([pb.own for pb in pbs], bool)
+    sx, sy = _joined([pb.rays.sx for pb in pbs]), _joined([pb.rays.sy for pb in pbs])
+    ok = (np.abs(sx) < band) & (np.abs(sy) < band)
+    traced, own, near = w.sum(), w[ok & mine].sum(), w[ok & ~mine].sum()
+    w = w[ok]
+    for iz, z in enumerate(zs):
+        offs = [pb.offsets(z * 1000.0) for pb in pbs]
+        dx, dy = _joined([o[0] for o in offs])[ok], _joined([o[1] for o in offs])[ok]
+        lsf[iz] = np.histogram(dx, edges, weights=w)[0]
+        folded[iz] = np.histogram(np.mod(dx, period_um), nb, (0.0, period_um), weights=w)[0]
+        inside[iz] = w[(np.abs(dx) <= cell / 2) & (np.abs(dy) <= cell / 2)].sum()
     total = own + near
     return RayInBand(
         band,
@@ -145,6 +145,11 @@ def ray_in_band(
         inside / total if total > 0 else np.zeros(zs.size),
         folded / n_rays,
     )
+
+
+def _joined(parts: list, dtype=np.float64) -> np.ndarray:
+    """The arrays of ``parts`` end to end (an empty array of ``dtype`` for none)."""
+    return np.concatenate(parts) if parts else np.zeros(0, dtype)
 
 
 @dataclass(frozen=True)
@@ -307,6 +312,7 @@ def compare_wave_ray(
     seed: int = 0,
     dof_dpi: float | None = None,
     spectrum: str | Spectrum | None = None,
+    tracer: PixelTracer | None = None,
 ) -> WaveRayComparison:
     """Ray against wave for ``design`` at the object distances ``z_mm`` (mm).
 
@@ -320,6 +326,10 @@ def compare_wave_ray(
     several wavelengths both sides are the weighted sums: the wave side
     :func:`~.wavespectral.wave_response_spectral`, the ray side the tracer at each
     wavelength (the design's indices there) in that wavelength's band, ``n_rays`` each.
+
+    ``tracer``: a tracer of ``design`` whose pilots and kept rays the ray side reuses at
+    the design's own wavelength (a report's: the rows' rays its other analyses traced
+    are not traced again).
     """
     spec = one_channel(design, spectrum)
     mono = spec.wavelengths_um == (design.wavelength_um,)
@@ -355,7 +365,8 @@ def compare_wave_ray(
     by_lam = []
     for lam, s_i in zip(spec.wavelengths_um, smps, strict=True):
         d_i = at_wavelength(design, lam)
-        tr = PixelTracer(d_i, Sampling(n_rays, seed))
+        same = tracer is not None and d_i.fingerprint() == design.fingerprint()
+        tr = tracer_for(d_i, Sampling(n_rays, seed), tracer if same else None)
         by_lam.append(
             [
                 ray_in_band(

@@ -62,6 +62,10 @@ class RayBatch:
     ledger : (n_planes, 4) int64, rays by exit plane and status (see STATUS_NAMES)
     n_launched : int, physical rays launched (ledger total)
     n_samples : int, samples drawn: estimates are sums of ``w`` divided by this
+    block_ledger : (n_blocks, n_planes, 4) int64, the ledger of each :data:`BLOCK` of rays
+        launched (the chunk's first ray starts block 0), so that a span of whole blocks
+        can be cut out of the chunk with its own ledger
+        (:meth:`~opticalstamp.raytrace.pixel.PixelTracer.trace`); None where not kept
     """
 
     ids: np.ndarray
@@ -75,6 +79,7 @@ class RayBatch:
     ledger: np.ndarray
     n_launched: int
     n_samples: int
+    block_ledger: np.ndarray | None = None
     #: The survivors in device memory (:class:`~opticalstamp.raytrace.cuda.DeviceRays`)
     #: where a GPU traced them, for tallies on the device; None on the CPU.
     device: ClassVar[Any] = None
@@ -293,6 +298,7 @@ def launch(
                 ledger.sum(axis=0),
                 n_launched,
                 m,
+                ledger if importance else None,  # plain sampling launches more than m
             )
             done += m
             bar.update(m)

@@ -29,7 +29,8 @@ from ..defaults import RSE_GHOST, RSE_OWN
 from ..design import Design
 from ..device import run_device
 from ..validate import InputError, check_number, check_seed
-from .launch import RayBatch, chunk_for, launch
+from .launch import BLOCK, RayBatch, launch
+from .passes import StreamKey, TracePasses
 from .sampling import DEFENSIVE_SHARE, Source, geometric_q_per_area, site_index
 from .stack import Path, lattice_of, pixel_center, reverse_path
 from .tally import is_own_path, object_plane
@@ -280,19 +281,29 @@ class PixelTracer:
     ----------
     design : Design
     sampling : Sampling, how to sample (default: ``Sampling()``)
-    replay : keep the batch of every traced chunk and hand it out again (read-only) to a
-        later trace with that chunk: the same rays of the same pixel (first ray and count),
-        stream, seed, Fresnel option and pilot. The rays of a chunk depend on nothing
-        else, so analyses of one pixel that trace the same rays (a report's ghost
-        analysis, folded LSFs and scan kernels; a study's ghost analysis and RMTF of a
-        design) trace them once. It holds the rays that leave the stack (about 11 MB per
-        2^20 rays launched for the paper's prototype) as long as the tracer lives; where a
-        GPU traced them, in the GPU's memory (with their weights and own-path flags).
+    replay : keep the batch of every traced chunk and hand its rays out again (read-only)
+        to a later trace that asks for them: rays of the same pixel, stream, seed, Fresnel
+        option and pilot. A kept chunk is handed out whole, or cut on a
+        :data:`~opticalstamp.raytrace.launch.BLOCK` edge (the ledger of the rays it lost
+        is kept per block), and only the rays not traced yet are launched. The rays of a
+        pixel depend on nothing else, so analyses of one pixel (a report's ghost analysis,
+        spots, folded LSFs, wave light, ray-vs-wave side and scan kernels; a study's ghost
+        analysis and RMTF of a design) trace each ray once, however many rays each asks
+        for. It holds the rays that leave the stack (about 11 MB per 2^20 rays launched
+        for the paper's prototype) as long as the tracer lives; where a GPU traced them,
+        in the GPU's memory (with their weights and own-path flags: handed out whole only,
+        a cut of one is traced again).
     device : where the rays are traced: auto, cpu or cuda, resolved once here
         (:func:`~opticalstamp.device.run_device`; None: the device of the run in
         progress, the CPU outside one) and kept as :attr:`device` (``cpu`` or ``cuda``).
         Every launch of the tracer, pilots included, goes there; the rays and every
         result are the same on either device.
+    passes : where the tracer records each launch it makes, its pilots included (a
+        :class:`~opticalstamp.raytrace.passes.TracePasses`; default a new one), as
+        :attr:`passes`: how many times each pixel's rays were traced. A batch handed out
+        again by ``replay`` is not a launch. Tracers made by :meth:`with_sampling` and
+        :meth:`with_device` share it, so one count covers every analysis given the
+        tracer (the report's "each pixel traced once", tests/test_trace_once.py).
 
     Notes
     -----
@@ -310,8 +321,10 @@ class PixelTracer:
         *,
         replay: bool = False,
         device: str | None = None,
+        passes: TracePasses | None = None,
     ) -> None:
         self.device = run_device(device)
+        self.passes = TracePasses() if passes is None else passes
         self.design = design
         self.sampling = Sampling() if sampling is None else sampling
         self.path = reverse_path(design)
@@ -320,6 +333,7 @@ class PixelTracer:
         self.n_obj = float(design.index(design.object_medium))
         self._pilots: dict[tuple, np.ndarray | None] = {}
         self._replays: dict[tuple, PixelBatch] | None = {} if replay else None
+        self._fingerprint: str | None = None
 
     def with_sampling(self, sampling: Sampling) -> PixelTracer:
         """A tracer of the same design under ``sampling``, sharing this one's pilots."""
@@ -359,6 +373,7 @@ class PixelTracer:
         key = (row, k, *s.pilot_key)
         if key not in self._pilots:
             src = self.source(pixel)
+            self.passes.add(self._stream_key(pixel, 1), 0, PILOT_RAYS)
             w = allocate_holes(
                 self.design,
                 self.path,
@@ -375,6 +390,13 @@ class PixelTracer:
                 w.flags.writeable = False
             self._pilots[key] = w
         return self._pilots[key]
+
+    def _stream_key(self, pixel: tuple[int, int], stream: int) -> StreamKey:
+        """The pass counter's key of the pixel's ``stream`` under this sampling."""
+        if self._fingerprint is None:
+            self._fingerprint = self.design.fingerprint()
+        s = self.sampling
+        return StreamKey(self._fingerprint, int(pixel[0]), int(pixel[1]), int(stream), *s.pilot_key)
 
     def trace(
         self,
@@ -408,27 +430,34 @@ class PixelTracer:
         if self._replays is None:
             yield from self._trace(pixel, n, first_id, stream, progress)
             return
-        # the chunks launch() deals the rays into; each is kept, and handed out again to a
-        # later trace with the same chunk (rays, stream, seed, Fresnel option and pilot)
+        # every chunk traced is kept (key: the rays' pixel, stream and sampling, then its
+        # first ray and count; the kept spans never overlap); the rays asked for are handed
+        # out of the kept chunks where traced (whole, or cut on a block edge), and only the
+        # rays not traced yet are launched
         self.source(pixel)  # InputError for a pixel that is not used, as _trace
-        chunk = chunk_for(s.chunk, self.device)  # as launch() deals them
         base = (int(pixel[0]), int(pixel[1]), int(stream), *s.pilot_key)
-        spans = [(int(first_id) + d, min(chunk, n - d)) for d in range(0, n, chunk)]
-        i = 0
-        while i < len(spans):
-            if base + spans[i] in self._replays:
-                yield self._replays[base + spans[i]]
-                i += 1
+        kept = {key[-2]: pb for key, pb in self._replays.items() if key[:-2] == base}
+        p, hi = int(first_id), int(first_id) + int(n)
+        while p < hi:
+            hit = next((f for f, pb in kept.items() if f <= p < f + pb.rays.n_samples), None)
+            if hit is not None:
+                pb = kept[hit]
+                end = min(hi, hit + pb.rays.n_samples)
+                piece = _cut(pb, hit, p - hit, end - hit)
+                if piece is not None:
+                    yield piece
+                else:  # a GPU's chunk, or not on a block edge: traced again, not kept
+                    yield from self._trace(pixel, end - p, p, stream, progress)
+                p = end
                 continue
-            j = i  # a run of chunks not traced yet: one launch, the same chunks
-            while j < len(spans) and base + spans[j] not in self._replays:
-                j += 1
-            count = sum(m for _, m in spans[i:j])
-            batches = self._trace(pixel, count, spans[i][0], stream, progress)
-            for span, pb in zip(spans[i:j], batches, strict=True):
-                self._replays[base + span] = pb = _read_only(pb)
+            end = min([hi] + [f for f in kept if f > p])  # up to the next kept chunk
+            at = p
+            for pb in self._trace(pixel, end - p, p, stream, progress):
+                kept[at] = pb = _read_only(pb)
+                self._replays[(*base, at, pb.rays.n_samples)] = pb
+                at += pb.rays.n_samples
                 yield pb
-            i = j
+            p = end
 
     def _trace(
         self, pixel: tuple[int, int], n: int, first_id: int, stream: int, progress: bool
@@ -437,6 +466,7 @@ class PixelTracer:
         row, k = pixel
         src = self.source(pixel)
         weights = self.hole_weights(pixel)
+        key, done = self._stream_key(pixel, stream), 0
         for b in launch(
             self.path,
             src,
@@ -450,7 +480,43 @@ class PixelTracer:
             hole_weights=weights,
             device=self.device,
         ):
+            self.passes.add(key, first_id + done, b.n_samples)  # each chunk as launched
+            done += b.n_samples
             yield PixelBatch(b, row, k, self.s2_max, src.x, src.y, self.n_obj)
+
+
+def _cut(pb: PixelBatch, first: int, a: int, b: int) -> PixelBatch | None:
+    """Rays a ... b - 1 of a kept chunk whose first ray is ``first`` (a and b counted from
+    it) as a batch of their
+    own: ``pb`` itself for the whole chunk; None where that cannot be cut exactly (a
+    chunk a GPU keeps, or a cut that is not on a :data:`~.launch.BLOCK` edge, where the
+    ledger of lost rays is not known)."""
+    r = pb.rays
+    if a == 0 and b == r.n_samples:
+        return pb
+    if r.device is not None or r.block_ledger is None or a % BLOCK:
+        return None
+    if b % BLOCK and b != r.n_samples:
+        return None
+    i0, i1 = np.searchsorted(r.ids, [first + a, first + b])
+    led = r.block_ledger[a // BLOCK : -(-b // BLOCK)]
+    sl = slice(int(i0), int(i1))
+    rays = replace(
+        r,
+        ids=r.ids[sl],
+        x=r.x[sl],
+        y=r.y[sl],
+        sx=r.sx[sl],
+        sy=r.sy[sl],
+        w=r.w[sl],
+        hole_row=r.hole_row[sl],
+        hole_k=r.hole_k[sl],
+        ledger=led.sum(axis=0),
+        n_launched=b - a,
+        n_samples=b - a,
+        block_ledger=led,
+    )
+    return _read_only(replace(pb, rays=rays))
 
 
 def _read_only(pb: PixelBatch) -> PixelBatch:

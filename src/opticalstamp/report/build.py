@@ -11,8 +11,10 @@ design does not allow it (:mod:`.section`: which errors that absorbs); one such 
 never takes the report down. The page is :mod:`.html`, a module per section too.
 
 The work is arranged so that nothing is computed twice: one
-:class:`~opticalstamp.raytrace.pixel.PixelTracer` (one pilot run per pixel, and each chunk
-of rays traced once: ``replay``) serves the traced analyses and the scan kernels; the
+:class:`~opticalstamp.raytrace.pixel.PixelTracer` (one pilot run per pixel, and each ray
+traced once: ``replay``; its pass count, ``passes``, says so) serves the traced analyses
+of the design's pixels (ghosts, spots, the Fig. 1 concept that is the design, RMTF, the
+wave light and the ray side of ray vs wave, scan kernels, restoration); the
 folded LSF is traced once for all light and the own path
 (:func:`~opticalstamp.analysis.lsf.traced_folded_lsf_pair`), and the scans' computed RMTF
 is folded from it; the scan kernels of every simulated scan come from one trace per pixel
@@ -38,6 +40,7 @@ from ..design import Design, load_design
 from ..design.describe import stack_rows
 from ..design.resolution import dof_chart_dpi
 from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
+from ..raytrace.passes import TracePasses
 from ..raytrace.pixel import PixelTracer
 from .background import Background
 from .figures import png, rodlens_figures, section_figures, study_figure
@@ -97,6 +100,7 @@ def build_report(
     paper_sections: bool | None = None,
     optics: str = "auto",
     fit: dict | None = None,
+    passes: TracePasses | None = None,
 ) -> dict:
     """Run every analysis and write report.json, PNG figures and index.html to out_dir.
 
@@ -129,6 +133,9 @@ def build_report(
         PSFs, scans and restoration are ray optics; the "ray vs wave" section shows both
     fit : a fit's JSON (:func:`~opticalstamp.report.fitsection.load_fit`): the section
         "model vs measurement" (:mod:`.fitsection`); None: no such section
+    passes : the count of the report's traced passes
+        (:class:`~opticalstamp.raytrace.passes.TracePasses`) that its tracer adds to
+        (None: a count of its own): how many times each pixel's rays were traced
 
     Returns
     -------
@@ -159,21 +166,24 @@ def build_report(
             with background.cores():  # numba threads
                 return measure(compute, *args, **kwargs)
 
-        # one pilot per pixel for every traced analysis below, and each chunk of rays traced
-        # once (the ghost analysis, the folded LSFs and the scan kernels share chunks)
-        tracer = PixelTracer(design, replay=True)
+        # one pilot per pixel for every traced analysis below, and each ray traced once:
+        # the analyses of the design's pixels draw their rays from this tracer, which hands
+        # out again the rays it traced (tests/test_trace_once.py counts its passes)
+        tracer = PixelTracer(design, replay=True, passes=passes)
         shown = dict(traced, progress=progress)
         g = run(ghost_section, design, work, **shown, tracer=tracer)
         sp = run(spot_section, design, work, **shown, tracer=tracer, optics=opt)
         psfs = run(psf_section, design, work, **shown)
         clock.lap("ghosts_spots_psf")
-        concepts = run(concept_section, design, g, work, **traced) if work.paper else None
+        concepts = (
+            run(concept_section, design, g, work, **traced, tracer=tracer) if work.paper else None
+        )
         clock.lap("concepts")
         rm = run(rmtf_section, design, work, **shown, tracer=tracer, dof_dpi=dpi, optics=opt)
-        eff = run(efficiency_section, design, g, work, **traced, optics=opt)
+        eff = run(efficiency_section, design, g, work, **traced, optics=opt, tracer=tracer)
         diffraction = run(diffraction_section, design)
         clock.lap("quality")
-        wave = run(wave_section, design, work, seed=seed, dof_dpi=dpi)
+        wave = run(wave_section, design, work, seed=seed, dof_dpi=dpi, tracer=tracer)
         clock.lap("ray_vs_wave")
         scans = run(
             scan_section,

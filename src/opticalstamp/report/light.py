@@ -5,17 +5,26 @@ from __future__ import annotations
 
 from ..analysis.responsivity import RAY, Optics
 from ..design import Design
+from ..raytrace.pixel import PixelTracer
 from .section import measured
 from .work import Work
 
 
 def efficiency_section(
-    design: Design, g, work: Work, *, seed: int, fresnel: bool, optics: Optics = RAY
+    design: Design,
+    g,
+    work: Work,
+    *,
+    seed: int,
+    fresnel: bool,
+    optics: Optics = RAY,
+    tracer: PixelTracer | None = None,
 ):
     """Light efficiency of the design (own path and all light) against the reference
     lens, and with the larger sensitive areas that fit (:func:`custom_area_scales`).
     ``g``: the report's ghost analysis, reused (traced again where it is not
-    measurable). ``optics``: the engine of the headline light (own path: geometric)."""
+    measurable). ``optics``: the engine of the headline light (own path: geometric).
+    ``tracer``: the report's, whose rays the design's traces reuse."""
     from ..analysis.efficiency import efficiency
 
     return efficiency(
@@ -25,6 +34,7 @@ def efficiency_section(
         ghosts=measured(g),
         area_scales=custom_area_scales(design, work.area_scales),
         optics=optics,
+        tracer=tracer,
     )
 
 

@@ -75,13 +75,22 @@ def psf_section(
     ]
 
 
-def concept_section(design: Design, g, work: Work, *, seed: int, fresnel: bool) -> list[dict]:
+def concept_section(
+    design: Design,
+    g,
+    work: Work,
+    *,
+    seed: int,
+    fresnel: bool,
+    tracer: PixelTracer | None = None,
+) -> list[dict]:
     """Own and ghost etendue of the paper's Fig. 1 concepts.
 
     A concept that is the report's design, analysed with the same rays, is the report's
     ghost analysis ``g`` (its etendues do not depend on the distances it lands ghost light
     at, and ``g`` lands it at Z = 0 too), so it is not run twice; where ``g`` is not
-    measurable the concept is analysed here.
+    measurable, or the concepts take fewer rays (a quick report), the concept is analysed
+    here with ``tracer`` (the report's: its pilot and the rays it traced already).
     """
     g = measured(g)
     out = []
@@ -91,7 +100,15 @@ def concept_section(design: Design, g, work: Work, *, seed: int, fresnel: bool) 
         if same and 0.0 in work.z_mm and g is not None:
             c = g
         else:
-            c = analyse_ghosts(d, z_mm=(0.0,), n_rays=work.concept_rays, seed=seed, fresnel=fresnel)
+            mine = d.fingerprint() == design.fingerprint()
+            c = analyse_ghosts(
+                d,
+                z_mm=(0.0,),
+                n_rays=work.concept_rays,
+                seed=seed,
+                fresnel=fresnel,
+                tracer=tracer if mine else None,
+            )
         out.append(
             {
                 "design": name,

@@ -58,11 +58,14 @@ def wave_section(
     seed: int,
     dof_dpi: float,
     sampling=None,
+    tracer=None,
 ) -> WaveSection:
     """Ray against wave optics for ``design`` at the heights of :func:`wave_heights`, on
     the ``dof_dpi`` chart, ``work.wave_rays`` rays per pixel row; ``sampling``: the wave
     engine's (:func:`~opticalstamp.analysis.wavebase.wave_sampling`; default from the
-    design). ValueError (not measurable) for circular holes."""
+    design). ``tracer``: the report's
+    :class:`~opticalstamp.raytrace.pixel.PixelTracer`, whose pilots and kept rays the ray
+    side reuses. ValueError (not measurable) for circular holes."""
     from ..analysis.raywave import LIGHT_TOLERANCE, RMTF_TOLERANCE, compare_and_judge
     from ..analysis.validity import choose_optics
     from ..analysis.wavebase import rectangular
@@ -76,6 +79,7 @@ def wave_section(
         n_rays=work.wave_rays,
         seed=seed,
         dof_dpi=dof_dpi,
+        tracer=tracer,
     )
     pred = None
     if sampling is None:  # the rule reads the design as it is (not an overridden sampling)
