@@ -15,7 +15,8 @@ from opticalstamp.analysis.diffraction import design_slit_case, geometric_edge
 from opticalstamp.analysis.own_etendue import own_etendue
 from opticalstamp.analysis.paraxial import paraxial_cumulative
 from opticalstamp.analysis.spots import spots
-from opticalstamp.analysis.wave2d import Hole, mask_field_2d, wave_response_2d
+from opticalstamp.analysis.wave2d import wave_response_2d
+from opticalstamp.analysis.wave2dgrid import Hole, mask_field_2d
 from opticalstamp.analysis.wavecompare import compare_wave_ray
 from opticalstamp.design import load_design
 from opticalstamp.design.files import design_from_dict

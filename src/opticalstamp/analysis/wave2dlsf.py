@@ -75,7 +75,7 @@ def lsf_source_2d(
     "cpu" or "cuda" (None: the run's, :mod:`.arrays`). The object side is paraxial, as
     the separable path's; the stack's slabs are exact (angular spectrum; ``propagator``
     "paraxial" for checks against the separable path). ``fresnel``: the interfaces'
-    Fresnel transmission (:func:`~.wave2d.angular_filters`, which also apply the pixel's
+    Fresnel transmission (:func:`~.wave2dgrid.angular_filters`, which also apply the pixel's
     acceptance cone); ``precision``: the stack operator's (:func:`~.wave2d.stack_modes`)."""
     smp = wave_sampling(design) if sampling is None else sampling
     with one_blas_thread():
