@@ -505,8 +505,11 @@ def wave(
     d = open_design(design)
     if not rectangular(d):
         fail(
-            "wave: the separable wave path needs square or rectangular holes; circular holes "
-            "take the 2-D path (opticalstamp.analysis.wave2d.wave_response_2d)"
+            "wave: the ray-vs-wave comparison needs the wave engine's 2-D maps, which it "
+            "gives for square or rectangular holes; for circular holes use "
+            "'opticalstamp rmtf --optics wave' and 'opticalstamp efficiency --optics wave' "
+            "(the 2-D path's line-spread functions and light), or the API's "
+            "opticalstamp.analysis.wave2d.wave_response_2d for maps"
         )
     if spectrum is not None and spectrum not in CHANNELS:
         fail(f"--spectrum: must be one of {', '.join(CHANNELS)} (got {spectrum!r})")
