@@ -333,6 +333,7 @@ class PixelTracer:
         self.n_obj = float(design.index(design.object_medium))
         self._pilots: dict[tuple, np.ndarray | None] = {}
         self._replays: dict[tuple, PixelBatch] | None = {} if replay else None
+        self._kept_again: dict[tuple, list[PixelBatch]] = {}
         self._fingerprint: str | None = None
 
     def with_sampling(self, sampling: Sampling) -> PixelTracer:
@@ -348,7 +349,7 @@ class PixelTracer:
         other = copy.copy(self)
         other.device = run_device(device)
         if other.device != self.device and self._replays is not None:
-            other._replays = {}
+            other._replays, other._kept_again = {}, {}
         return other
 
     def source(self, pixel: tuple[int, int]) -> Source:
@@ -446,8 +447,8 @@ class PixelTracer:
                 piece = _cut(pb, hit, p - hit, end - hit)
                 if piece is not None:
                     yield piece
-                else:  # a GPU's chunk, or not on a block edge: traced again, not kept
-                    yield from self._trace(pixel, end - p, p, stream, progress)
+                else:  # a GPU's chunk, or not on a block edge: these rays traced again
+                    yield from self._again(pixel, base, p, end - p, stream, progress)
                 p = end
                 continue
             end = min([hi] + [f for f in kept if f > p])  # up to the next kept chunk
@@ -458,6 +459,18 @@ class PixelTracer:
                 at += pb.rays.n_samples
                 yield pb
             p = end
+
+    def _again(
+        self, pixel: tuple[int, int], base: tuple, first: int, n: int, stream: int, progress: bool
+    ) -> Iterator[PixelBatch]:
+        """Rays first ... first + n - 1 that a kept chunk holds but cannot be cut to:
+        traced again the first time they are asked for alone, and kept apart for a later
+        trace that asks for exactly them (as a GPU's chunks were always kept)."""
+        key = (*base, first, n)
+        if key not in self._kept_again:
+            got = [_read_only(pb) for pb in self._trace(pixel, n, first, stream, progress)]
+            self._kept_again[key] = got
+        yield from self._kept_again[key]
 
     def _trace(
         self, pixel: tuple[int, int], n: int, first_id: int, stream: int, progress: bool
