@@ -387,7 +387,8 @@ def test_cli_bad_input_exit_2(tmp_path):
 
 def test_fit_says_when_its_ray_model_is_not_the_designs_optics():
     """A ray-optics fit of a design for which --optics auto takes wave optics (the
-    prototype) warns; where ray optics holds, or the fit was by wave optics, it does not."""
+    prototype) warns; where ray optics holds, or the fit was by wave optics, it does not;
+    a wave fit whose defect correction did not converge does."""
     from opticalstamp.design import load_design
     from opticalstamp.design.variants import scale_to_dpi
     from opticalstamp.studies.fitresult import fit_optics
@@ -395,5 +396,7 @@ def test_fit_says_when_its_ray_model_is_not_the_designs_optics():
     paper = load_design("paper2016")
     assert "absorb the diffraction blur" in fit_optics(paper, {"engine": "ray"})
     assert fit_optics(paper, {"engine": "wave"}) is None
+    stuck = {"converged": False, "stopped": "no step lowered", "wave_chi2": [10.0, 9.0]}
+    assert "did not converge" in fit_optics(paper, {"engine": "wave", "scheme": stuck})
     coarse = scale_to_dpi(paper, 100)  # holes and lattice 3x over the same plates
     assert fit_optics(coarse, {"engine": "ray"}) is None

@@ -19,7 +19,7 @@ from ..studies.fitresult import optics_words
 from ..validate import InputError
 
 #: What the RMTF curves of each optics are (the fit's model's).
-CURVES = {"ray": "paraxial own path", "wave": "the wave engine's light in its band"}
+CURVES = (("ray", "paraxial own path"), ("wave", "the wave engine's light in its band"))
 #: What a fit.json must hold for the section.
 FIT_KEYS = ("design", "design_fingerprint", "fitted_fingerprint", "parameters", "chi2", "dof")
 
@@ -99,7 +99,7 @@ def fit_section(fit: dict, design: Design) -> dict:
         "optics_text": optics_words(optics)
         + "."
         + (f" Warning: {optics['warning']}" if optics.get("warning") else ""),
-        "curves": CURVES[optics.get("engine", "ray")],
+        "curves": dict(CURVES)[optics.get("engine", "ray")],
     }
 
 

@@ -61,11 +61,14 @@ DEFECT_ROUNDS = 8
 #: within about sqrt(2 x 0.01) = 0.14 joint errors of its minimum).
 DEFECT_CHI2 = 0.01
 #: The forward model of each engine, in words (fit.json's ``optics``).
-FORWARD = {
-    "ray": "paraxial own path (ray optics)",
-    "wave": "wave engine's light in its band (own path, diffraction, near crosstalk), "
-    "by defect correction of the paraxial own path",
-}
+FORWARD = (
+    ("ray", "paraxial own path (ray optics)"),
+    (
+        "wave",
+        "wave engine's light in its band (own path, diffraction, near crosstalk), "
+        "by defect correction of the paraxial own path",
+    ),
+)
 
 
 def _draw_start(prob: Problem, rng: np.random.Generator) -> np.ndarray:
@@ -258,7 +261,7 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt) -> Fit
         t0 = np.concatenate([theta[keep], theta[len(names_now) :]])
         theta = _local(prob, t0, max_nfev).x
         chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
-    info = opt.to_dict() | {"forward_model": FORWARD[opt.engine]}
+    info = opt.to_dict() | {"forward_model": dict(FORWARD)[opt.engine]}
     if wave is not None:
         theta, prob, info["scheme"] = _defect(prob, theta, wave, cov, max_nfev)
         chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
@@ -327,7 +330,7 @@ def _defect(prob: Problem, theta: np.ndarray, wave: WaveModel, cov: np.ndarray, 
     def chi2_of(t):
         return float(np.sum(exact.residuals(t) ** 2))
 
-    moves, chis, runs, why = [], [], 1 + len(prob.model.free), None
+    moves, chis, runs, why, stale = [], [], 1 + len(prob.model.free), None, False
     for _ in range(DEFECT_ROUNDS):
         at = lay.physical(theta)
         model = wave.correction(design, list(lay.params), at, lay.free, zs, smear)
@@ -344,10 +347,15 @@ def _defect(prob: Problem, theta: np.ndarray, wave: WaveModel, cov: np.ndarray, 
             step = step / 2
             chi_new = chi2_of(theta + step)
             runs += 1
-        if chi_new > chi_at:
-            why = "no step lowered the wave model's chi2"
+        if chi_new > chi_at:  # at the wave model's minimum, or the linear model is poor
+            why = (
+                f"no step lowers the wave chi2 by {DEFECT_CHI2:g}"
+                if chi_new - chi_at < DEFECT_CHI2
+                else "no step lowered the wave model's chi2"
+            )
+            stale = False  # the last correction is about theta: the wave model there
             break
-        theta = theta + step
+        theta, stale = theta + step, True
         moves.append(float(np.max(np.abs(step[:nf]) / sd, initial=0.0)))
         if moves[-1] < DEFECT_TOL:
             why = f"moves below {DEFECT_TOL:g} of the errors"
@@ -357,7 +365,7 @@ def _defect(prob: Problem, theta: np.ndarray, wave: WaveModel, cov: np.ndarray, 
             break
     else:
         why = None
-    if moves:  # the model about the final point: the wave model there
+    if stale:  # the model about the final point: the wave model there
         at = lay.physical(theta)
         model = wave.correction(design, list(lay.params), at, lay.free, zs, smear)
         runs += 1 + nf
@@ -370,7 +378,7 @@ def _defect(prob: Problem, theta: np.ndarray, wave: WaveModel, cov: np.ndarray, 
         "rounds": len(moves),
         "moves_in_errors": moves,
         "wave_chi2": chis,
-        "converged": why is not None and not why.startswith("no step"),
+        "converged": why is not None and not why.startswith("no step lowered"),
         "stopped": why or f"after {DEFECT_ROUNDS} rounds",
         "wave_runs": runs,
         "jacobian": "the wave model's at the optimum (its difference from the fast model "

@@ -242,21 +242,6 @@ class Problem:
                 jac[a:b, k] = (self.residual_of(i, sps[i], t) - r0[a:b]) / h[k]
         return jac
 
-    def physical_columns(self, theta: np.ndarray, rel: float) -> np.ndarray:
-        """The Jacobian's physical columns by central differences, steps ``rel`` x each
-        parameter's assembly scale (one-sided at a bound): for a model too costly for
-        :meth:`jacobian`'s forward differences at every step, or one whose last digits
-        jitter at their tiny steps (the wave engine's grids)."""
-        cols = []
-        for k in range(self.lay.n_free):
-            p = self.lay.params[self.lay.free[k]]
-            h = rel * p.scale
-            lo, hi = max(theta[k] - h, p.lo), min(theta[k] + h, p.hi)
-            a, b = theta.copy(), theta.copy()
-            a[k], b[k] = lo, hi
-            cols.append((self.residuals(b) - self.residuals(a)) / (hi - lo))
-        return np.column_stack(cols) if cols else np.zeros((self.n_data, 0))
-
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """The physical parameters' bounds; a bar block's period within PERIOD_TOL of
         the one measured (a wider step could jump to an alias of the bars), black and

@@ -81,10 +81,19 @@ def fit_optics(design: Design, optics: dict) -> str | None:
     one the other commands pick for this design: a ray-optics fit (the paraxial own path)
     of a design for which ``--optics auto`` takes wave optics
     (:func:`~opticalstamp.analysis.responsivity.resolve_optics`), whose fitted geometry
-    absorbs the diffraction blur the model leaves out. None where they agree."""
+    absorbs the diffraction blur the model leaves out; or a wave fit whose defect
+    correction did not converge. None otherwise."""
     from ..analysis.responsivity import resolve_optics
 
     if optics.get("engine", "ray") != "ray":
+        sc = optics.get("scheme", {})
+        if sc and not sc.get("converged"):
+            return (
+                f"the wave fit's defect correction did not converge ({sc.get('stopped')}; "
+                f"wave chi2 by round {', '.join(f'{c:.1f}' for c in sc.get('wave_chi2', []))}"
+                "): the estimates are not the wave model's optimum; a model that cannot "
+                "describe the images (free the parameters that differ) is the usual cause"
+            )
         return None
     auto = resolve_optics(design, "auto")
     if auto.engine == "wave":
