@@ -243,8 +243,9 @@ def test_spots_by_wave_optics(paper):
 
 
 def test_rgb_light_is_ray_under_auto_and_refused_for_wave(paper):
-    """An rgb design's three channels are not taken one by one by the analyses yet: auto
-    picks ray and says why, wave is refused naming the field."""
+    """An rgb design's three channels are not taken one by one by the map analyses yet
+    (spots, scan kernels; the RMTF and the light do, tests/test_rgb_channels.py): auto
+    picks ray there and says why, wave is refused naming the field."""
     from opticalstamp.design.variants import replace as vary
 
     rgb = vary(paper, {"electronics.illumination": "rgb"})

@@ -20,13 +20,15 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..defaults import RSE_GHOST, RSE_OWN
+from ..defaults import RAYS_LSF, RSE_GHOST, RSE_OWN
 from ..design import Design, with_sensitive_area
 from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import output_pitch
+from .colour import LIGHT_RULE, weakest_channel
 from .ghosts import GhostResult, analyse_ghosts
 from .own_etendue import own_etendue, rectangular_holes
-from .responsivity import Optics, pixel_light, resolve_optics
+from .responsivity import Optics, pixel_light, pixel_light_channels, resolve_optics
+from .spectrum import channels as light_channels
 
 
 def disk_projected_solid_angle(rho_um, h_um: float, radius_um: float) -> np.ndarray:
@@ -123,6 +125,7 @@ def efficiency(
     progress: bool = False,
     optics: str | Optics = "ray",
     tracer: PixelTracer | None = None,
+    n_rays: int = RAYS_LSF,
 ) -> EfficiencyResult:
     """Light efficiency of one used pixel (paper Fig. 13), with and without ghost light.
 
@@ -144,7 +147,12 @@ def efficiency(
     engine's in-band light: the own path with its diffraction and the near crosstalk in
     the band (:func:`~opticalstamp.analysis.responsivity.pixel_light`); ``meta["optics"]``
     holds the breakdown and the ray figures they replace. The object-radius and
-    sensitive-area studies stay geometric (ray optics), and say so there.
+    sensitive-area studies stay geometric (ray optics), and say so there. A colour
+    scanner (``electronics.illumination`` "rgb"): the light per channel in
+    ``meta["optics"]["channels"]`` (:func:`~opticalstamp.analysis.responsivity.
+    pixel_light_channels`), the headline the weakest channel's signal
+    (:data:`~opticalstamp.analysis.colour.LIGHT_RULE`, ``meta["optics"]["headline"]``).
+    ``n_rays``: rays of the traced light beyond the wave band.
 
     ``tracer``: a :class:`~opticalstamp.raytrace.pixel.PixelTracer` of ``design`` whose
     pilots and kept rays the design's own traces reuse (the ghost analysis where
@@ -205,11 +213,20 @@ def efficiency(
                 "gain_own_vs_design": _over(ok, g_own),
             }
         )
-    opt = resolve_optics(design, optics, fresnel=fresnel)
+    opt = resolve_optics(design, optics, fresnel=fresnel, channels=True)
     optics_meta = opt.to_dict()
     own_method = "quadrature" if exact else "trace"
     if opt.engine == "wave":
-        light = pixel_light(design, opt, pixel=pixel, seed=seed, tracer=tracer)
+        kw = {"pixel": pixel, "n_rays": n_rays, "seed": seed, "tracer": tracer}
+        if len(light_channels(design)) == 1:
+            light = pixel_light(design, opt, **kw)
+        else:  # a colour scanner: each channel's light, the weakest as the headline
+            lights = pixel_light_channels(design, opt, **kw)
+            weakest = weakest_channel(lights)
+            light = lights[weakest] | {
+                "channels": lights,
+                "headline": {"channel": weakest, "rule": LIGHT_RULE},
+            }
         optics_meta |= light | {
             "ray_etendue_um2sr": tot,
             "ray_etendue_own_um2sr": g_own,

@@ -87,25 +87,36 @@ class Optics:
 RAY = Optics("ray", "ray", "asked for")
 
 
-def wave_unavailable(design: Design, band: float | None = None, *, maps: bool = True) -> str | None:
+def wave_unavailable(
+    design: Design, band: float | None = None, *, maps: bool = True, channels: bool = False
+) -> str | None:
     """Why the wave engine cannot give this design's responsivity yet, or None: an
-    illumination of several channels, or (with ``maps``: what ``auto`` and the analyses
+    illumination of several channels where the caller does not take them one by one
+    (``channels`` False: the spots, the scan kernels and what builds on them; the RMTF,
+    the depth of field and the light do, :func:`~.colour.folded_lsf_channels`,
+    :func:`pixel_light_channels`), or (with ``maps``: what ``auto`` and the analyses
     that need 2-D maps ask) holes that are not rectangular, whose line-spread functions
     and light the 2-D path gives (``--optics wave`` for the RMTF, the depth of field and
     the light) but not yet their 2-D maps. (The pixel's acceptance cone and Fresnel
     losses are filters on its angular spectrum, :mod:`.wavefilter`.)"""
     if maps and not rectangular(design):
         return CIRCLE_MAPS
-    if design.electronics.illumination == "rgb":
+    if not channels and design.electronics.illumination == "rgb":
         return (
-            "electronics.illumination is rgb: three channels, whose figures the analyses "
-            "do not take one by one yet (opticalstamp wave --spectrum rgb shows them)"
+            "electronics.illumination is rgb: three channels, one exposure each; the RMTF, "
+            "the depth of field and the light take them one by one (opticalstamp rmtf / "
+            "efficiency --optics wave), this analysis does not yet"
         )
     return None
 
 
 def resolve_optics(
-    design: Design, optics: str | Optics = "ray", *, fresnel: bool = False, method: str = "trace"
+    design: Design,
+    optics: str | Optics = "ray",
+    *,
+    fresnel: bool = False,
+    method: str = "trace",
+    channels: bool = False,
 ) -> Optics:
     """The :class:`Optics` for ``design`` from ``"ray"``, ``"wave"`` or ``"auto"``.
 
@@ -115,7 +126,10 @@ def resolve_optics(
     losses) goes with either engine (the wave engine's are filters on its angular
     spectrum, :mod:`.wavefilter`; the result carries it). ``method`` "paraxial" (the ray
     closed form) is ray optics: ``auto`` picks ray for it and says so, :func:`folded_lsf`
-    refuses it with ``wave``."""
+    refuses it with ``wave``. ``channels``: the caller takes a colour scanner's channels
+    one by one (:func:`wave_unavailable`); ``auto`` then applies the rule at the channel
+    of the lowest own-path Fresnel number (the reddest: diffraction grows with the
+    wavelength), wave where that channel needs it."""
     if isinstance(optics, Optics):
         if optics.engine == "wave" and optics.fresnel != bool(fresnel):
             return replace(optics, fresnel=bool(fresnel))
@@ -125,7 +139,7 @@ def resolve_optics(
     if optics == "ray":
         return RAY
     if optics == "wave":
-        why = wave_unavailable(design, maps=False)
+        why = wave_unavailable(design, maps=False, channels=channels)
         if why is not None:
             raise InputError(f"optics: 'wave' is not available for {design.name}: {why}")
         return Optics("wave", "wave", "asked for", wave_sampling(design), fresnel=bool(fresnel))
@@ -133,19 +147,42 @@ def resolve_optics(
         return Optics("auto", "ray", "the paraxial closed form asked for is ray optics")
     from .validity import choose_optics
 
-    why = wave_unavailable(design)
+    why = wave_unavailable(design, channels=channels)
     if why is not None:
         return Optics("auto", "ray", f"ray optics: {why}")
-    choice = choose_optics(design, optics="auto")
+    choice, channel = _channel_choice(design, choose_optics)
     rule = {
         "fresnel_min": choice.fresnel_min,
         "predictor": choice.predictor,
         "predicted_error": choice.predicted_error,
         "tolerance": choice.tolerance,
     }
+    if channel is not None:
+        rule |= {"channel": channel[0], "channel_predictors": channel[1]}
     if choice.engine == "wave":
         return Optics("auto", "wave", choice.reason, wave_sampling(design), rule, bool(fresnel))
     return Optics("auto", "ray", choice.reason, None, rule)
+
+
+def _channel_choice(design: Design, choose_optics):
+    """The validity rule's choice for ``design``, and for a light of several channels
+    (rgb) the rule applied at the channel with the lowest own-path Fresnel number (at
+    its mean wavelength): (choice, (channel, {channel: Fresnel number})), else
+    (choice, None)."""
+    from .spectrum import channels as light_channels
+    from .wavespectral import at_wavelength
+
+    specs = light_channels(design)
+    if len(specs) == 1:
+        return choose_optics(design, optics="auto"), None
+    picks = {
+        name: choose_optics(at_wavelength(design, spec.mean_um), optics="auto")
+        for name, spec in specs.items()
+    }
+    worst = min(picks, key=lambda name: picks[name].predictor)
+    c = picks[worst]
+    said = f"the {worst} channel ({specs[worst].mean_um:.3f} um) diffracts most: {c.reason}"
+    return replace(c, reason=said), (worst, {k: v.predictor for k, v in picks.items()})
 
 
 def folded_lsf(
@@ -308,6 +345,7 @@ def pixel_light(
     n_rays: int = RAYS_LSF,
     seed: int = 0,
     tracer: PixelTracer | None = None,
+    spectrum=None,
 ) -> dict:
     """A used pixel's light from a uniform Lambertian object (um^2 sr) by wave optics:
     the wave engine's in-band light plus the tracer's light outside the band, with the
@@ -315,40 +353,99 @@ def pixel_light(
     the light the object-side mask diffracts beyond the band (counted, not propagated:
     an upper bound on the halo left out). Fresnel losses as ``optics.fresnel`` says, on
     both parts. ``tracer``: a tracer of ``design`` whose pilots and kept rays to reuse
-    (the ghost analysis's: the traced part then traces only the rays it has not)."""
-    from .wavecompare import ray_in_band
-    from .wavespectral import wave_response_spectral
-
+    (the ghost analysis's: the traced part then traces only the rays it has not).
+    ``spectrum``: the light (one channel; default the design's illumination)."""
     if optics.engine != "wave":
         raise ValueError("pixel_light: wave optics only (the ray figures are the ghost analysis')")
-    # under the design's light (its illumination's spectrum), in one band at every wavelength
+    traced = _traced_light(design, optics, pixel, n_rays, seed, tracer)
+    return _light(_wave_light(design, optics, pixel, spectrum), traced, n_rays, seed, optics)
+
+
+def pixel_light_channels(
+    design: Design,
+    optics: Optics,
+    *,
+    pixel: tuple[int, int] = (0, 0),
+    n_rays: int = RAYS_LSF,
+    seed: int = 0,
+    tracer: PixelTracer | None = None,
+) -> dict[str, dict]:
+    """:func:`pixel_light` per channel of the design's light ({channel: figures}; "rgb":
+    red, green, blue), the light beyond the band traced at each channel's mean
+    wavelength as :func:`~.colour.folded_lsf_channels` traces it (``traced_at_um``)."""
+    from .colour import channel_designs
+    from .spectrum import channels as light_channels
+
+    if optics.engine != "wave":
+        raise ValueError("pixel_light_channels: wave optics only")
+    designs = channel_designs(design)
+    traced = {}  # per traced design: channels of one index share it
+    for d in designs.values():
+        if d.fingerprint() not in traced:
+            tr = tracer if d is design else None
+            traced[d.fingerprint()] = _traced_light(d, optics, pixel, n_rays, seed, tr)
+    return {
+        name: _light(
+            _wave_light(design, optics, pixel, spec),
+            traced[designs[name].fingerprint()],
+            n_rays,
+            seed,
+            optics,
+        )
+        | {"spectrum": spec.to_dict(), "traced_at_um": designs[name].wavelength_um}
+        for name, spec in light_channels(design).items()
+    }
+
+
+def _wave_light(design: Design, optics: Optics, pixel, spectrum) -> tuple[float, float]:
+    """The wave engine's in-band light under one channel's light and the light the
+    object-side mask sends beyond the band (um^2 sr)."""
+    from .wavespectral import SpectralLSFSource, wave_response_spectral
+
     if rectangular(design):
         w = wave_response_spectral(
-            design, [0.0], pixel=pixel, sampling=optics.sampling, fresnel=optics.fresnel
+            design,
+            [0.0],
+            spectrum=spectrum,
+            pixel=pixel,
+            sampling=optics.sampling,
+            fresnel=optics.fresnel,
         )
-        wave, lost = float(w.etendue_um2sr[0]), float(w.budget[-1]["lost_to_band"])
-    else:  # the 2-D path's light (and its estimate of the light sent beyond the band)
-        from .wavespectral import SpectralLSFSource
+        return float(w.etendue_um2sr[0]), float(w.budget[-1]["lost_to_band"])
+    # the 2-D path's light (and its estimate of the light sent beyond the band)
+    src = SpectralLSFSource.of(
+        design,
+        0.0,
+        spectrum=spectrum,
+        pixel=pixel,
+        sampling=optics.sampling,
+        fresnel=optics.fresnel,
+    )
+    parts = list(zip(src.weights, src.sources, strict=True))
+    wave = float(sum(wi * s.light for wi, s in parts))
+    return wave, float(sum(wi * s.meta["lost_to_band"] for wi, s in parts))
 
-        src = SpectralLSFSource.of(
-            design, 0.0, pixel=pixel, sampling=optics.sampling, fresnel=optics.fresnel
-        )
-        parts = list(zip(src.weights, src.sources, strict=True))
-        wave = float(sum(wi * s.light for wi, s in parts))
-        lost = float(sum(wi * s.meta["lost_to_band"] for wi, s in parts))
-    per = float(design.sensor.row_pitch_um)
+
+def _traced_light(design: Design, optics: Optics, pixel, n_rays, seed, tracer):
+    """The tracer's light of the pixel in and beyond the band (:func:`ray_in_band`)."""
+    from .wavecompare import ray_in_band
+
     sampling = Sampling(n_rays, seed, optics.fresnel)
-    r = ray_in_band(
+    return ray_in_band(
         design,
         [0.0],
         optics.band,
         pixel=pixel,
-        period_um=per,
+        period_um=float(design.sensor.row_pitch_um),
         n_rays=n_rays,
         seed=seed,
         fresnel=optics.fresnel,
         tracer=None if tracer is None else tracer_for(design, sampling, tracer),
     )
+
+
+def _light(wave_lost: tuple[float, float], r, n_rays: int, seed: int, optics: Optics) -> dict:
+    wave, lost = wave_lost
     far = r.traced_um2sr - r.own_um2sr - r.near_um2sr
     return {
         "etendue_um2sr": wave + far,

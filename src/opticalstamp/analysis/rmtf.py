@@ -35,9 +35,10 @@ from ..raytrace.pixel import PixelTracer
 from ..raytrace.stack import lattice_of
 from ..units import period_of_dpi
 from ..validate import check_memory, parse_grid
+from .colour import channel_folds, folded_lsf_channels, worst_channel
 from .dof import depth_of_field, dof_bounds, dof_text, refine_points, spurious_ranges
 from .lsf import FoldedLSF, fast_light
-from .responsivity import RAY, Optics, folded_lsf, resolve_optics, wave_folds
+from .responsivity import RAY, Optics, resolve_optics
 
 __all__ = ["depth_of_field", "dof_bounds", "dof_text", "refine_points", "spurious_ranges"]
 
@@ -318,7 +319,9 @@ class RMTFResult:
         ``rmtf_min`` (dpi, z_mm), ``period_um``, ``dof_mm``, ``dof_open_ended`` (a lower
         bound: the Z range ended first) and ``dof_low_mm`` / ``dof_high_mm`` (the range at
         ±2 SE) (dpi); the method, ghosts, shading, Fresnel setting, seed, design and the
-        depth-of-field chart in the attributes.
+        depth-of-field chart in the attributes. A colour scanner's channels (wave
+        optics): ``rmtf_channel`` (channel, dpi, z_mm) and ``dof_channel_mm`` (channel,
+        dpi), the headline channel (the worst) in the attributes.
         """
         import xarray as xr
 
@@ -328,7 +331,7 @@ class RMTFResult:
             return np.array([table[k] for k in keys], dtype=np.float64)
 
         dims = ("dpi", "z_mm")
-        return xr.Dataset(
+        ds = xr.Dataset(
             {
                 "rmtf": (dims, grid(self.rmtf_max)),
                 "rmtf_se": (dims, grid(self.rmtf_max_se)),
@@ -363,6 +366,14 @@ class RMTFResult:
                 "shading": int(self.shading),
             },
         )
+        from .colour import channel_variables  # a colour scanner's channels, one by one
+
+        extra = channel_variables(self)
+        if not extra:
+            return ds
+        ds = ds.assign_coords(channel=extra.pop("channel")[1]).assign(extra)
+        ds.attrs["headline_channel"] = self.meta["headline"]["channel"]
+        return ds
 
 
 def _key(dpi: float) -> str:
@@ -432,7 +443,11 @@ def rmtf(
     optics : "ray", "wave" or "auto" (or a resolved
         :class:`~opticalstamp.analysis.responsivity.Optics`): which engine gives the
         responsivity (:func:`~opticalstamp.analysis.responsivity.folded_lsf`); the
-        result's ``meta["optics"]`` says which one did and why
+        result's ``meta["optics"]`` says which one did and why. A colour scanner
+        (``electronics.illumination`` "rgb") under wave optics: one RMTF and depth of
+        field per channel (``meta["channels"]``), the headline the worst channel's
+        (:func:`~opticalstamp.analysis.colour.worst_channel`); the refinement samples
+        every channel at the Z that any of them needs
     """
     dpis = sorted({float(d) for d in (chart_dpis(design) if dpi is None else dpi)})
     dof_dpi = float(dof_chart_dpi(design) if dof_dpi is None else dof_dpi)
@@ -447,39 +462,47 @@ def rmtf(
     check_rmtf_memory(design, periods.max(), zs.size, window_um, shift_step_um)
     if method not in ("trace", "paraxial"):
         raise ValueError(f"method must be 'trace' or 'paraxial' (got {method!r})")
-    opt = resolve_optics(design, optics, fresnel=fresnel, method=method)
-    wave = wave_folds(design, opt, float(zs.max()))  # the stack once, for every Z below
+    opt = resolve_optics(design, optics, fresnel=fresnel, method=method, channels=True)
+    # the stack once per channel, for every Z below ("rgb" under wave optics: three)
+    waves = channel_folds(design, opt, float(zs.max()))
 
-    def lsf_at(z: np.ndarray) -> FoldedLSF:
-        return folded_lsf(
-            design,
-            z_mm=z,
-            periods_um=periods,
-            optics=opt,
-            wave=wave,
-            method=method,
-            n_rays=n_rays,
-            seed=seed,
-            ghosts=ghosts,
-            fresnel=fresnel,
-            progress=progress,
-            tracer=tracer,
+    def lsf_at(z: np.ndarray) -> list[FoldedLSF]:
+        return list(
+            folded_lsf_channels(
+                design,
+                z_mm=z,
+                periods_um=periods,
+                waves=waves,
+                optics=opt,
+                method=method,
+                n_rays=n_rays,
+                seed=seed,
+                ghosts=ghosts,
+                fresnel=fresnel,
+                progress=progress,
+                tracer=tracer,
+            ).values()
         )
 
-    res = rmtf_from_lsf(
-        lsf_at(zs),
-        design,
-        dpi=dpis,
-        seed=seed,
-        window_um=window_um,
-        shift_step_um=shift_step_um,
-        dof_threshold=dof_threshold,
-        dof_dpi=dof_dpi,
-        shading=shading,
-        optics=opt,
-    )
-    (res,) = refine_results([res], lambda z: [lsf_at(z)], design, steps=refine, passes=passes)
-    return res
+    res = [
+        rmtf_from_lsf(
+            lsf,
+            design,
+            dpi=dpis,
+            seed=seed,
+            window_um=window_um,
+            shift_step_um=shift_step_um,
+            dof_threshold=dof_threshold,
+            dof_dpi=dof_dpi,
+            shading=shading,
+            optics=opt,
+        )
+        for lsf in lsf_at(zs)
+    ]
+    res = refine_results(res, lsf_at, design, steps=refine, passes=passes)
+    if len(res) == 1:
+        return res[0]
+    return worst_channel(design, dict(zip(waves, res, strict=True)))
 
 
 def rmtf_from_lsf(
