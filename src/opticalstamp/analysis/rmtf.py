@@ -555,10 +555,25 @@ def rmtf_from_lsf(
         meta={
             "best_shift_um": pick["best_shift_um"],
             "fast_light": fast_light(lsf),
-            # no light reached the pixels at all: every RMTF is 0 for want of a signal
-            "no_light": not any(float(np.sum(h)) > 0 for h in lsf.h),
+            # no light reached the pixels: every RMTF is 0 for want of a signal
+            "no_light": _no_light(lsf, design),
             "optics": optics.to_dict(),
         },
         shading=shading,
     )
     return _with_crossings(res)
+
+
+#: Light below this fraction of the pixel's open etendue (sensitive area x pi sr) is no
+#: light: the wave engine's filters leave ~1e-12 of it where a stack passes none (a tracer
+#: gives exactly 0).
+NO_LIGHT = 1e-9
+
+
+def _no_light(lsf: FoldedLSF, design: Design) -> bool:
+    """Whether no light reaches the pixels: the folded light (um^2 sr) of every row at
+    every Z (``h``: rows, batches, Z, bins) below NO_LIGHT of the open etendue of the
+    sensitive area."""
+    s = design.sensor
+    scale = NO_LIGHT * s.sensitive_width_um * s.sensitive_height_um * np.pi
+    return not any(float(np.max(h.sum(axis=(1, 3)), initial=0.0)) > scale for h in lsf.h)
