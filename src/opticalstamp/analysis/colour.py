@@ -216,3 +216,37 @@ def channel_variables(res) -> dict:
         "dof_channel_mm": (("channel", "dpi"), dof),
         "channel": ("channel", np.array(names, dtype=str)),
     }
+
+
+def rmtf_channel_lines(res: dict) -> list[str]:
+    """A colour scanner's depth of field per channel as lines of text (none with one
+    channel); ``res``: ``RMTFResult.to_dict()``."""
+    from .dof import dof_text
+
+    chans = (res.get("meta") or {}).get("channels")
+    if not chans:
+        return []
+    head = res["meta"]["headline"]["channel"]
+    out = []
+    for name, c in chans.items():
+        mean = float(np.dot(c["spectrum"]["wavelengths_um"], c["spectrum"]["weights"]))
+        mark = " (the headline: the worst)" if name == head else ""
+        out.append(f"  {name} channel ({mean:.3f} µm): depth of field {dof_text(res | c)}{mark}")
+    return [f"per channel ({DOF_RULE}):"] + out
+
+
+def light_channel_lines(optics: dict) -> list[str]:
+    """A colour scanner's light per channel as lines of text (none with one channel);
+    ``optics``: the efficiency result's ``meta["optics"]``."""
+    chans = optics.get("channels")
+    if not chans:
+        return []
+    head = optics["headline"]["channel"]
+    out = [f"per channel ({LIGHT_RULE}):"]
+    for name, c in chans.items():
+        mark = " (the headline: the weakest)" if name == head else ""
+        out.append(
+            f"  {name} channel: wave in band {c['wave_in_band_um2sr']:.4g} µm²·sr, all light "
+            f"{c['etendue_um2sr']:.4g} (far light traced at {c['traced_at_um']:.3f} µm){mark}"
+        )
+    return out

@@ -181,7 +181,7 @@ def _channel_choice(design: Design, choose_optics):
     }
     worst = min(picks, key=lambda name: picks[name].predictor)
     c = picks[worst]
-    said = f"the {worst} channel ({specs[worst].mean_um:.3f} um) diffracts most: {c.reason}"
+    said = f"the {worst} channel ({specs[worst].mean_um:.3f} µm) diffracts most: {c.reason}"
     return replace(c, reason=said), (worst, {k: v.predictor for k, v in picks.items()})
 
 

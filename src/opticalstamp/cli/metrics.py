@@ -99,6 +99,7 @@ def rmtf(
     plot: PlotOpt = None,
 ) -> None:
     """RMTF of bar charts versus object distance and the depth of field (paper Fig. 11)."""
+    from ..analysis.colour import rmtf_channel_lines
     from ..analysis.dof import dof_lines
     from ..analysis.rmtf import rmtf as run
     from ..design.resolution import nominal_dpi
@@ -136,6 +137,9 @@ def rmtf(
     for i, zz in enumerate(r.z_mm):
         lines.append(f"{zz:6.2f} " + "".join(f"{r.rmtf_max[k][i]:10.3f}" for k in keys))
     lines += dof_lines(r.to_dict(), nominal_dpi(d))
+    if "headline" in r.meta:  # a colour scanner: the table is the worst channel's
+        lines[0] += f"; the {r.meta['headline']['channel']} channel's curves (the headline)"
+    lines += rmtf_channel_lines(r.to_dict())  # and every channel's depth of field
     emit(data, as_json, lines)
     if plot:
         from ..report.plotting import plot_rmtf
@@ -157,6 +161,7 @@ def efficiency(
 ) -> None:
     """Light efficiency against the paper's reference lens (Fig. 13), working F-number
     (a rod-lens array: averaged along the array, with its ripple)."""
+    from ..analysis.colour import light_channel_lines
     from ..analysis.efficiency import efficiency as run
     from ..analysis.efficiency import ratio_text
     from ..io.files import provenance
@@ -181,6 +186,7 @@ def efficiency(
             f"({o['etendue_um2sr'] / o['ray_etendue_um2sr'] - 1:+.1%} by wave optics); the "
             "own path below is the wave light in band, the sensitive-area figures are geometric"
         )
+        lines += light_channel_lines(o)  # a colour scanner's channels
     lines += [
         f"design {d.name}: etendue of one pixel {r.etendue_um2sr:.4g} ± {r.etendue_se:.2g}"
         f" µm²·sr (own path {r.etendue_own_um2sr:.4g})",
