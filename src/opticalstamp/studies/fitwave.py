@@ -28,7 +28,7 @@ import numpy as np
 
 from ..analysis.wavebase import WaveSampling
 from ..design import Design
-from .fitmodel import SMEAR_SUBS, TABLE_UM, Param, Spread, spread, with_params
+from .fitmodel import NODE_MASS, SMEAR_SUBS, TABLE_UM, Param, Spread, spread, with_params
 
 #: Light left beyond a wave spread's table on each side of each marginal: the table stops
 #: where the cumulative reaches it, and is renormalised to 0..1 on its grid.
@@ -74,7 +74,7 @@ def wave_spread(
     cy = np.mean([np.interp(u + s, y_um, cyw) for s in subs], axis=0)
     cx = (cx - cx[0]) / (cx[-1] - cx[0])
     cy = (cy - cy[0]) / (cy[-1] - cy[0])
-    return Spread(u, cx, cy, n * TABLE_UM)
+    return Spread(u, cx, cy, n * TABLE_UM, NODE_MASS)
 
 
 @dataclass(frozen=True)
@@ -138,7 +138,8 @@ def _widen(sp: Spread, n: int) -> Spread:
         return np.concatenate([np.zeros(pad), c, np.ones(pad)])
 
     k = m + pad
-    return Spread(np.arange(-k, k + 1) * TABLE_UM, ext(sp.cx), ext(sp.cy), k * TABLE_UM)
+    u = np.arange(-k, k + 1) * TABLE_UM
+    return Spread(u, ext(sp.cx), ext(sp.cy), k * TABLE_UM, sp.node_mass)
 
 
 @dataclass(frozen=True)
@@ -169,5 +170,5 @@ class Corrected:
             cx, cy = f.cx.copy(), f.cy.copy()
             cx[o : o + dx.size] += dx
             cy[o : o + dy.size] += dy
-            out[float(z)] = Spread(f.u, cx, cy, f.half_um)
+            out[float(z)] = Spread(f.u, cx, cy, f.half_um, NODE_MASS)
         return out
