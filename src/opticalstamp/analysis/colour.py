@@ -30,7 +30,7 @@ from ..defaults import RAYS_LSF
 from ..design import Design
 from ..raytrace.pixel import PixelTracer
 from .lsf import FoldedLSF
-from .responsivity import RAY, Optics, _folds, folded_lsf, join, resolve_optics, wave_folds
+from .responsivity import RAY, Optics, checked_folds, folded_lsf, join, resolve_optics, wave_folds
 from .spectrum import channels as light_channels
 
 if TYPE_CHECKING:
@@ -124,7 +124,7 @@ def folded_lsf_channels(
     optics = resolve_optics(design, optics, fresnel=fresnel, channels=True)
     if optics.engine != "wave" or method != "trace":
         raise ValueError("folded_lsf_channels: several channels are wave optics (method trace)")
-    folds = {name: _folds(design, optics, w, z_mm) for name, w in waves.items()}
+    folds = {name: checked_folds(design, optics, w, z_mm) for name, w in waves.items()}
     if not ghosts:
         return {name: wf.folded(z_mm, periods_um) for name, wf in folds.items()}
     from .lsf import traced_folded_lsf_pair

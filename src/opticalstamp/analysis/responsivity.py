@@ -228,7 +228,7 @@ def folded_lsf(
     if method == "paraxial":
         raise InputError("method: 'paraxial' is a ray-optics closed form; not with --optics wave")
     optics = resolve_optics(design, optics, fresnel=fresnel)
-    wf = _folds(design, optics, wave, z_mm)
+    wf = checked_folds(design, optics, wave, z_mm)
     if not ghosts:
         return wf.folded(z_mm, periods_um)
     both, _ = folded_lsf_pair(
@@ -246,7 +246,7 @@ def folded_lsf(
     return both
 
 
-def _folds(design: Design, optics: Optics, wave: WaveFolds | None, z_mm) -> WaveFolds:
+def checked_folds(design: Design, optics: Optics, wave: WaveFolds | None, z_mm) -> WaveFolds:
     """The wave folds to use: ``wave`` where given (made with the same Fresnel setting
     as ``optics``, else the join would mix two models), else new ones."""
     if wave is None:
@@ -293,7 +293,7 @@ def folded_lsf_pair(
     )
     if optics.engine == "ray":
         return both, own
-    wf = _folds(design, optics, wave, z_mm)
+    wf = checked_folds(design, optics, wave, z_mm)
     return join(wf.folded(z_mm, periods_um), both, optics.band, _n_obj(design)), own
 
 
