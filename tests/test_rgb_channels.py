@@ -5,8 +5,11 @@ channel's depth of field and the weakest channel's light."""
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
 import pytest
+import xarray as xr
 
 from opticalstamp.analysis.colour import channel_designs
 from opticalstamp.analysis.efficiency import efficiency
@@ -66,6 +69,9 @@ def test_each_channel_is_its_own_one_channel_design(paper):
     assert list(ds["channel"].values) == list(RGB)
     np.testing.assert_array_equal(ds["dof_channel_mm"].sel(dpi=200).values, list(dofs.values()))
     assert ds.attrs["headline_channel"] == worst
+    back = xr.open_dataset(io.BytesIO(ds.to_netcdf(engine="scipy")), engine="scipy")
+    assert list(back["channel"].values) == list(RGB)  # netCDF3 keeps the channels' names
+    np.testing.assert_array_equal(back["rmtf_channel"].values, ds["rmtf_channel"].values)
 
 
 def test_the_far_light_is_traced_at_each_channels_wavelength(paper):
