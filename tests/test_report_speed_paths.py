@@ -107,10 +107,20 @@ def test_one_trace_gives_the_own_path_and_all_light_lsfs(paper):
     assert rmtf_from_lsf(lsf_own, paper, dpi=dpis, seed=7).to_dict() == sep.to_dict()
 
 
-def test_quick_report_writes_what_it_promises_and_says_so(tmp_path):
+def test_quick_report_writes_what_it_promises_and_says_so(tmp_path, monkeypatch):
+    from opticalstamp.imaging import kernels
+
+    wave_runs = []  # the wave engine's scan kernels: row A's once for the whole report
+    real = kernels.wave_near_kernels
+    monkeypatch.setattr(
+        kernels,
+        "wave_near_kernels",
+        lambda d, z, row, *a: wave_runs.append(row) or real(d, z, row, *a),
+    )
     out = tmp_path / "quick"
     res = CliRunner().invoke(app, ["report", "--quick", "--out", str(out)])
     assert res.exit_code == 0, res.output
+    assert wave_runs == [0]  # scans and restoration share them, row B is A's mirror twin
     d = json.loads((out / "report.json").read_text())
     assert d["quick"] is True
     assert any("search" in x for x in d["left_out"]) and d["reduced"]
