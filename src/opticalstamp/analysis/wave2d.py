@@ -79,28 +79,15 @@ class _Stack:
     bk: Backend = CPU
     top: object | None = None  # amplitude filter above the top mask on the in-band bins
     dtype: object = np.complex128  # of the operator's fields (complex64: "single")
-    pruned: bool = True  # 1-D FFTs on the in-band rows/columns (else full 2-D FFTs)
-
-    @property
-    def band_idx(self) -> tuple:
-        """(iy, ix) of the in-band bins, row-major (nb,) each."""
-        xp = self.bk.xp
-        return (xp.repeat(self.ky, self.kx.size), xp.tile(self.kx, self.ky.size))
 
     def _spec(self, f, norm: str | None = None):
         """Fields (k, ny, nx) -> their spectra on the in-band bins (k, ny_in, nx_in)."""
-        if not self.pruned:
-            return self.bk.fft2(f, norm=norm)[..., self.ky[:, None], self.kx]
         a = self.bk.fft(f, axis=-1, norm=norm)[..., self.kx]
         return self.bk.fft(a, axis=-2, norm=norm)[..., self.ky, :]
 
     def _field(self, s, norm: str | None = None):
         """In-band spectra (k, ny_in, nx_in) -> the fields (k, ny, nx)."""
         xp = self.bk.xp
-        if not self.pruned:
-            b = xp.zeros(s.shape[:-2] + (self.y.size, self.x.size), dtype=s.dtype)
-            b[..., self.ky[:, None], self.kx] = s
-            return self.bk.ifft2(b, norm=norm)
         a = xp.zeros(s.shape[:-2] + (self.y.size, s.shape[-1]), dtype=s.dtype)
         a[..., self.ky, :] = s
         a = self.bk.ifft(a, axis=-2, norm=norm)
