@@ -36,7 +36,6 @@ from .wavespectral import (
     SpectralLSFSource,
     at_wavelength,
     mirror_twin,
-    spectral_lsf_x,
     spectral_samplings,
     wave_response_spectral,
 )
@@ -313,6 +312,7 @@ def compare_wave_ray(
     dof_dpi: float | None = None,
     spectrum: str | Spectrum | None = None,
     tracer: PixelTracer | None = None,
+    fresnel: bool = False,
 ) -> WaveRayComparison:
     """Ray against wave for ``design`` at the object distances ``z_mm`` (mm).
 
@@ -330,6 +330,11 @@ def compare_wave_ray(
     ``tracer``: a tracer of ``design`` whose pilots and kept rays the ray side reuses at
     the design's own wavelength (a report's: the rows' rays its other analyses traced
     are not traced again).
+
+    ``fresnel``: Fresnel transmission losses (unpolarised) at the index changes in both
+    engines: the wave engine's filters on the angular spectrum (:mod:`.wavefilter`), the
+    tracer's losses ray by ray, and the own path's exact etendue with them
+    (``meta["fresnel"]`` says so).
     """
     spec = one_channel(design, spectrum)
     mono = spec.wavelengths_um == (design.wavelength_um,)
@@ -344,9 +349,11 @@ def compare_wave_ray(
     rows = range(design.sensor.rows)
     t0 = time.perf_counter()
     if mono:
-        wa = wave_response(design, zs, pixel=(0, 0), sampling=smps[0])
+        wa = wave_response(design, zs, pixel=(0, 0), sampling=smps[0], fresnel=fresnel)
     else:
-        wa = wave_response_spectral(design, zs, spectrum=spec, pixel=(0, 0), sampling=sampling)
+        wa = wave_response_spectral(
+            design, zs, spectrum=spec, pixel=(0, 0), sampling=sampling, fresnel=fresnel
+        )
     # the other rows' x LSFs (all the RMTF needs): row A's where the row is its mirror
     # twin, else the x-only path
     reach = max(
@@ -358,15 +365,17 @@ def compare_wave_ray(
         if mirror_twin(design, (0, 0), (r, 0), reach):
             row_lsf.append(row_lsf[0])
         else:
-            x, lsf, _ = spectral_lsf_x(design, zs, spectrum=spec, pixel=(r, 0), sampling=sampling)
-            row_lsf.append((x, lsf))
+            src = SpectralLSFSource.of(
+                design, max(zs), spectrum=spec, pixel=(r, 0), sampling=sampling, fresnel=fresnel
+            )
+            row_lsf.append(src.lsf_x(zs)[:2])
     t_wave = time.perf_counter() - t0
     t0 = time.perf_counter()
     by_lam = []
     for lam, s_i in zip(spec.wavelengths_um, smps, strict=True):
         d_i = at_wavelength(design, lam)
         same = tracer is not None and d_i.fingerprint() == design.fingerprint()
-        tr = tracer_for(d_i, Sampling(n_rays, seed), tracer if same else None)
+        tr = tracer_for(d_i, Sampling(n_rays, seed, fresnel), tracer if same else None)
         by_lam.append(
             [
                 ray_in_band(
@@ -401,7 +410,7 @@ def compare_wave_ray(
     if rectangular_holes(design):
         own = float(
             sum(
-                w * own_etendue(at_wavelength(design, lam))
+                w * own_etendue(at_wavelength(design, lam), fresnel=fresnel)
                 for lam, w in zip(spec.wavelengths_um, spec.weights, strict=True)
             )
         )
@@ -434,6 +443,7 @@ def compare_wave_ray(
             "rows": len(rows),
             "acceptance_half_angle_deg": design.sensor.acceptance_half_angle_deg,
             "spectrum": spec.to_dict(),
+            "fresnel": bool(fresnel),
         },
         {"wave_x_um": wa.x_um, "wave_lsf": wa.lsf_x, "ray_x_um": ra.x_um, "ray_lsf": ra.lsf_x},
     )
@@ -472,6 +482,12 @@ def comparison_lines(c: WaveRayComparison) -> list[str]:
         f"(own {r['own_in_band_um2sr']:.4f} + near {r['near_um2sr']:.4f}){own}: "
         f"wave/ray {d['light']:+.1%}"
     )
+    if c.meta.get("fresnel"):
+        out.append(
+            "Fresnel transmission losses (unpolarised) at every index change in both engines: "
+            "the wave engine's filters on the angular spectrum, the tracer's ray by ray"
+            + ("" if c.own_exact_um2sr is None else ", the own path exact with them")
+        )
     out.append(
         f"wave light diffracted beyond the band by the object-side mask: "
         f"{w['lost_to_band_top_um2sr']:.4f} µm²·sr"

@@ -498,12 +498,14 @@ def wave(
             "(one comparison per LED); default the design's electronics.illumination"
         ),
     ] = None,
+    fresnel: FresnelOpt = False,
     as_json: JsonOpt = False,
     plot: PlotOpt = None,
 ) -> None:
     """Ray against wave optics (issue 23): light, spot and RMTF of the own path and near
     crosstalk by the wave engine and by the tracer in the same band, and the layers'
-    Fresnel numbers; under a spectrum, both weighted over its wavelengths."""
+    Fresnel numbers; under a spectrum, both weighted over its wavelengths; with
+    --fresnel, both engines with Fresnel transmission losses."""
     from ..analysis.spectrum import CHANNELS, channels
     from ..analysis.wavebase import rectangular
     from ..analysis.wavecompare import compare_wave_ray, comparison_lines
@@ -524,7 +526,10 @@ def wave(
         fail(f"--plot: draws one light; {', '.join(lights)} are {len(lights)}: pass one of them")
     zs = float_list(z, "--z", 0.0, 100.0)
     n = ray_count(rays, RAYS_LSF)
-    cs = {k: compare_wave_ray(d, zs, n_rays=n, seed=seed, spectrum=v) for k, v in lights.items()}
+    cs = {
+        k: compare_wave_ray(d, zs, n_rays=n, seed=seed, spectrum=v, fresnel=fresnel)
+        for k, v in lights.items()
+    }
     if len(cs) == 1:
         c = next(iter(cs.values()))
         emit(c.to_dict(), as_json, comparison_lines(c))
