@@ -30,7 +30,17 @@ from ..defaults import RAYS_LSF
 from ..design import Design
 from ..raytrace.pixel import PixelTracer
 from .lsf import FoldedLSF
-from .responsivity import RAY, Optics, checked_folds, folded_lsf, join, resolve_optics, wave_folds
+from .responsivity import (
+    RAY,
+    Optics,
+    checked_folds,
+    folded_lsf,
+    folded_lsf_pair,
+    join,
+    resolve_optics,
+    wave_folds,
+    wave_unavailable,
+)
 from .spectrum import channels as light_channels
 
 if TYPE_CHECKING:
@@ -127,28 +137,91 @@ def folded_lsf_channels(
     folds = {name: checked_folds(design, optics, w, z_mm) for name, w in waves.items()}
     if not ghosts:
         return {name: wf.folded(z_mm, periods_um) for name, wf in folds.items()}
+    kw = {"z_mm": z_mm, "periods_um": periods_um, "n_rays": n_rays, "seed": seed}
+    far = _far_light(design, optics.band, fresnel, progress, tracer, own=False, **kw)
+    return _joined(design, folds, far, optics.band, z_mm, periods_um)
+
+
+def folded_lsf_channels_pair(
+    design: Design,
+    *,
+    z_mm,
+    periods_um,
+    waves: dict[str, WaveFolds | None],
+    optics: Optics = RAY,
+    n_rays: int = RAYS_LSF,
+    seed: int = 0,
+    fresnel: bool = False,
+    progress: bool = False,
+    tracer: PixelTracer | None = None,
+) -> tuple[dict[str, FoldedLSF], FoldedLSF]:
+    """All light per channel, as :func:`folded_lsf_channels` gives it, and the own path
+    alone (traced, geometric, through ``design`` itself), as
+    :func:`~.responsivity.folded_lsf_pair` gives the pair for one light: from one trace
+    per row where no medium of the design disperses (the far light and the own path
+    share it), else the own path traced once more through ``design``."""
+    if len(waves) == 1:
+        ((name, wave),) = waves.items()
+        both, own = folded_lsf_pair(
+            design,
+            z_mm=z_mm,
+            periods_um=periods_um,
+            optics=optics,
+            n_rays=n_rays,
+            seed=seed,
+            fresnel=fresnel,
+            progress=progress,
+            tracer=tracer,
+            wave=wave,
+        )
+        return {name: both}, own
+    optics = resolve_optics(design, optics, fresnel=fresnel, channels=True)
+    if optics.engine != "wave":
+        raise ValueError("folded_lsf_channels_pair: several channels are wave optics")
+    folds = {name: checked_folds(design, optics, w, z_mm) for name, w in waves.items()}
+    kw = {"z_mm": z_mm, "periods_um": periods_um, "n_rays": n_rays, "seed": seed}
+    far = _far_light(design, optics.band, fresnel, progress, tracer, own=True, **kw)
+    own = far.pop("own")
+    return _joined(design, folds, far, optics.band, z_mm, periods_um), own
+
+
+def _far_light(design, band, fresnel, progress, tracer, *, own: bool, **kw) -> dict:
+    """The traced light beyond ``band`` per traced design of the channels
+    (:func:`channel_designs`; channels of one index share a trace), {fingerprint:
+    FoldedLSF}; with ``own``, also "own": ``design``'s own path alone, from the same
+    trace where ``design`` is one of the traced designs."""
     from .lsf import traced_folded_lsf_pair
 
+    designs = list(channel_designs(design).values())
+    if own and all(d is not design for d in designs):
+        designs.append(design)  # a dispersive design: its own path traced on its own
+    far: dict = {}
+    for d in designs:
+        if d.fingerprint() in far:
+            continue
+        both, path = traced_folded_lsf_pair(
+            d,
+            **kw,
+            fresnel=fresnel,
+            progress=progress,
+            tracer=tracer if d is design else None,
+            outside_band=band,
+        )
+        far[d.fingerprint()] = both
+        if own and d is design:
+            far["own"] = path
+    return far
+
+
+def _joined(design, folds: dict, far: dict, band: float, z_mm, periods_um) -> dict:
+    """Each channel's in-band folds joined with the light beyond the band traced through
+    its design."""
     designs = channel_designs(design)
-    far: dict[str, FoldedLSF] = {}  # per traced design (channels of one index share it)
-    for d in designs.values():
-        if d.fingerprint() not in far:
-            far[d.fingerprint()] = traced_folded_lsf_pair(
-                d,
-                z_mm=z_mm,
-                periods_um=periods_um,
-                n_rays=n_rays,
-                seed=seed,
-                fresnel=fresnel,
-                progress=progress,
-                tracer=tracer if d is design else None,
-                outside_band=optics.band,
-            )[0]
     return {
         name: join(
             wf.folded(z_mm, periods_um),
             far[designs[name].fingerprint()],
-            optics.band,
+            band,
             float(designs[name].index(designs[name].object_medium)),
         )
         for name, wf in folds.items()
@@ -250,3 +323,17 @@ def light_channel_lines(optics: dict) -> list[str]:
             f"{c['etendue_um2sr']:.4g} (far light traced at {c['traced_at_um']:.3f} µm){mark}"
         )
     return out
+
+
+def one_light_optics(design: Design, optics: Optics) -> Optics:
+    """The optics of the analyses that take one light (the spots, the scan kernels and
+    what builds on them), where ``optics`` was resolved for a colour scanner's channels
+    taken one by one (``resolve_optics(..., channels=True)``: the RMTF, the depth of
+    field and the light): ``optics`` itself, or ray optics, saying why, where the wave
+    engine would need a single channel (``electronics.illumination`` "rgb")."""
+    if optics.engine != "wave":
+        return optics
+    why = wave_unavailable(design, maps=False)
+    if why is None:
+        return optics
+    return Optics(optics.asked, "ray", f"ray optics: {why}")

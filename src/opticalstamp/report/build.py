@@ -34,6 +34,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ..analysis.colour import one_light_optics
 from ..analysis.responsivity import resolve_optics
 from ..defaults import RAYS_MAP
 from ..design import Design, load_design
@@ -129,8 +130,13 @@ def build_report(
         unstated parameters, the paper-vs-model table); None: only for the paper's presets
     optics : the engine of the headline RMTF, depth of field and light: "ray", "wave" or
         "auto" (the measured validity rule,
-        :func:`~opticalstamp.analysis.responsivity.resolve_optics`); the ghosts, spots,
-        PSFs, scans and restoration are ray optics; the "ray vs wave" section shows both
+        :func:`~opticalstamp.analysis.responsivity.resolve_optics`; a colour scanner,
+        ``electronics.illumination`` "rgb": one RMTF, depth of field and light per
+        channel, the headline the worst channel's depth of field and the weakest
+        channel's light, :mod:`~opticalstamp.analysis.colour`); the spots, scans and
+        restoration take it where they can (not a colour scanner's channels: ray optics
+        there, report.json's ``optics_one_light`` says so); the ghosts and PSFs are ray
+        optics; the "ray vs wave" section shows both
     fit : a fit's JSON (:func:`~opticalstamp.report.fitsection.load_fit`): the section
         "model vs measurement" (:mod:`.fitsection`); None: no such section
     passes : the count of the report's traced passes
@@ -149,7 +155,10 @@ def build_report(
     from .summary import parse_report_spec, summary
 
     parse_report_spec(spec)  # a bad spec is refused before any work
-    opt = resolve_optics(design, optics, fresnel=fresnel)  # and a bad or impossible optics
+    # and a bad or impossible optics: the headline's (RMTF, depth of field, light: a colour
+    # scanner's channels one by one), and the one the analyses of one light take
+    opt = resolve_optics(design, optics, fresnel=fresnel, channels=True)
+    one = one_light_optics(design, opt)
     t0 = time.perf_counter()
     clock = _Clock()
     dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
@@ -157,7 +166,7 @@ def build_report(
         paper_sections = is_paper_preset(design)
     work = report_work(quick, n_rays, z_mm, paper_sections)
     tol_spec = tolerance_spec(parse_report_spec(spec))
-    jobs = study_jobs(design, seed, fresnel, work, dpi, tol_spec, optics=opt)
+    jobs = study_jobs(design, seed, fresnel, work, dpi, tol_spec, optics=one)
     traced = dict(seed=seed, fresnel=fresnel)
     # the folder is replaced as a whole once everything is written, or not at all
     with replace_folder(Path(out_dir)) as tmp, Background(jobs, join_job) as background:
@@ -172,7 +181,7 @@ def build_report(
         tracer = PixelTracer(design, replay=True, passes=passes)
         shown = dict(traced, progress=progress)
         g = run(ghost_section, design, work, **shown, tracer=tracer)
-        sp = run(spot_section, design, work, **shown, tracer=tracer, optics=opt)
+        sp = run(spot_section, design, work, **shown, tracer=tracer, optics=one)
         psfs = run(psf_section, design, work, **shown)
         clock.lap("ghosts_spots_psf")
         concepts = (
@@ -193,12 +202,12 @@ def build_report(
             tracer=tracer,
             rmtf_section=rm,
             chart_dpi=dpi,
-            optics=opt,
+            optics=one,
             also_z_mm=restoration_heights(work),  # one build of the kernels for both
         )
         clock.lap("scans")
         restoration = run(
-            restoration_section, design, work, **traced, tracer=tracer, dof_dpi=dpi, optics=opt,
+            restoration_section, design, work, **traced, tracer=tracer, dof_dpi=dpi, optics=one,
             kernels=getattr(measured(scans), "kernels", None),
         )  # fmt: skip
         clock.lap("restoration")
@@ -257,6 +266,8 @@ def build_report(
             "reduced": list(work.reduced),
             "design": design.model_dump(mode="json"),
             "optics": opt.to_dict(),
+            # a colour scanner's analyses of one light, where they differ (ray optics)
+            "optics_one_light": None if one == opt else one.to_dict(),
             "stack": stack_rows(design),
             "ghosts": as_data(g),
             "spots": as_data(sp),

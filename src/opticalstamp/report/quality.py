@@ -50,10 +50,17 @@ def rmtf_section(
 ) -> RmtfSection:
     """RMTF and depth of field (at ``dof_dpi``) of all light (by ``optics``: the ray or
     the wave engine, :func:`~opticalstamp.analysis.responsivity.folded_lsf_pair`) and of
-    the own path (traced), the paraxial RMTF and the chart profiles (Fig. 12 analogue)."""
+    the own path (traced), the paraxial RMTF and the chart profiles (Fig. 12 analogue).
+
+    A colour scanner (``electronics.illumination`` "rgb") under wave optics: all light
+    per channel (:func:`~opticalstamp.analysis.colour.folded_lsf_channels_pair`), the
+    result the worst channel's with every channel's figures in ``meta["channels"]``
+    (:func:`~opticalstamp.analysis.colour.worst_channel`), as ``opticalstamp rmtf``
+    gives them; the chart profiles are the worst channel's, the own path and the
+    paraxial form geometric, as for one light."""
     import numpy as np
 
-    from ..analysis.responsivity import folded_lsf_pair, wave_folds
+    from ..analysis.colour import channel_folds, folded_lsf_channels_pair, worst_channel
     from ..analysis.rmtf import (
         DEFAULT_Z_MM,
         chart_waveform,
@@ -68,27 +75,37 @@ def rmtf_section(
     periods = [period_of_dpi(d) for d in dpis]
     zs = np.asarray(DEFAULT_Z_MM if work.lsf_z_mm is None else work.lsf_z_mm)
 
-    wave = wave_folds(design, optics, float(zs.max()))  # the wave stack once (wave optics)
+    # the wave stack once per channel (wave optics; "rgb": three), for every Z below
+    waves = channel_folds(design, optics, float(zs.max()))
 
-    def pair(z, show: bool):  # all light and the own path alone from one trace per row
-        return folded_lsf_pair(
+    def lsfs(z, show: bool) -> list:  # each channel's light and the own path: one trace a row
+        chans, own = folded_lsf_channels_pair(
             design,
             z_mm=z,
             periods_um=periods,
             optics=optics,
-            wave=wave,
+            waves=waves,
             n_rays=work.lsf_rays,
             seed=seed,
             fresnel=fresnel,
             progress=show,
             tracer=tracer,
         )
+        return [*chans.values(), own]
 
-    lsf, lsf_own = pair(zs, progress)
-    res = rmtf_from_lsf(lsf, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi, optics=optics)
-    own = rmtf_from_lsf(lsf_own, design, dpi=dpis, seed=seed, dof_dpi=dof_dpi)
+    *by_channel, lsf_own = lsfs(zs, progress)
+    kw = {"dpi": dpis, "seed": seed, "dof_dpi": dof_dpi}
+    res = [rmtf_from_lsf(x, design, optics=optics, **kw) for x in by_channel]
+    own = rmtf_from_lsf(lsf_own, design, **kw)
     # the crossings again on a finer Z step where they need it (the same rays)
-    res, own = refine_results([res, own], lambda z: pair(z, False), design)
+    *res, own = refine_results([*res, own], lambda z: lsfs(z, False), design)
+    head = 0
+    if len(res) > 1:  # a colour scanner: the worst channel is the headline
+        res = worst_channel(design, dict(zip(waves, res, strict=True)))
+        head = list(waves).index(res.meta["headline"]["channel"])
+    else:
+        res = res[0]
+    lsf = by_channel[head]
     rect = all(m.shape != "circle" for m in design.masks)
     par = rmtf(design, dpi=dpis, z_mm=zs, method="paraxial", dof_dpi=dof_dpi) if rect else own
     # Fig. 12 analogue: the merged line's waveform for the depth-of-field chart (200 dpi for

@@ -126,7 +126,12 @@ def _optics_line(data: dict) -> str | None:
     reason = not_measurable(data.get("ray_vs_wave"))
     if reason is not None:
         return f"not measurable: {reason}"
-    return (section(data, "ray_vs_wave") or {}).get("verdict", {}).get("text")
+    w = section(data, "ray_vs_wave") or {}
+    text = w.get("verdict", {}).get("text")
+    if text and (data.get("design") or {}).get("electronics", {}).get("illumination") == "rgb":
+        name = (w.get("meta") or {}).get("spectrum", {}).get("name")
+        text = f"(the {name} channel, the one that diffracts most) {text}"
+    return text
 
 
 def _yield_doubt(tol: dict) -> str | None:
@@ -192,4 +197,23 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
         "optics": _optics_line(data),
         # which engine gave the headline RMTF, depth of field and light, and why
         "headline_optics": data.get("optics"),
+        # a colour scanner: the channels of the headline figures, and the optics of the
+        # analyses of one light where it differs (None: one light)
+        "headline_channels": _headline_channels(r, eff=section(data, "efficiency")),
+        "optics_one_light": data.get("optics_one_light"),
+    }
+
+
+def _headline_channels(r: dict | None, eff: dict | None) -> dict | None:
+    """Which channel of a colour scanner gives the verdict's depth of field (the worst)
+    and its light (the weakest signal), {"dof": name, "light": name, "channels": [...]};
+    None for one light."""
+    chans = ((r or {}).get("meta") or {}).get("channels")
+    light = ((eff or {}).get("meta") or {}).get("optics", {}).get("channels")
+    if not chans and not light:
+        return None
+    return {
+        "dof": r["meta"]["headline"]["channel"] if chans else None,
+        "light": eff["meta"]["optics"]["headline"]["channel"] if light else None,
+        "channels": list(chans or light),
     }

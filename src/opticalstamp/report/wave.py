@@ -65,13 +65,19 @@ def wave_section(
     engine's (:func:`~opticalstamp.analysis.wavebase.wave_sampling`; default from the
     design). ``tracer``: the report's
     :class:`~opticalstamp.raytrace.pixel.PixelTracer`, whose pilots and kept rays the ray
-    side reuses. ValueError (not measurable) for circular holes."""
+    side reuses. ValueError (not measurable) for circular holes. A colour scanner
+    (``electronics.illumination`` "rgb"): the channel that diffracts most, the reddest
+    (its LED's light; ``meta["spectrum"]`` names it), as the validity rule judges it."""
     from ..analysis.raywave import LIGHT_TOLERANCE, RMTF_TOLERANCE, compare_and_judge
+    from ..analysis.spectrum import channels
     from ..analysis.validity import choose_optics
     from ..analysis.wavebase import rectangular
+    from ..analysis.wavespectral import at_wavelength
 
     if not rectangular(design):
         raise ValueError(NEEDS_RECTANGLES)
+    specs = channels(design)
+    light = max(specs.values(), key=lambda sp: sp.mean_um) if len(specs) > 1 else None
     c, verdict = compare_and_judge(
         design,
         wave_heights(work),
@@ -80,9 +86,11 @@ def wave_section(
         seed=seed,
         dof_dpi=dof_dpi,
         tracer=tracer,
+        spectrum=light,
     )
     pred = None
     if sampling is None:  # the rule reads the design as it is (not an overridden sampling)
-        choice = choose_optics(design, light_tol=LIGHT_TOLERANCE, rmtf_tol=RMTF_TOLERANCE)
+        ruled = design if light is None else at_wavelength(design, light.mean_um)
+        choice = choose_optics(ruled, light_tol=LIGHT_TOLERANCE, rmtf_tol=RMTF_TOLERANCE)
         pred = choice.to_dict()
     return WaveSection(c, verdict, pred)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import html
 import math
 
 from .common import percent, table, unmeasured
@@ -69,9 +70,47 @@ def efficiency_html(e: dict, signal: dict | None = None, paper: bool = False) ->
 design's output pitch ({e["meta"]["reference_lens"]["pixel_um"]:.1f} µm; the paper's 84.6 µm):
 {e["reference_etendue_um2sr"]:.4g} µm²·sr (working F {e["reference_f_number"]:g}).</p>
 {table(eff_rows, ["light", "etendue (µm²·sr)", "ratio", "1/ratio", "working F"])}
-{area_html(area_rows)}
+{channels_html(o, e["reference_etendue_um2sr"])}{area_html(area_rows)}
 <img src="efficiency.png">
 {signal_html(signal, e)}
+"""
+
+
+def channels_html(o: dict, g_ref: float) -> str:
+    """A colour scanner's light per channel (the efficiency's ``meta["optics"]``), the
+    headline (the weakest signal) marked, and the rule; empty for one light."""
+    chans = o.get("channels")
+    if not chans:
+        return ""
+    from ...analysis.colour import LIGHT_RULE
+
+    head = o["headline"]["channel"]
+    rows = [
+        [
+            name + (" — the headline" if name == head else ""),
+            c["wave_in_band_um2sr"],
+            c["wave_in_band_um2sr"] / g_ref,
+            g_ref / c["wave_in_band_um2sr"] if c["wave_in_band_um2sr"] else None,
+            c["etendue_um2sr"],
+            c["traced_at_um"],
+        ]
+        for name, c in chans.items()
+    ]
+    return f"""<h3>Colour: the light per LED (illumination rgb)</h3>
+<p>The signal above is the <b>{html.escape(head)}</b> channel's: {html.escape(LIGHT_RULE)}.</p>
+{
+        table(
+            rows,
+            [
+                "channel",
+                "signal: wave in band (µm²·sr)",
+                "ratio",
+                "1/ratio",
+                "all light (µm²·sr)",
+                "far light traced at (µm)",
+            ],
+        )
+    }
 """
 
 

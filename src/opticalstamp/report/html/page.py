@@ -153,7 +153,9 @@ def summary_html(s: dict | None) -> str:
         "radius; own-path light is the signal.</p>"
     )
     optics = f"<p>Ray vs wave optics: {html.escape(s['optics'])}</p>" if s.get("optics") else ""
-    optics += _headline_optics(s.get("headline_optics"))
+    optics += _headline_optics(
+        s.get("headline_optics"), s.get("headline_channels"), s.get("optics_one_light")
+    )
     return (
         f"<div style='border:2px solid #444;padding:.5em 1em;margin:1em 0'>"
         f"<h2>Verdict</h2><p>{top}</p>"
@@ -165,22 +167,39 @@ def summary_html(s: dict | None) -> str:
     )
 
 
-def _headline_optics(o: dict | None) -> str:
-    """Which engine gave the verdict's depth of field and light, and why."""
+def _headline_optics(o: dict | None, chans: dict | None = None, one: dict | None = None) -> str:
+    """Which engine gave the verdict's depth of field and light, and why; ``chans``: a
+    colour scanner's headline channels (the summary's ``headline_channels``), ``one``:
+    the optics of its analyses of one light where it differs."""
     if not o:
         return ""
     if o["engine"] == "wave":
+        at = "each LED's light" if chans else f"{o['wavelength_um']:g} µm"
         what = (
-            f"wave optics (scalar diffraction at {o['wavelength_um']:g} µm in the band "
+            f"wave optics (scalar diffraction at {at} in the band "
             f"|s| &lt; {o['band']:.3f}, the far ghosts traced)"
         )
     else:
         what = "ray optics (the exact tracer)"
     why = html.escape(o["reason"])
+    rest = "Ghosts, spots, PSFs, scans and restoration are ray optics."
+    colour = ""
+    if chans:
+        worst = [f"depth of field the {chans['dof']} channel's (the worst)"] if chans["dof"] else []
+        weak = [f"light the {chans['light']} channel's (the weakest)"] if chans["light"] else []
+        colour = (
+            f" A colour scanner ({', '.join(chans['channels'])} LEDs lit in turn): one RMTF, "
+            f"depth of field and light per channel, the verdict's {' and '.join(worst + weak)}."
+        )
+    if one:
+        why_one = one["reason"].removeprefix("ray optics: ")
+        rest = (
+            "Ghosts and PSFs are ray optics, and so are the spots, scans and restoration "
+            f"here ({html.escape(why_one)})."
+        )
     return (
         f"<p>The depth of field, RMTF and light above are by {what}: {why} "
-        f"(--optics {html.escape(o['asked'])}). Ghosts, spots, PSFs, scans and restoration "
-        "are ray optics.</p>"
+        f"(--optics {html.escape(o['asked'])}).{colour} {rest}</p>"
     )
 
 

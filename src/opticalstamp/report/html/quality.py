@@ -61,7 +61,7 @@ falls below {r["dof_threshold"]:g}:
         spurious_html(r)
     }</p>
 {table(rows, ["Z (mm)"] + [f"{k} dpi" for k in keys] + [f"SE ({dk} dpi)"])}
-<img src="rmtf.png">
+{channels_html(r, keys)}<img src="rmtf.png">
 <p>Depth of field (mm) by model: the paraxial closed form against the exact tracer shows
 how far the paraxial limit is off; the ghost light's uniform background lowers contrast.</p>
 {table(dof_rows, ["model"] + [f"{k} dpi" for k in dof_keys])}
@@ -70,6 +70,36 @@ how far the paraxial limit is off; the ghost light's uniform background lowers c
 this waveform as from an image agrees with the computed one.</p>
 {table(prof, ["Z (mm)", "chart shift (µm)", "RMTF computed", "RMTF measured from waveform"])}
 <img src="chart_profiles.png">
+"""
+
+
+def channels_html(r: dict, keys: list[str]) -> str:
+    """A colour scanner's channels (``meta["channels"]`` of an RMTF result): each
+    channel's depth of field on every chart and its RMTF on the depth-of-field chart
+    against Z, the headline (the worst) marked, and the rule; empty for one light."""
+    chans = (r.get("meta") or {}).get("channels")
+    if not chans:
+        return ""
+    from ...analysis.colour import DOF_RULE
+
+    dk = f"{r['dof_dpi']:g}"
+    head = r["meta"]["headline"]["channel"]
+    dof_keys = [dk] + [k for k in keys if k != dk]
+    rows, curves = [], []
+    for name, c in chans.items():
+        sp = c["spectrum"]
+        mean = sum(x * w for x, w in zip(sp["wavelengths_um"], sp["weights"], strict=True))
+        label = f"{name} ({mean:.3f} µm){' — the headline' if name == head else ''}"
+        rows.append([label] + [dof_cell(r | c, k) for k in dof_keys])
+        curves.append(c["rmtf_max"][dk])
+    z_rows = [[z] + [cv[i] for cv in curves] for i, z in enumerate(r["z_mm"])]
+    return f"""<h3>Colour: one exposure per LED (illumination rgb)</h3>
+<p>The red, green and blue LEDs are lit in turn: each channel has its own responsivity,
+RMTF and depth of field (wave optics at each LED's spectrum, the far light traced at its
+mean wavelength). The depth of field above is the <b>{html.escape(head)}</b> channel's:
+{html.escape(DOF_RULE)}. The RMTF table above is that channel's.</p>
+{table(rows, ["channel"] + [f"DOF {k} dpi" for k in dof_keys])}
+{table(z_rows, ["Z (mm)"] + [f"RMTF {dk} dpi, {n}" for n in chans])}
 """
 
 

@@ -74,7 +74,7 @@ def wave_html(w: dict | None, fresnel_losses: bool = False) -> str:
     lams = spec.get("wavelengths_um") or []
     if len(lams) > 1:
         light_words = (
-            f"under the design's light ({html.escape(str(spec.get('name', '')))}: "
+            f"under the {html.escape(str(spec.get('name', '')))} light ("
             f"{len(lams)} wavelengths, {min(lams):.3f}-{max(lams):.3f} µm; both engines' figures "
             f"are the weighted sums, each wavelength in its own band; the Fresnel numbers at "
             f"the mean wavelength) in the band, at the heaviest wavelength,"

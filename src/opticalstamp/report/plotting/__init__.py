@@ -3,6 +3,8 @@ Each returns a :class:`matplotlib.figure.Figure`."""
 
 from __future__ import annotations
 
+from types import MappingProxyType
+
 import numpy as np
 
 from ...analysis.efficiency import ratio_text
@@ -225,11 +227,16 @@ def plot_rmtf(res, paper_points: dict | None = None):
     """
     from ...analysis.rmtf import merged_samples
 
-    fig, ax = subplots(figsize=(6.4, 4.2))
+    head = res.meta.get("headline", {}).get("channel") if res.meta.get("channels") else None
+    fig, ax = (
+        subplots(figsize=(6.4, 5.4), layout="constrained") if head else subplots(figsize=(6.4, 4.2))
+    )
     z = np.asarray(res.z_mm)
     fine = set(res.meta.get("refined", {}).get("z_mm", []))
+    # a colour scanner's channels are drawn red, green and blue: the charts in others
+    colours = ["C1", "C4", "C5", "C7", "C8", "C9"] if head else [f"C{i}" for i in range(10)]
     for i, (key, vals) in enumerate(res.rmtf_max.items()):
-        c = f"C{i}"
+        c = colours[i % len(colours)]
         zm, rm, _ = merged_samples(res, key)
         ax.plot(zm, rm, "-", color=c, lw=1.2, label=f"{key} dpi ({res.periods_um[i]:.0f} µm)")
         extra = np.isin(zm, list(fine))
@@ -238,6 +245,7 @@ def plot_rmtf(res, paper_points: dict | None = None):
         if paper_points and key in paper_points:
             pz, pv = zip(*paper_points[key], strict=True)
             ax.plot(pz, pv, "o", color=c)
+    _channel_curves(ax, res)
     ax.axhline(res.dof_threshold, color="k", lw=0.6, ls=":")
     dof = res.dof_mm.get(f"{res.dof_dpi:g}")
     if dof is not None:
@@ -247,14 +255,57 @@ def plot_rmtf(res, paper_points: dict | None = None):
     ax.set_ylabel("RMTF")
     ax.set_ylim(0, 1.02)
     ax.set_xlim(z[0], z[-1])
-    ax.legend(fontsize=8, loc="lower left")
     what = "own + ghost light" if res.ghosts else "own path only"
-    ax.set_title(
+    title = (
         f"{res.design}: RMTF vs Z ({res.method}, {what}; band = min..max over chart shifts;"
-        f"\ndots: finer samples; DOF on the {res.dof_dpi:g}-dpi chart)",
-        fontsize=9,
+        f"\ndots: finer samples; DOF on the {res.dof_dpi:g}-dpi chart)"
     )
+    if head:  # the legend below the axes, clear of the curves
+        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2)
+        title += (
+            f"\nsolid: the {head} channel's charts (the headline: the worst); dashed: each channel"
+        )
+    else:
+        ax.legend(fontsize=8, loc="lower left")
+    ax.set_title(title, fontsize=9)
     return fig
+
+
+#: the lines of a colour scanner's channels
+CHANNEL_COLOURS = MappingProxyType({"red": "#d62728", "green": "#2ca02c", "blue": "#1f77b4"})
+
+
+def _channel_curves(ax, res) -> None:
+    """A colour scanner's channels (``meta["channels"]``): each channel's RMTF on the
+    depth-of-field chart against Z (grid and refined samples), dashed in its colour,
+    with its depth of field in the legend; nothing for one light."""
+    from types import SimpleNamespace
+
+    from ...analysis.rmtf import merged_samples
+
+    chans = res.meta.get("channels")
+    if not chans:
+        return
+    key = f"{res.dof_dpi:g}"
+    head = res.meta["headline"]["channel"]
+    for name, c in chans.items():
+        one = SimpleNamespace(
+            z_mm=res.z_mm,
+            rmtf_max=c["rmtf_max"],
+            rmtf_max_se=c["rmtf_max_se"],
+            meta={"refined": c.get("refined") or {}},
+        )
+        zm, rm, _ = merged_samples(one, key)
+        mark = ", the headline" if name == head else ""
+        dof = f"{'≥ ' if c['dof_open_ended'].get(key) else ''}{c['dof_mm'][key]:.2f} mm"
+        ax.plot(
+            zm,
+            rm,
+            "--",
+            color=CHANNEL_COLOURS.get(name, "0.4"),
+            lw=1.0,
+            label=f"{name} channel, {key} dpi: DOF {dof}{mark}",
+        )
 
 
 def plot_efficiency(res):
