@@ -73,6 +73,7 @@ def test_the_rmtf_section_has_each_channel_and_the_worst_as_headline(report):
     figures = {f["figure"]: f for f in data["summary"]["figures"]}
     assert figures["dof"]["value"] == min(dofs.values())
     assert figures["dof"]["check"]["pass"] is True
+    assert figures["dof"]["text"].endswith("(red channel, the worst)")
     assert data["summary"]["headline_channels"] == {
         "dof": "red",
         "light": "blue",
@@ -108,6 +109,7 @@ def test_the_light_section_has_each_channel_and_the_weakest_as_headline(report):
     assert figures["light"]["value"] == pytest.approx(
         min(lights.values()) / e["reference_etendue_um2sr"], rel=1e-12
     )
+    assert figures["light"]["text"].endswith("(blue channel, the weakest)")
 
 
 def test_the_one_light_analyses_say_they_are_ray_optics(report):
@@ -131,4 +133,5 @@ def test_the_page_shows_the_channels(report):
         assert f"<td>{name} (" in page and f"RMTF 200 dpi, {name}" in page
     assert "red (0.630 µm) — the headline" in page and "blue — the headline" in page
     assert "the verdict's depth of field the red channel's" in page
+    assert "(red channel, the worst)" in page and "(blue channel, the weakest)" in page
     assert (out / "rmtf.png").stat().st_size > 0

@@ -164,6 +164,12 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
         got = values.get(name)
         ok = None if got is None else bool(got >= v if op == ">=" else got <= v)
         checks[name] = {"spec": f"{op} {v:g}", "pass": ok}
+    chans = _headline_channels(r, eff=section(data, "efficiency"))
+    said = {}  # a colour scanner: which channel gives the figure
+    if chans and chans["dof"] and r:
+        said["dof"] = f"{dof_text(r)} ({chans['dof']} channel, the worst)"
+    if chans and chans["light"] and values["light"]:
+        said["light"] = f"1/{1 / values['light']:.0f} ({chans['light']} channel, the weakest)"
     rows = []
     for name, (what, unit) in FIGURES.items():
         rows.append(
@@ -180,7 +186,7 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
                 ),
                 "check": checks.get(name),
                 "paper": PAPER.get(name) if paper else None,
-                "text": dof_text(r) if name == "dof" and r else None,
+                "text": said.get(name) or (dof_text(r) if name == "dof" and r else None),
             }
         )
     return {
@@ -199,7 +205,7 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
         "headline_optics": data.get("optics"),
         # a colour scanner: the channels of the headline figures, and the optics of the
         # analyses of one light where it differs (None: one light)
-        "headline_channels": _headline_channels(r, eff=section(data, "efficiency")),
+        "headline_channels": chans,
         "optics_one_light": data.get("optics_one_light"),
     }
 
