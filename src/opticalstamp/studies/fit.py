@@ -325,28 +325,36 @@ def _defect(prob: Problem, theta: np.ndarray, wave: WaveModel, cov: np.ndarray, 
     nf = lay.n_free
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))[:nf]
     sd = np.where(sd > 0, sd, [lay.params[j].scale for j in lay.free])
-    exact = Problem(design, obs, lay, hold=prob.hold, model=wave)
+    params, memo = list(lay.params), {}
+    runs = 1 + len(prob.model.free)  # the first correction's, made by the caller
+
+    def wave_at(phys):  # the wave model's spreads at physical values: each point run once
+        nonlocal runs
+        key = np.asarray(phys, dtype=np.float64).tobytes()
+        if key not in memo:
+            memo[key] = wave(with_params(design, params, phys), zs, smear)
+            runs += 1
+        return memo[key]
+
+    exact = Problem(design, obs, lay, hold=prob.hold, model=lambda d, z, s, phys: wave_at(phys))
 
     def chi2_of(t):
         return float(np.sum(exact.residuals(t) ** 2))
 
-    moves, chis, runs, why, stale = [], [], 1 + len(prob.model.free), None, False
+    moves, chis, why, stale = [], [], None, False
     for _ in range(DEFECT_ROUNDS):
-        at = lay.physical(theta)
-        model = wave.correction(design, list(lay.params), at, lay.free, zs, smear)
-        runs += 1 + nf
+        at = lay.physical(theta)  # its run made already where the last round stepped to
+        model = wave.correction(design, params, at, lay.free, zs, smear, wave_at=wave_at)
         prob = Problem(design, obs, lay, hold=prob.hold, model=model)
         chi_at = float(np.sum(prob.residuals(theta) ** 2))  # the wave model's, exactly
         chis.append(chi_at)
         new = _local(prob, theta, max_nfev).x
         step, chi_new = new - theta, chi2_of(new)
-        runs += 1
         for _ in range(3):  # a step the wave model does not take downhill: shorter
             if chi_new <= chi_at:
                 break
             step = step / 2
             chi_new = chi2_of(theta + step)
-            runs += 1
         if chi_new > chi_at:  # at the wave model's minimum, or the linear model is poor
             why = (
                 f"no step lowers the wave chi2 by {DEFECT_CHI2:g}"
@@ -367,8 +375,7 @@ def _defect(prob: Problem, theta: np.ndarray, wave: WaveModel, cov: np.ndarray, 
         why = None
     if stale:  # the model about the final point: the wave model there
         at = lay.physical(theta)
-        model = wave.correction(design, list(lay.params), at, lay.free, zs, smear)
-        runs += 1 + nf
+        model = wave.correction(design, params, at, lay.free, zs, smear, wave_at=wave_at)
         prob = Problem(design, obs, lay, hold=prob.hold, model=model)
         chis.append(float(np.sum(prob.residuals(theta) ** 2)))
     scheme = {

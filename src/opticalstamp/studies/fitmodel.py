@@ -214,7 +214,7 @@ def edge_fraction(sp: Spread, edge, pos_um: float, slope: float) -> np.ndarray:
         # -Y' has the cumulative 1 - C_y'(-m)
         main_u, main_c = -sp.u[::-1], 1.0 - sp.cy[::-1]
         cross = -slope * vals
-    f = np.zeros(d.size)
-    for c, wt in zip(cross, w, strict=True):
-        f += wt * np.interp(d - c, main_u, main_c, left=0.0, right=1.0)
+    # every node at once: one interpolation of (nodes, pixels) points
+    at = np.subtract.outer(-np.asarray(cross, dtype=np.float64), -np.asarray(d)).ravel()
+    f = np.asarray(w) @ np.interp(at, main_u, main_c, left=0.0, right=1.0).reshape(len(w), -1)
     return f if edge.dark_after else 1.0 - f

@@ -95,11 +95,20 @@ class WaveModel:
         }
 
     def correction(
-        self, design: Design, params: list[Param], phys: np.ndarray, free, zs, smear_um: float
+        self,
+        design: Design,
+        params: list[Param],
+        phys: np.ndarray,
+        free,
+        zs,
+        smear_um: float,
+        wave_at=None,
     ) -> Corrected:
         """The wave model minus the fast one at the physical values ``phys`` of
         ``design``'s ``params``, and its derivative in each parameter of ``free`` (forward
-        differences of ``STEP`` assembly scales): 1 + len(free) wave runs."""
+        differences of ``STEP`` assembly scales): 1 + len(free) wave runs (``wave_at``:
+        physical values -> the wave model's spreads there, e.g. a memo of the runs made
+        already; default a run each)."""
         zs = [float(z) for z in zs]
         at = np.asarray(phys, dtype=np.float64)
         points = [at]
@@ -113,7 +122,7 @@ class WaveModel:
         waves, fasts = [], []
         for v in points:
             d = with_params(design, params, v)
-            waves.append(self(d, zs, smear_um))
+            waves.append(self(d, zs, smear_um) if wave_at is None else wave_at(v))
             fasts.append({z: spread(d, z, smear_um) for z in zs})
         table = {}
         for z in zs:
