@@ -1,12 +1,16 @@
 """Speed of the design search judged by wave optics (run on demand:
 python benchmarks/bench_search_wave.py [POPULATION GENERATIONS [POP1200 GEN1200]]).
 
+(1200 dpi runs first.)
 1. ``opticalstamp search --dpi 600`` as a user runs it (default --optics auto: every
    candidate of the 600-dpi space is judged by the wave estimator where the validity
    rule says ray optics fails), 32 designs x 15 generations (480) on every core, the
    front and the base design verified with the exact wave figures and exported as
    design files (``--export-designs``). Timed whole.
-2. The same at 1200 dpi with a smaller budget (default 16 x 4 = 64 designs).
+2. The same at 1200 dpi (default the same 32 x 15 = 480 designs).
+Both bases are the paper's design with every length scaled (``search_base``) and its
+space the paper's 300-dpi space scaled to the resolution (``default_space``: slabs from
+the Fresnel image of the thinnest to the geometric image of the thickest).
 One run each, no journal (every design evaluated from scratch). Written as JSON to
 benchmarks/bench_search_wave.json: times, the machine's load, the fronts (exact wave
 figures, the estimates beside them, the flags) and what the constraints rejected.
@@ -62,6 +66,9 @@ def run(dpi: int, population: int, generations: int, folder: Path) -> dict:
         "load_after": os.getloadavg()[0],
         "optics_used": data["meta"].get("optics_used"),
         "rejected_by": data["meta"].get("rejected_by"),
+        "hole_bounds_um": data["meta"].get("hole_bounds_um"),
+        "thickness_bounds_um": data["meta"].get("thickness_bounds_um"),
+        "wave_accuracy": data["meta"].get("wave_accuracy"),
         "front": front,
         "reference": {k: (data["reference"] or {}).get(k) for k in keep},
         "exported": files,
@@ -75,11 +82,11 @@ def run(dpi: int, population: int, generations: int, folder: Path) -> dict:
     return out
 
 
-def main(pop: int = 32, gen: int = 15, pop1200: int = 16, gen1200: int = 4) -> dict:
+def main(pop: int = 32, gen: int = 15, pop1200: int = 32, gen1200: int = 15) -> dict:
     out = {"cores": os.cpu_count()}
     path = Path(__file__).with_suffix(".json")
     with tempfile.TemporaryDirectory() as tmp:
-        for dpi, p, g in ((600, pop, gen), (1200, pop1200, gen1200)):
+        for dpi, p, g in ((1200, pop1200, gen1200), (600, pop, gen)):
             out[str(dpi)] = run(dpi, p, g, Path(tmp))
             path.write_text(json.dumps(out, indent=1) + "\n")  # each part as it ends
     return out

@@ -35,6 +35,7 @@ from ..defaults import SEARCH_BUDGET_MM, SEARCH_GENERATIONS, SEARCH_NEAR_MM, SEA
 from ..design import (
     Design,
     design_from_dict,
+    replace,
     scale_to_dpi,
     stack_params,
     structural_variants,
@@ -64,6 +65,7 @@ from .searchspace import (
     SearchSpace,
     constraint_values,
     default_space,
+    lateral_scale,
     on_grid,
     rejections,
 )
@@ -332,11 +334,24 @@ def search(
 def search_base(design: Design, dpi: float | None = None) -> Design:
     """The design to search at ``dpi``: itself when ``dpi`` is None (its own resolution)
     or its output pitch is within SAME_RESOLUTION of 25.4 mm / dpi (300 dpi is 84.67 um;
-    the paper's sensor gives 84.6 um), else the design scaled to that resolution
-    (:func:`~opticalstamp.design.scale_to_dpi`: only when asked)."""
+    the paper's sensor gives 84.6 um), else the design with every length scaled to that
+    resolution (only when asked): the sensor and the holes by
+    :func:`~opticalstamp.design.scale_to_dpi`, and the slabs and the reference gap by
+    the same factor (geometric similarity: its aspect ratios, so its ray optics, as at
+    its own resolution; the plates kept at 600 dpi left it ghost-heavy and at 1200 dpi
+    1 mm of reference gap over 10-um holes leaves no contrast at any height, the holes'
+    Fresnel number towards it 0.06). The search space around it follows the resolution
+    (:func:`~opticalstamp.studies.searchspace.default_space`)."""
     if dpi is None or abs(pitch_of_dpi(dpi) / output_pitch(design) - 1) < SAME_RESOLUTION:
         return design
-    return scale_to_dpi(design, dpi)
+    out = scale_to_dpi(design, dpi)
+    k = lateral_scale(out) / lateral_scale(design)  # as named: 1/2 from 300 to 600 dpi
+    changes: dict[str, object] = {
+        f"slabs.{i}.thickness_um": round(sl.thickness_um * k, 3)
+        for i, sl in enumerate(design.slabs)
+    }
+    changes["reference_gap.thickness_um"] = round(design.reference_gap.thickness_um * k, 3)
+    return replace(out, changes)
 
 
 def variant_path(path: Path | None, index: int, n_variants: int) -> Path | None:

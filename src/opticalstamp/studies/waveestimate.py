@@ -6,15 +6,17 @@ wave-optical light, depth of field and crosstalk. The figures are those of
 :func:`~opticalstamp.studies.evaluate.evaluate_design`, with the same keys, from:
 
 * :func:`evaluate_wave`, the **wave estimator** of the search: the separable wave
-  engine (:func:`~opticalstamp.analysis.wavecompare.wave_folded_lsf`) in a narrower
-  band than the analyses' (``FAST_ORDERS`` diffraction orders of the smallest hole over
-  the own path's slopes instead of 12: the same step rule, lambda / (6 B), so a coarser
-  grid and fewer source points) on the search's Z grid, for the own path with its
-  diffraction and the near crosstalk in that band; the light outside the band (the far
-  ghost paths) traced (importance sampling, ``ghost_rays`` rays, :func:`far_light`) and
-  added as a uniform background, as the ray surrogate adds its ghosts. Its error
-  against the exact wave figures is measured (``benchmarks/wave_estimator_accuracy.py``)
-  and held in :data:`WAVE_ACCURACY`.
+  engine (:class:`~opticalstamp.analysis.wavecompare.WaveFolds`, the stack traversed once
+  per evaluation) in the analyses' own band (``ESTIMATE_ORDERS``, the same 12 diffraction
+  orders of the smallest hole over the own path's slopes) on the search's Z grid, for the
+  own path with its diffraction and the near crosstalk in that band; the light outside
+  the band (the far ghost paths) traced (importance sampling, ``ghost_rays`` rays,
+  :func:`far_light`) and joined where it lands, as the analyses join it; the RMTF
+  crossings refined between heights by the exact figures' rule (``REFINE`` steps). What
+  makes it cheaper than the exact figures: 2^17 rays for the traced part instead of 2^19
+  and 2^20, the light from the folded LSFs instead of a separate efficiency analysis,
+  and one ghost trace. Its error against the exact wave figures is measured
+  (``benchmarks/wave_estimator_accuracy.py``) and held in :data:`WAVE_ACCURACY`.
 * :func:`exact_wave_figures`, the **exact wave figures** a front is verified with: the
   analyses' own interface, :func:`~opticalstamp.analysis.efficiency.efficiency` and
   :func:`~opticalstamp.analysis.rmtf.rmtf` with ``optics="wave"`` (the wave engine in its
@@ -31,13 +33,14 @@ in the RMTF and the depth of field, where it costs contrast).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from types import MappingProxyType
 
 import numpy as np
 
 from ..analysis.efficiency import reference_etendue
 from ..analysis.rmtf import DEFAULT_Z_MM, period_of_dpi, refine_results, rmtf_from_lsf
-from ..analysis.wavebase import wave_sampling
+from ..analysis.wavebase import ORDERS, wave_sampling
 from ..design import Design
 from ..design.resolution import dof_chart_dpi
 from ..raytrace.pixel import PixelTracer, Sampling
@@ -45,36 +48,53 @@ from ..raytrace.stack import output_pitch
 from .evaluate import GHOST_Z_MM, RMTF_Z_MM, Z_LIMIT_MM, diffraction_spill, extended_z
 
 #: diffraction orders of the smallest hole over the own path's slopes in the estimator's
-#: band (the analyses use 12: :data:`~opticalstamp.analysis.wavebase.ORDERS`)
-FAST_ORDERS = 4.0
-#: Z steps of the estimator's refinement of its RMTF crossings (the exact figures: 8)
-REFINE = 4
+#: band: the analyses' own (:data:`~opticalstamp.analysis.wavebase.ORDERS`). A narrower
+#: band (4 orders until 2026-11-26) leaves out the diffraction halo of the holes' edges
+#: beyond it, which the exact figures count: on 600-dpi designs whose spill is large
+#: (holes 25/14/13 um) that read the RMTF up to 0.04 high and the depth of field up to
+#: 0.8 mm long (docs/search.md)
+ESTIMATE_ORDERS = ORDERS
+#: Z steps of the estimator's refinement of its RMTF crossings: the exact figures' rule
+#: (:func:`~opticalstamp.analysis.rmtf.rmtf`'s ``refine``). Ghost light at steep slopes
+#: moves one chart period in tens of um of Z, so the RMTF can dip through the threshold
+#: between heights 1/16 mm apart (4 steps until 2026-11-26 missed dips that 8 found)
+REFINE = 8
+#: Relative power of the coherent modes the estimator leaves out when it compresses the
+#: light leaving the stack (the exact figures: :data:`~opticalstamp.analysis.wavebase.
+#: MODE_TOL`, 1e-10): the L1 error of its LSFs is at most this fraction of the light, so
+#: its RMTF moves by at most twice it (0.002, below the traced part's standard error at
+#: 2^17 rays), and a design's modes drop about 5-fold (179 -> 33 on holes 22/26/12 um at
+#: 600 dpi), the cost of each height with them
+ESTIMATE_MODE_TOL = 1e-3
 #: how :func:`evaluate_wave` estimates, recorded with every figure it makes
 WAVE_ESTIMATE = (
-    f"wave estimator: separable wave engine in a band of {FAST_ORDERS:g} diffraction orders "
-    "(own path, its diffraction, near crosstalk) + traced light beyond the band as a "
-    "uniform background"
+    f"wave estimator: separable wave engine in its band of {ESTIMATE_ORDERS:g} diffraction "
+    f"orders, modes to {ESTIMATE_MODE_TOL:g} of the light (own path, its diffraction, near "
+    "crosstalk) + traced light beyond the band where it lands, crossings refined in "
+    f"{REFINE} steps"
 )
 #: how :func:`exact_wave_figures` estimates
 EXACT_WAVE = (
     "exact wave figures: wave engine in its full band joined with the traced light beyond "
     "it (efficiency and rmtf with optics wave), RMTF with that light where it lands"
 )
-#: How far the wave estimator may be from the exact wave figures: the largest |estimate -
-#: exact| measured by benchmarks/wave_estimator_accuracy.py (seed 0) on the 600-dpi
-#: half-scale prototype and random feasible designs of the 600-dpi search space, times
-#: about 1.2 (docs/search.md): depth of field in mm (largest 0.020 mm over 5 designs,
-#: the crossings refined), RMTF at 1, 2, 3 mm and ghost fraction in absolute units
-#: (largest 0.161 and 0.131 over 7), the light as a relative error (largest 6.6 %, always
-#: low: the diffraction beyond the narrower band). The RMTF and ghost errors come from
-#: designs with ghost fractions of 0.3-0.7 (their far light traced with 2^17 rays against
-#: 2^21); on the half-scale prototype (ghost fraction 0.10) they are 0.004 and 0.0003.
+#: How far the wave estimator may be from the exact wave figures, from the errors
+#: measured by benchmarks/wave_estimator_accuracy.py (seed 0, docs/search.md) on the
+#: 600-dpi half-scale prototype and random designs of the 600- and 1200-dpi search spaces
+#: with some light and contrast: depth of field in mm, RMTF at 1, 2, 3 mm and ghost
+#: fraction in absolute units, the light as a relative error. The estimator computes the
+#: exact figures' wave part (the same band and rule) to 0.1 % of the light, so its light
+#: and its depth of field agree closely; its traced part has 8x fewer rays, so the RMTF
+#: at a height and the ghost fraction of designs with much far ghost light scatter (the
+#: far light moves a chart period in tens of um of Z). A depth of field where the RMTF
+#: hovers within the RMTF error of the threshold can still move further: there the
+#: figure is ill-conditioned for any estimator (docs/search.md).
 WAVE_ACCURACY = MappingProxyType(
     {
         "dof_mm": 0.05,
-        "rmtf": 0.20,
-        "efficiency_ratio": 0.08,
-        "ghost_fraction": 0.16,
+        "rmtf": 0.15,
+        "efficiency_ratio": 0.01,
+        "ghost_fraction": 0.05,
     }
 )
 
@@ -119,20 +139,22 @@ def far_light(
     }
 
 
-def _joined_lsf(design: Design, zs: np.ndarray, per: float, smp, n_rays: int, seed: int, tracer):
-    """The wave engine's folded LSFs in the band of ``smp`` joined with the traced light
-    beyond it where it lands (:func:`~opticalstamp.analysis.responsivity.join`), on the
-    one chart period ``per`` at each of ``zs``."""
+def _joined_lsf(design: Design, zs: np.ndarray, per: float, folds, n_rays: int, seed: int, tracer):
+    """The wave engine's folded LSFs (``folds``: a
+    :class:`~opticalstamp.analysis.wavecompare.WaveFolds`, the stack traversed once for
+    every call) joined with the traced light beyond its band where it lands
+    (:func:`~opticalstamp.analysis.responsivity.join`), on the one chart period ``per`` at
+    each of ``zs``."""
     from ..analysis.lsf import traced_folded_lsf
     from ..analysis.responsivity import join
-    from ..analysis.wavecompare import wave_folded_lsf
 
-    wave = wave_folded_lsf(design, zs, [per], sampling=smp)
+    band = folds.sampling.band
+    wave = folds.folded(zs, [per])
     far = traced_folded_lsf(
         design, z_mm=zs, periods_um=[per], n_rays=n_rays, seed=seed, ghosts=True,
-        tracer=tracer, outside_band=smp.band,
+        tracer=tracer, outside_band=band,
     )  # fmt: skip
-    return wave, join(wave, far, smp.band, float(design.index(design.object_medium)))
+    return wave, join(wave, far, band, float(design.index(design.object_medium)))
 
 
 def evaluate_wave(
@@ -147,8 +169,9 @@ def evaluate_wave(
     seed: int = 0,
     wavelength_um: float | None = None,
     restored: bool = False,
-    orders: float = FAST_ORDERS,
+    orders: float = ESTIMATE_ORDERS,
     refine: int = REFINE,
+    mode_tol: float = ESTIMATE_MODE_TOL,
 ) -> dict:
     """The figures of :func:`~opticalstamp.studies.evaluate.evaluate_design` by the wave
     estimator (``"estimator"``: :data:`WAVE_ESTIMATE`, ``"optics"``: "wave").
@@ -156,32 +179,40 @@ def evaluate_wave(
     The wave engine's LSFs of rows A and B folded onto the chart of ``dpi`` at each
     ``z_mm`` (the grid runs on in its step while the RMTF stays above the threshold, up
     to 20 mm), in the band of ``orders`` diffraction orders
-    (:func:`~opticalstamp.analysis.wavebase.wave_sampling`); the light beyond the band
-    traced with ``ghost_rays`` rays (:func:`far_light`). The signal (efficiency) is the
-    light in the band at Z = 0, the ghost fraction the light beyond it over all. The
-    diffraction spill (closed form, at ``wavelength_um``) is reported, not judged; the
-    restored depth of field (``restored``) is the closed form at this ghost fraction.
+    (:func:`~opticalstamp.analysis.wavebase.wave_sampling`), the light leaving the stack
+    compressed to its coherent modes to ``mode_tol`` of its power, the crossings refined
+    in ``refine`` steps (:func:`~opticalstamp.analysis.rmtf.refine_results`); the light
+    beyond the band traced with ``ghost_rays`` rays (:func:`far_light`). The signal
+    (efficiency) is the light in the band at Z = 0, the ghost fraction the light beyond
+    it over all. The diffraction spill (closed form, at ``wavelength_um``) is reported,
+    not judged; the restored depth of field (``restored``) is the closed form at this
+    ghost fraction.
     """
+    from ..analysis.wavecompare import WaveFolds
+
     dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
-    smp = wave_sampling(design, orders=orders)
+    smp = replace(wave_sampling(design, orders=orders), mode_tol=mode_tol)
     tracer = PixelTracer(design, Sampling(ghost_rays, seed), replay=True)
     far = far_light(design, smp.band, n_rays=ghost_rays, seed=seed, tracer=tracer)
     per = period_of_dpi(dpi)
     zs = np.asarray(z_mm, dtype=np.float64)
     key = f"{dpi:g}"
+    folds = None
     while True:
-        wave, lsf = _joined_lsf(design, zs, per, smp, ghost_rays, seed, tracer)
+        if folds is None or folds.z_max_mm < zs.max():  # the stack traversed once per reach
+            folds = WaveFolds(design, float(zs.max()), sampling=smp)
+        wave, lsf = _joined_lsf(design, zs, per, folds, ghost_rays, seed, tracer)
         res = rmtf_from_lsf(lsf, design, dpi=[dpi], seed=seed, dof_threshold=dof_threshold,
                             dof_dpi=dpi)  # fmt: skip
         curve = np.asarray(res.rmtf_max[key])
         if curve.min() < dof_threshold or zs[-1] >= Z_LIMIT_MM:
             break
         zs = extended_z(zs)  # the depth of field is a crossing: go on in the same step
-    # the crossings found again between the grid's heights, as the exact figures do
-    # (an RMTF near the threshold dips between heights), in fewer steps
+    # the crossings found again between the grid's heights by the exact figures' rule
+    # (an RMTF near the threshold dips between heights where ghost light moves fast)
     (res,) = refine_results(
         [res],
-        lambda z: [_joined_lsf(design, z, per, smp, ghost_rays, seed, tracer)[1]],
+        lambda z: [_joined_lsf(design, z, per, folds, ghost_rays, seed, tracer)[1]],
         design,
         steps=refine,
     )
@@ -332,7 +363,7 @@ def wave_estimator_text() -> str:
     """The wave estimator and its stated accuracy (:data:`WAVE_ACCURACY`), in words."""
     a = WAVE_ACCURACY
     return (
-        f"wave estimator, {FAST_ORDERS:g} diffraction orders; stated accuracy against "
+        f"wave estimator, {ESTIMATE_ORDERS:g} diffraction orders; stated accuracy against "
         f"the exact wave figures: depth of field {a['dof_mm']:g} mm, RMTF {a['rmtf']:g}, "
         f"light {a['efficiency_ratio']:.0%}, ghost fraction {a['ghost_fraction']:g}"
     )
