@@ -189,10 +189,15 @@ def test_wave_scan_kernels_are_the_joined_responsivity(paper):
 
 
 def test_wave_kernels_refused_where_the_engine_does_not_apply(paper):
-    from opticalstamp.imaging.kernels import scan_kernels
+    """A colour scanner's three channels are refused by the wave kernels, naming them;
+    circular holes are not (asked for, they take the 2-D path's maps:
+    tests/test_wave_circle_maps.py)."""
+    from opticalstamp.imaging.kernels import kernel_source, scan_kernels
 
-    with pytest.raises(ValueError, match="circular holes"):
-        scan_kernels(with_unstated(paper, hole_shape="circle"), [0.0], source="wave")
+    rgb = paper.electronics.model_copy(update={"illumination": "rgb"})
+    with pytest.raises(ValueError, match="rgb"):
+        scan_kernels(paper.model_copy(update={"electronics": rgb}), [0.0], source="wave")
+    assert kernel_source(with_unstated(paper, hole_shape="circle"), "wave") == "wave"
 
 
 def test_scan_with_wave_kernels(tmp_path):

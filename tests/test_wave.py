@@ -350,15 +350,13 @@ def test_compare_wave_ray_runs(paper):
 
 
 def test_wave_command(tmp_path):
-    """``opticalstamp wave``: JSON with the figures of both engines and a figure; circular
-    holes are refused with a message naming the 2-D path (exit 2)."""
+    """``opticalstamp wave``: JSON with the figures of both engines and a figure (circular
+    holes take the 2-D path: tests/test_wave_circle_maps.py)."""
     import json
 
     from typer.testing import CliRunner
 
     from opticalstamp.cli.common import app
-    from opticalstamp.design.files import design_toml
-    from opticalstamp.design.variants import with_hole_shape
 
     runner = CliRunner()
     png = tmp_path / "w.png"
@@ -370,8 +368,3 @@ def test_wave_command(tmp_path):
     assert len(data["wave"]["rmtf"]) == len(data["ray"]["fwhm_x_um"]) == 2
     assert [round(f["fresnel_number"], 2) for f in data["fresnel"]] == [1.62, 2.76, 1.59, 1.05]
     assert png.stat().st_size > 0
-    circ = tmp_path / "circ.toml"
-    circ.write_text(design_toml(with_hole_shape(load_design("paper2016"), "circle")))
-    res = runner.invoke(app, ["wave", "-d", str(circ)])
-    assert res.exit_code == 2
-    assert "2-D path" in res.output

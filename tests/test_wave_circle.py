@@ -14,10 +14,8 @@ from opticalstamp.analysis.arrays import backend, cupy_found
 from opticalstamp.analysis.responsivity import folded_lsf, resolve_optics
 from opticalstamp.analysis.wave2d import wave_response_2d
 from opticalstamp.analysis.wave2dlsf import lsf_source_2d
-from opticalstamp.analysis.wavespectral import wave_response_spectral
 from opticalstamp.design import design_from_dict
 from opticalstamp.device import DeviceUnavailable
-from opticalstamp.validate import InputError
 from test_wave import _stack
 
 ZS = (0.0, 0.4)
@@ -124,8 +122,9 @@ def test_lost_to_band_estimate_against_the_separable_budget(squares):
 
 def test_circles_take_wave_optics_where_asked_for():
     """Circular holes: ``wave`` gives the 2-D path's LSFs (folded onto a chart, as the
-    RMTF asks), equal to the marginal source's; ``auto`` keeps ray optics and says why
-    (their 2-D maps are not done); a wave spot map is refused naming the reason."""
+    RMTF asks), equal to the marginal source's; ``auto`` keeps ray optics on a CPU and
+    says why (the 2-D maps' cost), naming ``--optics wave`` (the maps themselves:
+    tests/test_wave_circle_maps.py)."""
     d = _stack((10.0, 10.0, 12.0), shape="circle")
     opt = resolve_optics(d, "wave")
     assert opt.engine == "wave"
@@ -136,8 +135,7 @@ def test_circles_take_wave_optics_where_asked_for():
     assert f.h[0][0, 0].sum(axis=-1) == pytest.approx(np.trapezoid(lsf, x, axis=-1), rel=1e-3)
     auto = resolve_optics(d, "auto")
     assert auto.engine == "ray" and "circular" in auto.reason
-    with pytest.raises(InputError, match="circular holes"):
-        wave_response_spectral(d, (0.0,), sampling=smp)
+    assert "--optics wave" in auto.reason
 
 
 @pytest.mark.skipif(cupy_found(), reason="CuPy is installed here")

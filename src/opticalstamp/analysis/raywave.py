@@ -21,8 +21,13 @@ import numpy as np
 from ..defaults import DOF_THRESHOLD
 from .dof import depth_of_field
 
-#: why no wave figures for a design with circular holes
-NEEDS_RECTANGLES = "the separable wave engine needs rectangular holes"
+#: why no wave figures for a design with circular holes unless asked for: the 2-D path
+#: (:mod:`.wave2dmaps`) takes minutes a height on a CPU
+NEEDS_RECTANGLES = (
+    "holes that are not rectangles take the 2-D path of the wave engine, minutes a height on "
+    "a CPU: ask for it with --optics wave (report) or opticalstamp wave, or run on a CUDA "
+    "GPU with CuPy"
+)
 #: Ray optics holds where the wave light is within this fraction of the ray light
 LIGHT_TOLERANCE = 0.05
 #: ... and the wave RMTF within this (absolute) of the ray RMTF at every height compared

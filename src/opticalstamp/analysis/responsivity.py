@@ -94,13 +94,17 @@ def wave_unavailable(
     illumination of several channels where the caller does not take them one by one
     (``channels`` False: the spots, the scan kernels and what builds on them; the RMTF,
     the depth of field and the light do, :func:`~.colour.folded_lsf_channels`,
-    :func:`pixel_light_channels`), or (with ``maps``: what ``auto`` and the analyses
-    that need 2-D maps ask) holes that are not rectangular, whose line-spread functions
-    and light the 2-D path gives (``--optics wave`` for the RMTF, the depth of field and
-    the light) but not yet their 2-D maps. (The pixel's acceptance cone and Fresnel
-    losses are filters on its angular spectrum, :mod:`.wavefilter`.)"""
+    :func:`pixel_light_channels`), or (with ``maps``: what ``auto`` asks) holes that are
+    not rectangular where the 2-D path's maps would run on the CPU (:data:`CIRCLE_MAPS`:
+    minutes a height; ``--optics wave`` computes them, and ``auto`` follows the validity
+    rule where the run's device is a GPU with CuPy, :func:`~.wave2dmaps.maps_on_gpu`).
+    (The pixel's acceptance cone and Fresnel losses are filters on its angular
+    spectrum, :mod:`.wavefilter`.)"""
     if maps and not rectangular(design):
-        return CIRCLE_MAPS
+        from .wave2dmaps import maps_on_gpu
+
+        if not maps_on_gpu():
+            return CIRCLE_MAPS
     if not channels and design.electronics.illumination == "rgb":
         return (
             "electronics.illumination is rgb: three channels, one exposure each; the RMTF, "
@@ -122,7 +126,11 @@ def resolve_optics(
 
     ``wave`` for a design the wave engine cannot do raises :class:`InputError` naming
     the reason; ``auto`` picks ray there, and elsewhere follows the measured validity
-    rule (:func:`~opticalstamp.analysis.validity.choose_optics`). ``fresnel`` (Fresnel
+    rule (:func:`~opticalstamp.analysis.validity.choose_optics`). Holes that are not
+    rectangles: ``wave`` takes the 2-D path everywhere (maps included, minutes a height
+    on a CPU); ``auto`` keeps ray optics on a CPU and says so (:data:`CIRCLE_MAPS`),
+    and follows the rule where the run's device (:func:`~opticalstamp.device.run_device`,
+    ``--device``) is a GPU with CuPy. ``fresnel`` (Fresnel
     losses) goes with either engine (the wave engine's are filters on its angular
     spectrum, :mod:`.wavefilter`; the result carries it). ``method`` "paraxial" (the ray
     closed form) is ray optics: ``auto`` picks ray for it and says so, :func:`folded_lsf`

@@ -205,7 +205,7 @@ def spots(
         from .wavespectral import wave_response_spectral
 
         wave = wave_response_spectral(
-            design, zs, pixel=pixel, sampling=opt.sampling, fresnel=opt.fresnel
+            design, zs, pixel=pixel, sampling=opt.sampling, fresnel=opt.fresnel, progress=progress
         )
         wave_maps = [
             wave.spot(iz, float(b), float(h))

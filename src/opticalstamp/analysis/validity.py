@@ -44,8 +44,10 @@ With them ray optics holds for P >= 3.1 (the RMTF bound; the light bound alone: 
 as thick (P = 5.3), or to 100 dpi over its own plates (P = 6.0). The prototype itself
 (P = 0.66) is off by +9.7 % in light and 0.094 in RMTF: wave.
 
-Not covered: circular holes (the wave engine cannot feed the analyses with them yet:
-ray, with the predicted error said), rod-lens arrays (no masks: ray), the far ghost
+Not covered: circular holes on a CPU (their 2-D maps take minutes a height there:
+ray, with the predicted error said and ``--optics wave`` named; where the run's device
+is a GPU with CuPy the rule applies to them, their Fresnel number the circle's radius's),
+rod-lens arrays (no masks: ray), the far ghost
 light (outside any wave band; the tracer's on both sides), a spectrum (one wavelength,
 the design's), designs outside the study's range of P (the bound is extrapolated: it
 keeps falling above P = 12 and exceeds 1 below 0.04).
@@ -274,7 +276,8 @@ def choose_optics(
     ``auto`` picks wave where the predicted ray error (:data:`ENVELOPES` at the own
     path's Fresnel number) exceeds ``light_tol`` (relative light) or ``rmtf_tol`` (RMTF on
     the depth-of-field chart), and ray elsewhere; ray also, saying so, where the wave
-    engine cannot do the design (circular holes; a rod-lens array). No tracing, no wave
+    engine cannot do the design (a rod-lens array) or would take minutes a height
+    (circular holes on a CPU: :data:`~.wavebase.CIRCLE_MAPS`). No tracing, no wave
     run: the predictor is a closed form of the geometry.
 
     Raises
@@ -312,7 +315,7 @@ def choose_optics(
         return OpticsChoice("ray", fmin, p, err, tol, reason)
     names = {"light": f"light ({tol['light']:.1%})", "rmtf": f"RMTF ({tol['rmtf']:.3f})"}
     beyond = " and ".join(names[k] for k in over)
-    if not rectangular(design):
+    if not rectangular(design) and not _maps_on_gpu():
         reason = f"{said}, beyond the tolerance for {beyond}; {CIRCLE_MAPS}: ray, with that error"
         return OpticsChoice("ray", fmin, p, err, tol, reason)
     return OpticsChoice(
@@ -334,3 +337,10 @@ def validity_lines(choice: OpticsChoice) -> list[str]:
             f"{ray_holds_above(t['light'], t['rmtf']):.2f}"
         )
     return out
+
+
+def _maps_on_gpu() -> bool:
+    """Whether the 2-D path's maps run on a GPU in this run (:mod:`.wave2dmaps`)."""
+    from .wave2dmaps import maps_on_gpu
+
+    return maps_on_gpu()

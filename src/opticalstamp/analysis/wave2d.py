@@ -411,7 +411,7 @@ def wave_response_2d(
         etendue[iz] = inten_z.sum() * step * step
         in_x = band_integral(xf, inten_z, -cell / 2, cell / 2)  # (ny,)
         cells[iz] = float(band_integral(yf, in_x.real, -cell / 2, cell / 2).real) / etendue[iz]
-        maps[iz] = _binned(xf, yf, inten_z, edges) / (bin_um * bin_um)
+        maps[iz] = binned_map(xf, yf, inten_z, edges) / (bin_um * bin_um)
     lat = lattice_of(design)
     px, py = (float(v) for v in lat.centers(*pixel))
     meta = {"propagator": propagator, "path": "2d", "cell_um": cell, "device": bk.name}
@@ -436,7 +436,7 @@ def wave_response_2d(
     )
 
 
-def _binned(x: np.ndarray, y: np.ndarray, inten: np.ndarray, edges: np.ndarray) -> np.ndarray:
+def binned_map(x: np.ndarray, y: np.ndarray, inten: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """Integrals of the intensity (y, x) over the square bins ``edges`` x ``edges``
     (cumulative trapezoid along each axis, interpolated at the edges)."""
     return _axis_bins(y, _axis_bins(x, inten, edges).T, edges).T

@@ -40,12 +40,15 @@ MODE_TOL = 1e-10
 PRUNE_TOL = 1e-10
 
 
-#: Why the analyses that need a pixel's 2-D maps (spots, scan kernels, the report) keep
-#: ray optics for circular holes.
+#: Why ``auto`` keeps ray optics for circular (any non-rectangular) holes on a CPU: the
+#: analyses that need a pixel's 2-D maps take them from the 2-D path (
+#: :mod:`.wave2dmaps`), which the user asks for with ``--optics wave``.
 CIRCLE_MAPS = (
-    "circular holes: the wave engine's 2-D path gives their line-spread functions and "
-    "light (rmtf, efficiency with --optics wave) but not yet their 2-D maps (spots, scan "
-    "kernels, the report), which take minutes a height on 2 CPU cores"
+    "circular holes (any that are not rectangles): the wave engine's 2-D maps (spots, scan "
+    "kernels, the report's ray-vs-wave section) take the 2-D path, about 4 min for the "
+    "stack and 1-2 min a height per wavelength on 2 CPU cores (the circular prototype), "
+    "so auto keeps ray optics on a CPU; --optics wave computes them (seconds on a CUDA "
+    "GPU with CuPy, where auto follows the validity rule)"
 )
 
 

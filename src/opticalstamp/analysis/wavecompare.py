@@ -30,12 +30,13 @@ from .lsf import FOLD_BIN_UM, FoldedLSF
 from .own_etendue import own_etendue, rectangular_holes
 from .rmtf import rmtf_curves
 from .spectrum import Spectrum, one_channel
-from .wave import stack_reach, wave_response
+from .wave import stack_reach
 from .wavebase import WaveSampling, fresnel_numbers, fwhm_of, wave_sampling
 from .wavespectral import (
     SpectralLSFSource,
     at_wavelength,
     mirror_twin,
+    response_at,
     spectral_samplings,
     wave_response_spectral,
 )
@@ -313,11 +314,14 @@ def compare_wave_ray(
     spectrum: str | Spectrum | None = None,
     tracer: PixelTracer | None = None,
     fresnel: bool = False,
+    progress: bool = False,
 ) -> WaveRayComparison:
     """Ray against wave for ``design`` at the object distances ``z_mm`` (mm).
 
     The wave figures come from :func:`~opticalstamp.analysis.wave.wave_response` for row
-    A's pixel (rectangular holes; the other rows' x LSFs for the RMTF from its mirror
+    A's pixel (rectangular holes; other holes, circles, by the 2-D path's maps,
+    :func:`~.wavespectral.response_at`: minutes a height on a CPU, ``progress`` shows its
+    bar and expected cost; the other rows' x LSFs for the RMTF from its mirror
     image on the nominal lattice, else the x-only path), the ray figures from :func:`ray_in_band`
     with ``n_rays`` per row. Differences are wave / ray - 1 for the light and the FWHM,
     wave - ray for the centre-cell share and the RMTF.
@@ -349,10 +353,18 @@ def compare_wave_ray(
     rows = range(design.sensor.rows)
     t0 = time.perf_counter()
     if mono:
-        wa = wave_response(design, zs, pixel=(0, 0), sampling=smps[0], fresnel=fresnel)
+        wa = response_at(
+            design, zs, pixel=(0, 0), sampling=smps[0], fresnel=fresnel, progress=progress
+        )
     else:
         wa = wave_response_spectral(
-            design, zs, spectrum=spec, pixel=(0, 0), sampling=sampling, fresnel=fresnel
+            design,
+            zs,
+            spectrum=spec,
+            pixel=(0, 0),
+            sampling=sampling,
+            fresnel=fresnel,
+            progress=progress,
         )
     # the other rows' x LSFs (all the RMTF needs): row A's where the row is its mirror
     # twin, else the x-only path

@@ -167,7 +167,7 @@ def responses_at(side: ObjectSide, zs: np.ndarray, cell: float):
     # w_k = sum_j V_jk u_j, on the spectra once
     ws = [np.tensordot(rot[a][1], side.spectra[a], axes=([0], [0])) for a in (0, 1)]
     coarse = [side.coarse(a) for a in (0, 1)]
-    win = [_cell_weights(x, cell) for x, _ in coarse]
+    win = [cell_weights(x, cell) for x, _ in coarse]
     lsf = [np.zeros((zs.size, gr.size)) for gr in side.grids]
     cells = np.zeros(zs.size)
     for iz, z in enumerate(zs):
@@ -257,7 +257,7 @@ def _gram_rows(a: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
     return blas.zgemm(1.0, b, c, trans_a=2).T  # (b^H c)[l, j] = G[j, l]
 
 
-def _cell_weights(x: np.ndarray, cell: float) -> np.ndarray:
+def cell_weights(x: np.ndarray, cell: float) -> np.ndarray:
     """Weights w with sum_n g_n w_n = the integral of g over |x| <= cell / 2, exact for
     band-limited periodic samples g (:func:`~.wavebase.band_integral` as a vector: the
     intensities' band is below the grid's Nyquist rate; real, as the Nyquist bin of such

@@ -10,7 +10,9 @@ rules, each on its own grid; the line-spread functions (band-limited below 2B / 
 are summed on one grid, the union of theirs at the finest step, by exact band-limited
 (Fourier series) interpolation. A light of one
 wavelength ("mono", the design's ``wavelength_um``) gives :func:`~.wave.wave_response`'s
-figures exactly.
+figures exactly. Holes that are not rectangles (circles) take the 2-D path at each
+wavelength (:func:`response_at`, :func:`~.wave2dmaps.wave_maps_2d`): the same figures and
+maps, so that no analysis needs to know which path gave them.
 
 R, G and B LEDs lit in turn ("rgb") are three channels, one responsivity each
 (:func:`wave_response_channels`).
@@ -26,11 +28,10 @@ from scipy import fft as sfft
 from scipy.signal import czt
 
 from ..design import Design
-from ..validate import InputError
 from .spectrum import Spectrum, channels, one_channel
 from .wave import WaveResponse, half_width, lsf_source, stack_reach, wave_response
+from .wave2dmaps import checked_heights
 from .wavebase import (
-    CIRCLE_MAPS,
     SOURCE_EXTRA,
     WaveSampling,
     rectangular,
@@ -44,6 +45,7 @@ __all__ = [
     "at_wavelength",
     "mirror_rows",
     "mirror_twin",
+    "response_at",
     "spectral_lsf_x",
     "spectral_samplings",
     "wave_response_channels",
@@ -171,11 +173,13 @@ class SpectralWaveResponse:
 
     @property
     def budget(self) -> list[dict]:
-        """The mask-by-mask budget, weighted over the wavelengths (um^2 sr)."""
+        """The mask-by-mask budget, weighted over the wavelengths (um^2 sr; the 2-D
+        path's, :class:`~.wave2dmaps.MapResponse`, has the object-side mask's alone)."""
         out = []
+        keys = ("incoming", "transmitted", "in_band", "lost_to_band")
         for i, rec in enumerate(self.parts[0].budget):
             agg = {"mask": rec["mask"]}
-            for key in ("incoming", "transmitted", "in_band", "lost_to_band"):
+            for key in (k for k in keys if k in rec):
                 agg[key] = float(
                     sum(
                         w * p.budget[i][key]
@@ -208,6 +212,69 @@ class SpectralWaveResponse:
         return edges, total
 
 
+def response_at(
+    design: Design,
+    z_mm,
+    *,
+    pixel: tuple[int, int] = (0, 0),
+    sampling: WaveSampling | None = None,
+    cell_um: float | None = None,
+    fresnel: bool = False,
+    progress: bool = False,
+    bar=None,
+):
+    """A used pixel's responsivity at the design's wavelength, by the path its holes
+    take: the separable :func:`~.wave.wave_response` for rectangles, else the 2-D path's
+    maps (:func:`~.wave2dmaps.wave_maps_2d`: the same figures and ``spot``), with a
+    progress bar (heights; ``progress``) and, on a CPU, the expected cost (:func:`maps_bar`)
+    unless the caller's ``bar`` counts them."""
+    if rectangular(design):
+        return wave_response(
+            design, z_mm, pixel=pixel, sampling=sampling, cell_um=cell_um, fresnel=fresnel
+        )
+    from .wave2dmaps import wave_maps_2d
+
+    smp = wave_sampling(design) if sampling is None else sampling
+    zs = checked_heights(z_mm)
+    own = bar is None
+    if own:
+        bar = maps_bar(design, [smp], zs, progress)
+    try:
+        return wave_maps_2d(
+            design, zs, pixel=pixel, sampling=smp, cell_um=cell_um, fresnel=fresnel, bar=bar
+        )
+    finally:
+        if own:
+            bar.close()
+
+
+def maps_bar(design: Design, smps: list[WaveSampling], zs: np.ndarray, progress: bool):
+    """A tqdm bar over the 2-D path's heights x wavelengths (shown with ``progress`` on a
+    terminal, :func:`~opticalstamp.raytrace.launch.progress_bar`) and, where the maps run
+    on the CPU (:func:`~.wave2dmaps.maps_on_gpu`), a line on stderr with the expected
+    cost (:func:`~.wave2dmaps.expected_seconds`) before any work."""
+    import sys
+
+    from ..raytrace.launch import progress_bar
+    from .wave2dmaps import expected_seconds, maps_on_gpu
+
+    n = len(smps) * zs.size
+    bar = progress_bar(total=n, progress=progress, desc="wave maps (2-D path)", unit="height")
+    if progress and not maps_on_gpu():
+        z_max = float(zs.max()) if zs.size else 0.0
+        est = [expected_seconds(design, s, z_max, zs.size) for s in smps]
+        total = sum(e["total_s"] for e in est)
+        bar.write(
+            f"{design.name}: holes that are not rectangles take the wave engine's 2-D path "
+            f"on the CPU: expect about {total / 60:.0f} min of CPU time for {zs.size} "
+            f"height(s) x {len(smps)} wavelength(s) (the stack ~{est[0]['stack_s']:.0f} s "
+            f"and ~{est[0]['height_s']:.0f} s a height per wavelength; a CUDA GPU with "
+            "CuPy, --device cuda, takes seconds)",
+            file=sys.stderr,
+        )
+    return bar
+
+
 def wave_response_spectral(
     design: Design,
     z_mm=(0.0, 1.0, 2.0, 3.0),
@@ -217,33 +284,43 @@ def wave_response_spectral(
     sampling: WaveSampling | None = None,
     cell_um: float | None = None,
     fresnel: bool = False,
+    progress: bool = False,
 ) -> SpectralWaveResponse:
     """A used pixel's responsivity under a light of one channel.
 
     Parameters
     ----------
-    design, z_mm, pixel, cell_um, fresnel : as :func:`~.wave.wave_response`
+    design, z_mm, pixel, cell_um, fresnel : as :func:`~.wave.wave_response`; any hole
+        shape: rectangles by the separable path, other holes (circles) by the 2-D path's
+        maps (:func:`response_at`), the same figures and ``spot``
     spectrum : a :class:`~.spectrum.Spectrum`, a light's name ("mono", "white", "red",
         "green", "blue") or None: the design's ``electronics.illumination`` ("rgb" has
         three channels: :func:`wave_response_channels`)
     sampling : a :class:`~.wavebase.WaveSampling` at one wavelength, carried to each
         (:func:`spectral_samplings`); default the design's rules at each wavelength
+    progress : the 2-D path's progress bar over heights x wavelengths, and on a CPU the
+        expected cost (:func:`maps_bar`); the separable path takes seconds and shows none
     """
-    if not rectangular(design):
-        raise InputError(f"optics: 'wave' maps of {design.name}: {CIRCLE_MAPS}; use --optics ray")
     spec = one_channel(design, spectrum)
     smps = spectral_samplings(design, spec, sampling)
-    parts = [
-        wave_response(
-            at_wavelength(design, lam),
-            z_mm,
-            pixel=pixel,
-            sampling=s,
-            cell_um=cell_um,
-            fresnel=fresnel,
-        )
-        for lam, s in zip(spec.wavelengths_um, smps, strict=True)
-    ]
+    zs = checked_heights(z_mm)
+    bar = None if rectangular(design) else maps_bar(design, smps, zs, progress)
+    try:
+        parts = [
+            response_at(
+                at_wavelength(design, lam),
+                zs,
+                pixel=pixel,
+                sampling=s,
+                cell_um=cell_um,
+                fresnel=fresnel,
+                bar=bar,
+            )
+            for lam, s in zip(spec.wavelengths_um, smps, strict=True)
+        ]
+    finally:
+        if bar is not None:
+            bar.close()
     w = spec.weights
     cyc = [2 * s.band / s.wavelength_um for s in smps]
     x, lx = _weighted_sum([p.x_um for p in parts], [p.lsf_x for p in parts], w, cyc)
@@ -267,7 +344,8 @@ def wave_response_spectral(
         cells,
         spec,
         parts,
-        {"path": "separable", "propagator": "paraxial", "cell_um": first.meta["cell_um"]},
+        {"path": first.meta["path"], "propagator": first.meta["propagator"]}
+        | {"cell_um": first.meta["cell_um"]},
     )
 
 

@@ -172,7 +172,9 @@ def traced_kernels(
 WAVE_BIN_UM = 4.0
 
 
-def wave_near_kernels(design: Design, z_mm, row: int, fresnel: bool = False) -> list[ScanKernel]:
+def wave_near_kernels(
+    design: Design, z_mm, row: int, fresnel: bool = False, progress: bool = False
+) -> list[ScanKernel]:
     """One row's near-field kernels by wave optics at each height, the stack traversed
     once: the wave engine's map of the light in its band (own path, its diffraction,
     near crosstalk; :func:`~opticalstamp.analysis.wavespectral.wave_response_spectral`,
@@ -180,14 +182,17 @@ def wave_near_kernels(design: Design, z_mm, row: int, fresnel: bool = False) -> 
     :func:`stamp_kernel_sets` adds the traced ghost map of the light beyond the band
     (traced with ``outside_band``): the join of :mod:`~opticalstamp.analysis.responsivity`.
     ``fresnel``: the wave engine's Fresnel losses (:mod:`~opticalstamp.analysis.wavefilter`),
-    as the traced part has them."""
+    as the traced part has them. Holes that are not rectangles take the 2-D path's maps
+    (minutes a height on a CPU; ``progress``: its bar and expected cost)."""
     from ..analysis.responsivity import resolve_optics
     from ..analysis.wave import one_blas_thread
     from ..analysis.wavespectral import wave_response_spectral
 
     opt = resolve_optics(design, "wave")
     zs = np.asarray(z_mm, dtype=np.float64)
-    r = wave_response_spectral(design, zs, pixel=(row, 0), sampling=opt.sampling, fresnel=fresnel)
+    r = wave_response_spectral(
+        design, zs, pixel=(row, 0), sampling=opt.sampling, fresnel=fresnel, progress=progress
+    )
     out = []
     with one_blas_thread():  # thin products: BLAS's threads only spin (the engine's rule)
         for iz, z in enumerate(zs):
@@ -315,7 +320,8 @@ def stamp_kernel_sets(
             zs = sorted({float(z) for z_mm in z_sets for z in np.atleast_1d(z_mm)})
             twin = twins[row]
             if twin is None:
-                near = dict(zip(zs, wave_near_kernels(design, zs, row, fresnel), strict=True))
+                ks = wave_near_kernels(design, zs, row, fresnel, progress)
+                near = dict(zip(zs, ks, strict=True))
                 wave_rows[row] = near
             else:  # row A's view mirrored in y (the nominal staggered lattice)
                 near = {z: mirrored_y(k) for z, k in wave_rows[twin].items()}

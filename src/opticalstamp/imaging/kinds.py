@@ -69,7 +69,7 @@ class Stamp:
         if source == "wave":
             from ..analysis.responsivity import wave_unavailable
 
-            why = wave_unavailable(design)
+            why = wave_unavailable(design, maps=False)  # asked for: circles' maps too
             if why is not None:
                 raise ValueError(f"wave kernels: {why}")
         if source == "paraxial" and not rect:

@@ -192,7 +192,10 @@ def build_report(
         eff = run(efficiency_section, design, g, work, **traced, optics=opt, tracer=tracer)
         diffraction = run(diffraction_section, design)
         clock.lap("quality")
-        wave = run(wave_section, design, work, seed=seed, dof_dpi=dpi, tracer=tracer)
+        wave = run(
+            wave_section, design, work, seed=seed, dof_dpi=dpi, tracer=tracer, optics=opt,
+            progress=progress,
+        )  # fmt: skip
         clock.lap("ray_vs_wave")
         scans = run(
             scan_section,

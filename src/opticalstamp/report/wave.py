@@ -59,13 +59,19 @@ def wave_section(
     dof_dpi: float,
     sampling=None,
     tracer=None,
+    optics=None,
+    progress: bool = False,
 ) -> WaveSection:
     """Ray against wave optics for ``design`` at the heights of :func:`wave_heights`, on
     the ``dof_dpi`` chart, ``work.wave_rays`` rays per pixel row; ``sampling``: the wave
     engine's (:func:`~opticalstamp.analysis.wavebase.wave_sampling`; default from the
     design). ``tracer``: the report's
     :class:`~opticalstamp.raytrace.pixel.PixelTracer`, whose pilots and kept rays the ray
-    side reuses. ValueError (not measurable) for circular holes. A colour scanner
+    side reuses. Holes that are not rectangles (circles): the wave side by the 2-D path
+    (minutes a height on a CPU; ``progress``: its bar and expected cost) where the
+    report's ``optics`` was asked for as "wave" or the run's device is a GPU with CuPy
+    (:func:`~opticalstamp.analysis.wave2dmaps.maps_on_gpu`), else ValueError (not
+    measurable, :data:`~opticalstamp.analysis.raywave.NEEDS_RECTANGLES`). A colour scanner
     (``electronics.illumination`` "rgb"): the channel that diffracts most, the reddest
     (its LED's light; ``meta["spectrum"]`` names it), as the validity rule judges it."""
     from ..analysis.raywave import LIGHT_TOLERANCE, RMTF_TOLERANCE, compare_and_judge
@@ -75,13 +81,17 @@ def wave_section(
     from ..analysis.wavespectral import at_wavelength
 
     if not rectangular(design):
-        raise ValueError(NEEDS_RECTANGLES)
+        from ..analysis.wave2dmaps import maps_on_gpu
+
+        if getattr(optics, "asked", None) != "wave" and not maps_on_gpu():
+            raise ValueError(NEEDS_RECTANGLES)
     specs = channels(design)
     light = max(specs.values(), key=lambda sp: sp.mean_um) if len(specs) > 1 else None
     c, verdict = compare_and_judge(
         design,
         wave_heights(work),
         sampling=sampling,
+        progress=progress,
         n_rays=work.wave_rays,
         seed=seed,
         dof_dpi=dof_dpi,
