@@ -50,8 +50,9 @@ def run(dpi: int, population: int, generations: int, folder: Path) -> dict:
         | {
             "estimate": {
                 k: (p.get("surrogate") or {}).get(k)
-                for k in ("efficiency_ratio", "dof_mm", "ghost_fraction")
-            }
+                for k in ("efficiency_ratio", "dof_mm", "ghost_fraction", "rmtf_at")
+            },
+            "exact_rmtf_at": p.get("rmtf_at"),
         }  # fmt: skip
         for p in data["pareto"]
     ]

@@ -1,5 +1,5 @@
 """How far the search's wave estimator is from the exact wave figures (run on demand:
-python benchmarks/wave_estimator_accuracy.py [N600] [N1200] [SEED] [NARROW]).
+python benchmarks/wave_estimator_accuracy.py [N600] [N1200] [SEED] [NARROW] [REUSE]).
 
 Random designs of the 600-dpi and 1200-dpi search spaces (the paper's design scaled by
 ``search_base``, every length; ``default_space``: the paper's 300-dpi space scaled to
@@ -17,7 +17,10 @@ by the estimator as it was before 2026-11-26 (a band of 4 orders, crossings refi
 4 steps), for comparison. Printed: the error of every figure (mean, RMS, largest, and
 the depth of field's share within 0.05 mm) and the time of each; written as JSON to
 benchmarks/wave_estimator_accuracy.json. ``WAVE_ACCURACY`` in studies/waveestimate.py
-is set from the errors measured here (docs/search.md).
+is set from the errors measured here (docs/search.md). ``REUSE``: a JSON of an earlier
+run whose exact figures are taken for the same designs (the draws depend on the seed
+alone; the exact figures' code unchanged), its estimates recorded as ``earlier``: to
+measure a change of the estimator alone.
 """
 
 from __future__ import annotations
@@ -62,13 +65,15 @@ def draw(rng, space, n_holes, budget_um):
             return holes, ts
 
 
-def compare(d, label: str, narrow: bool = False) -> dict:
+def compare(d, label: str, narrow: bool = False, earlier: dict | None = None) -> dict:
     dpi = dof_chart_dpi(d)
     t0 = time.perf_counter()
     est = evaluate_wave(d, dpi=dpi)
     t1 = time.perf_counter()
-    ex = exact_wave_figures(d, dpi=dpi)
-    t2 = time.perf_counter()
+    key = (tuple(stack_params(d)["holes_um"]), tuple(stack_params(d)["thicknesses_um"]), dpi)
+    before = (earlier or {}).get(key)
+    ex = before["exact"] if before else exact_wave_figures(d, dpi=dpi)
+    t2 = before["exact_s"] + t1 if before else time.perf_counter()
     err = wave_errors(est, ex)
     old = {}
     if narrow:
@@ -83,6 +88,11 @@ def compare(d, label: str, narrow: bool = False) -> dict:
         flush=True,
     )
     keep = ("efficiency_ratio", "dof_mm", "ghost_fraction", "rmtf_at", "nearest_ghost_mm")
+    if before:
+        old |= {"earlier_estimate": before["estimate"], "earlier_error": before["error"],
+                "exact_reused": True}  # fmt: skip
+        if not narrow:  # the earlier run's narrow-band figures against the same exact
+            old |= {k: before[k] for k in ("narrow_estimate", "narrow_error") if k in before}
     return {
         "label": label,
         "dof_dpi": dpi,
@@ -98,12 +108,17 @@ def compare(d, label: str, narrow: bool = False) -> dict:
     } | old
 
 
-def main(n600: int = 12, n1200: int = 4, seed: int = 0, narrow: int = 0) -> dict:
+def main(n600: int = 12, n1200: int = 4, seed: int = 0, narrow: int = 0, reuse: str = ""):
     rng = np.random.default_rng(seed)
+    earlier = {}
+    if reuse:
+        for r in json.loads(Path(reuse).read_text())["rows"]:
+            key = (tuple(r["holes_um"]), tuple(r["thicknesses_um"]), r["dof_dpi"])
+            earlier[key] = r
     paper = load_design("paper2016")
     rows = []
     half = with_stack(scale_to_dpi(paper, 600), thicknesses_um=(500, 200, 225), name="half")
-    rows.append(compare(half, "half-scale prototype", bool(narrow)) | {"dpi": 600})
+    rows.append(compare(half, "half-scale prototype", bool(narrow), earlier) | {"dpi": 600})
     for dpi, n in ((600, n600), (1200, n1200)):
         base = search_base(paper, dpi)
         space = default_space(base, BUDGET_UM)
@@ -120,7 +135,7 @@ def main(n600: int = 12, n1200: int = 4, seed: int = 0, narrow: int = 0) -> dict
                 continue  # no contrast or no light even by ray optics: nothing to compare
             found += 1
             label = f"{dpi} dpi #{found} (drawn {drawn})"
-            rows.append(compare(d, label, bool(narrow)) | {"dpi": dpi})
+            rows.append(compare(d, label, bool(narrow), earlier) | {"dpi": dpi})
     summary = {}
     for k in FIGURES:
         e = np.array([r["error"][k] for r in rows])
@@ -128,7 +143,7 @@ def main(n600: int = 12, n1200: int = 4, seed: int = 0, narrow: int = 0) -> dict
                       "max": float(e.max()), "p90": float(np.quantile(e, 0.9))}  # fmt: skip
     dof_err = np.array([r["error"]["dof_mm"] for r in rows])
     summary["dof_mm"]["within_0.05"] = float(np.mean(dof_err <= 0.05))
-    if narrow:
+    if all("narrow_error" in r for r in rows):
         e = np.array([r["narrow_error"]["dof_mm"] for r in rows])
         summary["narrow_dof_mm"] = {"mean": float(e.mean()), "max": float(e.max()),
                                     "within_0.05": float(np.mean(e <= 0.05))}  # fmt: skip
@@ -136,6 +151,10 @@ def main(n600: int = 12, n1200: int = 4, seed: int = 0, narrow: int = 0) -> dict
         [r["estimate"]["efficiency_ratio"] / r["exact"]["efficiency_ratio"] - 1 for r in rows]
     )
     summary["efficiency_ratio"]["signed_mean"] = float(signed.mean())
+    if all("earlier_error" in r for r in rows):
+        e = np.array([r["earlier_error"]["dof_mm"] for r in rows])
+        summary["earlier_dof_mm"] = {"mean": float(e.mean()), "max": float(e.max()),
+                                     "within_0.05": float(np.mean(e <= 0.05))}  # fmt: skip
     out = {
         "what": "wave estimator (search) against the exact wave figures",
         "orders": ESTIMATE_ORDERS,
@@ -155,4 +174,5 @@ def main(n600: int = 12, n1200: int = 4, seed: int = 0, narrow: int = 0) -> dict
 
 
 if __name__ == "__main__":
-    main(*(int(a) for a in sys.argv[1:]))
+    args = sys.argv[1:]
+    main(*(int(a) for a in args[:4]), *args[4:5])

@@ -99,6 +99,15 @@ def test_disagreements_flag_beyond_the_stated_accuracy():
         inside = base[k] if k == "rmtf_at" else base[k] + 0.99 * (v - base[k])
         assert wave_disagreements(base | {k: inside}, base) == []
     assert wave_disagreements(base, base | {"near_ghost": True}) == ["near_ghost"]
+    # where the exact ghost fraction is high the traced part's fewer rays scatter more:
+    # the bounds of that regime apply
+    heavy = base | {"ghost_fraction": 0.3}
+    step = 0.5 * (a["dof_mm"] + a["dof_mm_high_ghost"])
+    assert a["dof_mm_high_ghost"] > a["dof_mm"]
+    assert wave_disagreements(heavy | {"dof_mm": 0.5 + step}, heavy) == []
+    assert wave_disagreements(base | {"dof_mm": 0.5 + step}, base) == ["dof_mm"]
+    far = 0.5 + 1.01 * a["dof_mm_high_ghost"]
+    assert wave_disagreements(heavy | {"dof_mm": far}, heavy) == ["dof_mm"]
 
 
 def test_half_scale_prototype_passes_when_pinned_at_600_dpi():
