@@ -71,12 +71,13 @@ __all__ = [
 MAP_TAIL = 1e-6
 
 #: CPU-seconds of the circular-hole prototype (paper2016 with circles, its default band,
-#: one wavelength) on the 2-core development machine, by what they scale with: the
-#: stack (range finder) per stack-grid point, a height of maps per mode and object-grid
-#: point, the forward transforms per mode and object-grid point (measured for
-#: :func:`expected_seconds`; docs/wave.md).
+#: one wavelength, 86 modes, object grid 6750^2 for 4.5 mm) on the shared 2-core
+#: development machine, by what they scale with: the stack (range finder, 212 CPU-s at
+#: load 4) per stack-grid point, and a height of maps (about 90 CPU-s: 486 CPU-s for the
+#: stack, the forward transforms and two heights at load 10-15) per mode and object-grid
+#: point (docs/wave.md; :func:`expected_seconds`).
 CPU_S_PER_STACK_POINT = 212.0 / 1650**2
-CPU_S_PER_MODE_POINT = 0.55 / 6750**2
+CPU_S_PER_MODE_POINT = 90.0 / (86 * 6750**2)
 PROTOTYPE_MODES = 86
 
 
@@ -112,8 +113,10 @@ class MapResponse:
         standard error ``lost_to_band_se``, ``transmitted``; um^2 sr): the 2-D path
         estimates the light sent beyond the band there, not mask by mask
     sampling : the :class:`~.wavebase.WaveSampling`
-    windows : per height (x (n,), y (m,), intensity (m, n) float32, um^2 sr per um^2)
-        where the light is (:data:`MAP_TAIL`)
+    windows : per height (x (n,), y (m,), intensity (m, n), um^2 sr per um^2) where the
+        light is (:data:`MAP_TAIL`); float32 at the default single precision (4 bytes a
+        point: 130 MB a height for the circular prototype at 4.5 mm, whose window is
+        most of its 6750^2 object grid)
     meta : how the stack was traversed (modes, range, device, grids)
     """
 
@@ -255,9 +258,9 @@ def wave_maps_2d(
     cw = [cell_weights(g, cell) for g in (gx, gy)]  # exact: the band is below Nyquist
     for i, (wx, wy) in enumerate(wins):
         x, y = gx[wx], gy[wy]
-        inside = float(cw[1][wy] @ inten[i] @ cw[0][wx])  # ~0 outside the window
+        inside = float(cw[1][wy] @ inten[i].astype(np.float64) @ cw[0][wx])  # ~0 beyond
         cells[i] = inside / etendue[i] if etendue[i] > 0 else 0.0
-        windows.append((x, y, inten[i].astype(np.float32)))
+        windows.append((x, y, inten[i]))
     info = sm.info
     budget = [
         {
@@ -299,12 +302,13 @@ def wave_maps_2d(
 
 
 def _intensities(sm: StackModes, side, zs: np.ndarray, wins, precision: str, bar) -> list:
-    """sum_m |u_m(X, Y; Z)|^2 on each height's window (host arrays, um^2 sr per um^2):
+    """sum_m |u_m(X, Y; Z)|^2 on each height's window (host arrays, um^2 sr per um^2, in
+    the precision's real type: float32 sums of 86 modes are good to ~1e-7):
     each mode's spectrum on the object grid once (pruned transforms), then at each Z the
     paraxial transfer function, back along y on the in-band columns and along x on the
     window's rows."""
     st, bk, xp = sm.stack, sm.bk, sm.bk.xp
-    cdt = PRECISIONS[precision][0]
+    cdt, rdt = PRECISIONS[precision]
     smp = sm.sampling
     (xf, yf), step = side.grids, smp.step_um
     ox = int(round((st.x[0] - xf[0]) / step))
@@ -317,7 +321,7 @@ def _intensities(sm: StackModes, side, zs: np.ndarray, wins, precision: str, bar
     cols = xp.zeros((yf.size, kx.size), dtype=cdt)  # in-band columns: the stack's rows
     back = xp.zeros((yf.size, kx.size), dtype=cdt)  # in-band columns: the in-band rows
     outs = [xp.zeros((wy.stop - wy.start, xf.size), dtype=cdt) for _, wy in wins]
-    acc = [xp.zeros((wy.stop - wy.start, wx.stop - wx.start)) for wx, wy in wins]
+    acc = [xp.zeros((wy.stop - wy.start, wx.stop - wx.start), dtype=rdt) for wx, wy in wins]
     n_modes = sm.modes.shape[0]
     for m in sm.modes:
         rows[:, ox : ox + st.x.size] = st.field(m)
