@@ -1,7 +1,9 @@
 """The search's space and constraints (paper §3): the variables of a stack (each
 layer's square hole size, each slab's thickness, object side first), their bounds for a
-sensor and a thickness budget, and the constraint values NSGA-II keeps at or below zero
-(no near ghost, a ghost-fraction bound, the stack budget). The diffraction spill is a
+sensor and a thickness budget (the paper's 300-dpi space scaled to the design's
+resolution, spanning its geometric and its Fresnel image: :func:`scaled_slab_bounds`),
+and the constraint values NSGA-II keeps at or below zero (no near ghost, a
+ghost-fraction bound, the stack budget). The diffraction spill is a
 reported figure, not a constraint: where diffraction matters the candidates are judged by
 wave optics (:mod:`.waveestimate`), which counts it."""
 
