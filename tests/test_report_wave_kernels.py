@@ -89,9 +89,9 @@ def test_one_wave_run_per_twin_free_row(paper, monkeypatch):
     calls = []
     real = kmod.wave_near_kernels
 
-    def counting(design, z_mm, row, fresnel=False):
+    def counting(design, z_mm, row, fresnel=False, progress=False):
         calls.append(row)
-        return real(design, z_mm, row, fresnel)
+        return real(design, z_mm, row, fresnel, progress)
 
     monkeypatch.setattr(kmod, "wave_near_kernels", counting)
     st = ScanSettings(kernel="wave", kernel_rays=RAYS)
