@@ -10,7 +10,8 @@ cached kernels, process pools and the writing of every file included); the media
 time is reported, and the CPU time (user + system) of the process and every process it
 started (the report's background studies, Tesseract), which other work on a shared
 machine changes far less than the wall time. The report's own section times (report.json
-``section_elapsed_s``) of its median run are kept too, and the load average before each
+``section_elapsed_s``) of its median run are kept too, and each background study's
+wall and CPU seconds in its process (``study_elapsed_s``), and the load average before each
 run, since other work on the machine slows every wall time here. Prints a table and,
 with ``--out``, writes it as JSON with provenance (version, git commit, Python, numba,
 cores, date). ``--interleave`` runs the commands in turn, one run of each per round, so
@@ -69,6 +70,7 @@ def run_once(args: list[str], tmp: Path) -> dict:
     if rep.exists():
         d = json.loads(rep.read_text())
         run["sections_s"] = d.get("section_elapsed_s")
+        run["studies_s"] = d.get("study_elapsed_s")  # each background study: wall, CPU
         run["report_elapsed_s"] = d.get("elapsed_s")
     return run
 
@@ -121,6 +123,7 @@ def main(argv: list[str] | None = None) -> int:
                 "runs_cpu_s": cpu,
                 "load_before": [r["load_before"] for r in runs],
                 "sections_s_of_median_run": median.get("sections_s"),
+                "studies_s_of_median_run": median.get("studies_s"),
             }
             print(
                 f"{name:16s} median {statistics.median(times):6.2f} s"

@@ -23,6 +23,7 @@ from opticalstamp.imaging.heightmap import shape_map
 from opticalstamp.imaging.kernels import scan_kernels
 from opticalstamp.imaging.scan import ScanSettings, prepare_kernels, scan_levels, simulate_scan
 from opticalstamp.raytrace.pixel import PixelTracer
+from opticalstamp.report.html.page import one_light_sentence
 
 DPI = 1200.0
 RAYS = 1 << 16
@@ -147,6 +148,14 @@ def test_quick_report_writes_what_it_promises_and_says_so(tmp_path, monkeypatch)
     assert v["holds"] == "wave"  # 10 % is beyond the light's tolerance
     assert d["summary"]["optics"] == v["text"] and html.escape(v["text"]) in page
     assert "raywave.png" in d["figures"]
+    # the spots, scans and restoration ran by the report's wave optics, recorded so by
+    # each section, and the verdict box says so (not "ray optics" for all)
+    assert d["spots"]["meta"]["optics"]["engine"] == "wave"
+    assert d["scans"]["optics"] == d["restoration"]["optics"] == "wave"
+    engines = d["summary"]["one_light_engines"]
+    assert engines == {"spots": "wave", "scans": "wave", "restoration": "wave"}
+    assert one_light_sentence(engines) in page  # (HTML already)
+    assert "the spots, scans and restoration are by wave optics" in page
 
 
 def test_figures_drawn_by_an_idle_background_process_are_those_drawn_here():

@@ -122,6 +122,13 @@ def test_the_one_light_analyses_say_they_are_ray_optics(report):
         assert "not_measurable" not in data[key], key
     assert data["ray_vs_wave"]["meta"]["spectrum"]["name"] == "red"
     assert data["summary"]["optics"].startswith("(the red channel")
+    # each section recorded ray optics, and the verdict box says so, with the reason
+    assert data["summary"]["one_light_engines"] == dict.fromkeys(
+        ("spots", "scans", "restoration"), "ray"
+    )
+    page = (out / "index.html").read_text()
+    assert "and so are the spots, scans and restoration here" in page
+    assert "by wave optics (the wave engine" not in page
 
 
 def test_the_page_shows_the_channels(report):

@@ -21,6 +21,15 @@ def one_numba_thread() -> None:  # pragma: no cover - runs in the background pro
     numba.set_num_threads(1)
 
 
+def timed(fn, args: tuple) -> tuple:  # pragma: no cover - runs in the background processes
+    """``fn(*args)`` with the seconds it took: (result, wall s, CPU s of this process)."""
+    import time
+
+    t, c = time.perf_counter(), time.process_time()
+    out = fn(*args)
+    return out, time.perf_counter() - t, time.process_time() - c
+
+
 def only_result(name: str, results: list):
     """The result of a job of one task (the default ``join`` of :class:`Background`)."""
     (result,) = results
@@ -35,7 +44,9 @@ class Background:
     ----------
     jobs : name -> list of (function, arguments), the tasks of each job; functions and
         results are pickled. The tasks go to :func:`workers` processes in the order
-        given, each to the next process that is free.
+        given, each to the next process that is free (so the longest first: no process
+        is left alone with a long task at the end while the others idle); each task's
+        seconds are kept (:meth:`seconds`).
     join : ``join(name, results)``: the result of job ``name`` from its tasks' results,
         in the order given (default: the result of its one task)
     """
@@ -55,7 +66,7 @@ class Background:
         self._n = workers(len(tasks))
         self._pool = ctx.Pool(self._n, initializer=one_numba_thread)
         for name, (fn, args) in tasks:
-            self._jobs.setdefault(name, []).append(self._pool.apply_async(fn, args))
+            self._jobs.setdefault(name, []).append(self._pool.apply_async(timed, (fn, args)))
 
     def __enter__(self) -> Background:
         return self
@@ -68,7 +79,20 @@ class Background:
         was not started."""
         if name not in self._jobs:
             return None
-        return self._join(name, [task.get() for task in self._jobs[name]])
+        return self._join(name, [task.get()[0] for task in self._jobs[name]])
+
+    def seconds(self) -> dict:
+        """Per job whose tasks all finished without error, the seconds its tasks took in
+        their processes: {name: {"wall_s", "cpu_s"}} (sums over the tasks; the CPU
+        seconds of the one process each ran in, which the load changes far less than the
+        wall seconds)."""
+        out = {}
+        for name, tasks in self._jobs.items():
+            if not all(t.ready() and t.successful() for t in tasks):
+                continue
+            got = [t.get() for t in tasks]
+            out[name] = {"wall_s": sum(g[1] for g in got), "cpu_s": sum(g[2] for g in got)}
+        return out
 
     def _ready(self, name: str) -> bool:
         return all(task.ready() for task in self._jobs[name])

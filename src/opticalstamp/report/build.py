@@ -294,6 +294,8 @@ def build_report(
             "figures": sorted(names),
             "elapsed_s": time.perf_counter() - t0,
             "section_elapsed_s": clock.laps,
+            # each background study's seconds in its process (wall, CPU)
+            "study_elapsed_s": background.seconds(),
         }
         data["paper_vs_model"] = as_data(measure(paper_vs_model, data)) if work.paper else None
         paper = design.fingerprint() == load_design(PAPER_PRESET).fingerprint()

@@ -152,6 +152,7 @@ def restoration_section(
         "panel_cols": 1 + len(methods),
         "panel_points": PANEL_POINTS,
         "ocr": ocr,
+        "optics": page.kernel if page.kernel == "wave" else "ray",  # the kernels' engine
         "settings": "the design's electronics, noise and ghost light on, white surround, "
         f"seed {seed}; the height known",
     }

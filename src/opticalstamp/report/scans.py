@@ -186,6 +186,7 @@ def scan_section(
     tilt = scan(text, z_mm=None, height_map=hm)
     panels["scan_tilt"] = [("tilt: Z = 0 mm at the top, 4 mm at the bottom", tilt.image)]
     res["chart_dpi"] = float(chart_dpi)
+    res["optics"] = "wave" if wave else "ray"  # the engine of the kernels (the verdict says)
     res["settings"] = (
         f"{'wave' if wave else 'ray'}-optics kernels, "
         f"the design's sensor electronics, noise on, ghost light on, white surround, seed {seed}"

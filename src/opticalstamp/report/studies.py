@@ -76,7 +76,21 @@ def study_jobs(
         budget = study_budget(work.budget, optics)
         jobs["search"] = [(run_search, (design, seed, dpi, budget, optics.engine))]
         jobs["tolerance"] = [(run_tolerance, (design, seed, dpi, tol_spec, budget, optics))]
-    return jobs
+    return {name: jobs[name] for name in job_order(jobs, optics)}
+
+
+def job_order(jobs: dict, optics: Optics = RAY) -> list[str]:
+    """The order the report's studies go to its background processes, the longest first
+    (:class:`~.background.Background` hands each task to the next process that is free):
+    by ray optics the parameter study's parts, the rod-lens rows, the search and the
+    tolerance study (the parts end with the search and the tolerance study); by wave
+    optics the search and the tolerance study first, each several times longer than by
+    ray optics (the wave estimator and the exact wave figures of the search's front:
+    :data:`WAVE_STUDY_BUDGET`), so that the parameter study and the rod-lens rows fill
+    the other process meanwhile instead of leaving those two alone at the end. The
+    order changes no number: every study carries its own seed."""
+    first = ("search", "tolerance") if optics.engine == "wave" else ()
+    return [n for n in first if n in jobs] + [n for n in jobs if n not in first]
 
 
 def study_budget(budget: StudyBudget, optics: Optics) -> StudyBudget:

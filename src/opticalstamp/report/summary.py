@@ -207,7 +207,25 @@ def summary(data: dict, spec=(), paper: bool = False) -> dict:
         # analyses of one light where it differs (None: one light)
         "headline_channels": chans,
         "optics_one_light": data.get("optics_one_light"),
+        # the engine each analysis of one light ran by, as its section records it
+        "one_light_engines": one_light_engines(data),
     }
+
+
+def one_light_engines(data: dict) -> dict[str, str]:
+    """The engine ("ray" or "wave") that each analysis of one light ran by, as its section
+    of report.json records it: the spots' ``meta.optics.engine``, the scans' and the
+    restoration's ``optics``; a section not computed is left out (one without the record,
+    as written before it was kept: ray optics, as all were then)."""
+    out = {}
+    spots = section(data, "spots")
+    if spots:
+        out["spots"] = ((spots.get("meta") or {}).get("optics") or {}).get("engine", "ray")
+    for name in ("scans", "restoration"):
+        sec = section(data, name)
+        if sec:
+            out[name] = sec.get("optics", "ray")
+    return out
 
 
 def _headline_channels(r: dict | None, eff: dict | None) -> dict | None:

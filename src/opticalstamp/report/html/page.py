@@ -4,6 +4,7 @@ the model, the design as built and what a quick report left out."""
 from __future__ import annotations
 
 import html
+from types import MappingProxyType
 
 from ...design import Design
 from ...design.describe import describe, sensor_warnings
@@ -154,7 +155,10 @@ def summary_html(s: dict | None) -> str:
     )
     optics = f"<p>Ray vs wave optics: {html.escape(s['optics'])}</p>" if s.get("optics") else ""
     optics += _headline_optics(
-        s.get("headline_optics"), s.get("headline_channels"), s.get("optics_one_light")
+        s.get("headline_optics"),
+        s.get("headline_channels"),
+        s.get("optics_one_light"),
+        s.get("one_light_engines"),
     )
     return (
         f"<div style='border:2px solid #444;padding:.5em 1em;margin:1em 0'>"
@@ -167,10 +171,16 @@ def summary_html(s: dict | None) -> str:
     )
 
 
-def _headline_optics(o: dict | None, chans: dict | None = None, one: dict | None = None) -> str:
+def _headline_optics(
+    o: dict | None,
+    chans: dict | None = None,
+    one: dict | None = None,
+    engines: dict | None = None,
+) -> str:
     """Which engine gave the verdict's depth of field and light, and why; ``chans``: a
     colour scanner's headline channels (the summary's ``headline_channels``), ``one``:
-    the optics of its analyses of one light where it differs."""
+    the optics of its analyses of one light where it differs, ``engines``: the engine each
+    of those ran by (the summary's ``one_light_engines``: :func:`one_light_sentence`)."""
     if not o:
         return ""
     if o["engine"] == "wave":
@@ -182,7 +192,7 @@ def _headline_optics(o: dict | None, chans: dict | None = None, one: dict | None
     else:
         what = "ray optics (the exact tracer)"
     why = html.escape(o["reason"])
-    rest = "Ghosts, spots, PSFs, scans and restoration are ray optics."
+    rest = one_light_sentence(engines, one)
     colour = ""
     if chans:
         worst = [f"depth of field the {chans['dof']} channel's (the worst)"] if chans["dof"] else []
@@ -191,16 +201,42 @@ def _headline_optics(o: dict | None, chans: dict | None = None, one: dict | None
             f" A colour scanner ({', '.join(chans['channels'])} LEDs lit in turn): one RMTF, "
             f"depth of field and light per channel, the verdict's {' and '.join(worst + weak)}."
         )
-    if one:
-        why_one = one["reason"].removeprefix("ray optics: ")
-        rest = (
-            "Ghosts and PSFs are ray optics, and so are the spots, scans and restoration "
-            f"here ({html.escape(why_one)})."
-        )
     return (
         f"<p>The depth of field, RMTF and light above are by {what}: {why} "
         f"(--optics {html.escape(o['asked'])}).{colour} {rest}</p>"
     )
+
+
+def one_light_sentence(engines: dict | None, one: dict | None = None) -> str:
+    """The verdict box's sentence on the engines of the other analyses: the ghosts and PSFs
+    are ray optics; the spots, scans and restoration by the engine each ran by
+    (``engines``, the summary's ``one_light_engines``; None: a report.json written before
+    they were recorded, all ray optics then); ``one``: a colour scanner's optics of one
+    light (ray optics, and why)."""
+    engines = engines if engines is not None else dict.fromkeys(_ONE_LIGHT, "ray")
+    ray = [_ONE_LIGHT[k] for k, e in engines.items() if e != "wave"]
+    wave = [_ONE_LIGHT[k] for k, e in engines.items() if e == "wave"]
+    if one:
+        why = html.escape(one["reason"].removeprefix("ray optics: "))
+        if not ray:
+            return "Ghosts and PSFs are ray optics."
+        return f"Ghosts and PSFs are ray optics, and so are the {_and(ray)} here ({why})."
+    text = "G" + f"{_and(['ghosts'] + ray + ['PSFs'])} are ray optics"[1:]
+    if wave:
+        text += (
+            f"; the {_and(wave)} are by wave optics (the wave engine's light in its "
+            "band, the far ghosts traced)"
+        )
+    return text + "."
+
+
+#: the analyses of one light, as the verdict names them
+_ONE_LIGHT = MappingProxyType({"spots": "spots", "scans": "scans", "restoration": "restoration"})
+
+
+def _and(names: list[str]) -> str:
+    """'a', 'a and b', 'a, b and c'."""
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
 def paper_html(rows: list[dict] | None) -> str:
