@@ -152,7 +152,8 @@ def _cheap_circles(rows: int = 1):
             "name": "tiny-circles",
             "wavelength_um": 0.85,
             "sensor": {
-                "pixel_pitch_um": 12.0,
+                "pixel_pitch_um": 6.0,
+                "lines": 4,
                 "sensitive_width_um": 6.0,
                 "sensitive_height_um": 6.0,
                 "rows": rows,
@@ -191,6 +192,26 @@ def test_cli_spots_by_wave_optics_on_circles(tmp_path):
     res = runner.invoke(app, ["--device", "cpu", *args[:-1], "--optics", "auto"])
     assert res.exit_code == 0, res.output
     assert "optics: ray" in res.stdout and "--optics wave" in res.stdout
+
+
+def test_cli_wave_compares_ray_and_wave_on_circles(tmp_path):
+    """``opticalstamp wave`` on a small two-row circular-hole design exits 0 with both
+    engines' figures: the wave side the 2-D path's (its budget the object-side mask's
+    record), row B's LSFs row A's (mirror twins)."""
+    from typer.testing import CliRunner
+
+    from opticalstamp.cli.common import app
+    from opticalstamp.design.files import design_toml
+
+    path = tmp_path / "tiny2.toml"
+    path.write_text(design_toml(_cheap_circles(rows=2)))
+    args = ["--device", "cpu", "wave", "-d", str(path), "--z", "0,0.1", "--rays", "20000"]
+    res = CliRunner().invoke(app, [*args, "--json"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["wave"]["light_um2sr"] > 0 and data["ray"]["light_um2sr"] > 0
+    assert len(data["wave"]["rmtf"]) == 2 and data["meta"]["rows"] == 2
+    assert [b["mask"] for b in data["budget"]] == [2] and data["budget"][0]["lost_to_band"] > 0
 
 
 def test_auto_keeps_ray_for_circles_on_a_cpu_and_follows_the_rule_on_a_gpu(monkeypatch):

@@ -264,9 +264,10 @@ def maps_bar(design: Design, smps: list[WaveSampling], zs: np.ndarray, progress:
         z_max = float(zs.max()) if zs.size else 0.0
         est = [expected_seconds(design, s, z_max, zs.size) for s in smps]
         total = sum(e["total_s"] for e in est)
+        said = f"{total:.0f} s" if total < 120 else f"{total / 60:.0f} min"
         bar.write(
             f"{design.name}: holes that are not rectangles take the wave engine's 2-D path "
-            f"on the CPU: expect about {total / 60:.0f} min of CPU time for {zs.size} "
+            f"on the CPU: expect about {said} of CPU time for {zs.size} "
             f"height(s) x {len(smps)} wavelength(s) (the stack ~{est[0]['stack_s']:.0f} s "
             f"and ~{est[0]['height_s']:.0f} s a height per wavelength; a CUDA GPU with "
             "CuPy, --device cuda, takes seconds)",
