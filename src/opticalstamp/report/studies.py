@@ -32,6 +32,9 @@ REPORT_ROD_CURVES = MappingProxyType(
 #: designs (not 240) and draws 50 samples (not 200): 71 CPU-s for both studies against
 #: 35 by ray optics at the full budget, the whole report 160 CPU-s against 117
 #: (benchmarks/bench_tolerance_optics.py --studies, bench_report.py; docs/search.md).
+#: With the estimator of 2026-11-26 (12 orders, 8 refinement steps, at least 2^19 far
+#: rays) the same budget costs 117 CPU-s for the search and 82 for the tolerance study
+#: (report.json study_elapsed_s, the prototype), the whole report about 300 CPU-s.
 WAVE_STUDY_BUDGET = MappingProxyType(
     {"search_population": 10, "search_generations": 4, "tolerance_samples": 50}
 )
