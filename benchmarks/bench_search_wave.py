@@ -1,5 +1,5 @@
 """Speed of the design search judged by wave optics (run on demand:
-python benchmarks/bench_search_wave.py [POPULATION GENERATIONS [POP1200 GEN1200]]).
+python benchmarks/bench_search_wave.py [POPULATION GENERATIONS [POP1200 GEN1200]]; 0 skips a part).
 
 (1200 dpi runs first.)
 1. ``opticalstamp search --dpi 600`` as a user runs it (default --optics auto: every
@@ -84,12 +84,21 @@ def run(dpi: int, population: int, generations: int, folder: Path) -> dict:
 
 
 def main(pop: int = 32, gen: int = 15, pop1200: int = 32, gen1200: int = 15) -> dict:
-    out = {"cores": os.cpu_count()}
+    """Run each part whose budget is not 0 (POP or GEN 0 skips the part, whose entry of
+    the JSON written before is kept, marked ``"kept_from_earlier_run"``)."""
     path = Path(__file__).with_suffix(".json")
+    earlier = json.loads(path.read_text()) if path.exists() else {}
+    out = {"cores": os.cpu_count()}
     with tempfile.TemporaryDirectory() as tmp:
         for dpi, p, g in ((1200, pop1200, gen1200), (600, pop, gen)):
+            if p * g == 0:
+                if str(dpi) in earlier:
+                    out[str(dpi)] = earlier[str(dpi)] | {"kept_from_earlier_run": True}
+                continue
             out[str(dpi)] = run(dpi, p, g, Path(tmp))
-            path.write_text(json.dumps(out, indent=1) + "\n")  # each part as it ends
+            path.write_text(json.dumps(out | {k: v for k, v in earlier.items() if k not in out},
+                                       indent=1) + "\n")  # fmt: skip
+    path.write_text(json.dumps(out, indent=1) + "\n")
     return out
 
 
