@@ -3,17 +3,52 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 from PIL import Image
 from typer.testing import CliRunner
 
 from opticalstamp.cli.common import app
+from opticalstamp.report import build, studies
+from opticalstamp.report.work import StudyBudget
+
+#: the background search and tolerance study's budget, by either optics: 16 designs, 16
+#: samples (the report's own budgets: 240 / 200 by ray optics, 40 / 50 by wave optics)
+SMALL_STUDIES = {"search_population": 8, "search_generations": 2, "tolerance_samples": 16}
 
 
-def test_report_writes_every_section(tmp_path):
+def _small(real):
+    """The full report's work (every section, its heights, RMTF grid, both sensitive
+    areas, scans at 1200 dpi with OCR, the background studies) with fewer rays and
+    smaller study budgets: what a section computes is the same, on fewer samples."""
+
+    def work(*args, **kwargs):
+        w = real(*args, **kwargs)
+        assert not w.reduced and w.studies and w.ocr  # the full report's shape
+        budget = StudyBudget(
+            **SMALL_STUDIES,
+            search_ghost_rays=1 << 14,
+            verify_ghost_rays=1 << 16,
+            verify_lsf_rays=1 << 16,
+        )
+        return replace(
+            w,
+            ghost_rays=1 << 19,
+            concept_rays=1 << 17,
+            lsf_rays=1 << 19,
+            wave_rays=1 << 18,
+            budget=budget,
+        )
+
+    return work
+
+
+def test_report_writes_every_section(tmp_path, monkeypatch):
+    monkeypatch.setattr(build, "report_work", _small(build.report_work))
+    monkeypatch.setattr(studies, "WAVE_STUDY_BUDGET", SMALL_STUDIES)  # by wave optics too
     out = tmp_path / "rep"
     res = CliRunner().invoke(
-        app, ["report", "--design", "paper2016", "--out", str(out), "--rays", "1000000"]
+        app, ["report", "--design", "paper2016", "--out", str(out), "--rays", "262144"]
     )
     assert res.exit_code == 0, res.output
     d = json.loads((out / "report.json").read_text())
