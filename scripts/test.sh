@@ -4,4 +4,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 .venv/bin/ruff check src tests benchmarks
-.venv/bin/python -m pytest -q tests
+# two workers (pytest-xdist), each test file whole on one of them: module fixtures and
+# caches computed once, the tests of one file never run against each other
+.venv/bin/python -m pytest -q -n 2 --dist loadfile tests
