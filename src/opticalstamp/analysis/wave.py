@@ -56,6 +56,7 @@ from .wavebase import (
     in_band,
     kernel,
     mask_field,
+    pixel_record,
     point_sources,
     propagate,
     rectangular,
@@ -495,14 +496,12 @@ def _object_side(design, pixel, zs, terms, axes, smp, budget, cell_um, filters) 
     keys = list(terms)
     side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, zs.max())
     lsf_x, lsf_y, etendue, cells = responses_at(side, zs, cell)
-    lat = lattice_of(design)
-    px, py = (float(v) for v in lat.centers(*pixel))
     for rec in budget:
         rec["lost_to_band"] = rec["transmitted"] - rec["in_band"]
     return WaveResponse(
         design.name,
         design.fingerprint(),
-        {"row": "AB"[pixel[0]], "k": pixel[1], "x_um": px, "y_um": py},
+        pixel_record(design, pixel),
         zs,
         side.grids[0],
         side.grids[1],

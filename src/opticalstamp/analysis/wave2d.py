@@ -42,6 +42,7 @@ from .wavebase import (
     gauss_legendre,
     in_band,
     object_grid,
+    pixel_record,
     point_sources,
     response_summary,
     stack_grid,
@@ -412,8 +413,6 @@ def wave_response_2d(
         in_x = band_integral(xf, inten_z, -cell / 2, cell / 2)  # (ny,)
         cells[iz] = float(band_integral(yf, in_x.real, -cell / 2, cell / 2).real) / etendue[iz]
         maps[iz] = binned_map(xf, yf, inten_z, edges) / (bin_um * bin_um)
-    lat = lattice_of(design)
-    px, py = (float(v) for v in lat.centers(*pixel))
     meta = {"propagator": propagator, "path": "2d", "cell_um": cell, "device": bk.name}
     meta |= {"grid": (st.y.size, st.x.size), "object_grid": (yf.size, xf.size)} | sm.info
     if sm.note:
@@ -421,7 +420,7 @@ def wave_response_2d(
     return WaveMaps(
         design.name,
         design.fingerprint(),
-        {"row": "AB"[pixel[0]], "k": pixel[1], "x_um": px, "y_um": py},
+        pixel_record(design, pixel),
         zs,
         xf,
         yf,

@@ -42,7 +42,7 @@ import numpy as np
 
 from ..design import Design
 from ..device import run_device
-from ..raytrace.stack import lattice_of, output_pitch
+from ..raytrace.stack import output_pitch
 from ..validate import InputError
 from .arrays import cupy_found
 from .wave import half_width, one_blas_thread
@@ -51,6 +51,7 @@ from .wave2dlsf import marginal_modes
 from .wavebase import (
     WaveSampling,
     object_grid,
+    pixel_record,
     response_summary,
     stack_axes,
     stack_grid,
@@ -275,8 +276,6 @@ def wave_maps_2d(
             "lost_to_band_se": info["lost_to_band_se"],
         }
     ]
-    lat = lattice_of(design)
-    px, py = (float(v) for v in lat.centers(*pixel))
     meta = {"path": "2d", "propagator": propagator, "object_side": "paraxial", "cell_um": cell}
     meta |= {"device": sm.bk.name, "precision": precision, "tail": tail}
     meta |= {
@@ -290,7 +289,7 @@ def wave_maps_2d(
     return MapResponse(
         design.name,
         design.fingerprint(),
-        {"row": "AB"[pixel[0]], "k": pixel[1], "x_um": px, "y_um": py},
+        pixel_record(design, pixel),
         zs,
         side.grids[0],
         side.grids[1],

@@ -52,6 +52,12 @@ CIRCLE_MAPS = (
 )
 
 
+def pixel_record(design: Design, pixel: tuple[int, int]) -> dict:
+    """A wave response's record of its used pixel: row (A/B), k and its centre (um)."""
+    px, py = (float(v) for v in lattice_of(design).centers(*pixel))
+    return {"row": "AB"[pixel[0]], "k": pixel[1], "x_um": px, "y_um": py}
+
+
 @dataclass(frozen=True)
 class WaveSampling:
     """How the wave engine samples one design (all lengths um).
