@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from ..analysis.paraxial import paraxial_cumulative, paraxial_support
@@ -179,19 +180,56 @@ def smear_of(design: Design) -> float:
 
 
 # -- charts -------------------------------------------------------------------------------
+@numba.njit(cache=True)
+def _cum(u: np.ndarray, c: np.ndarray, x: float) -> float:
+    """``np.interp(x, u, c, left=0, right=1)`` on a uniform grid ``u`` (the fit's tables):
+    the bracket found by division instead of a binary search, the same formula."""
+    n = u.size
+    if x < u[0]:
+        return 0.0
+    if x > u[n - 1]:
+        return 1.0
+    j = min(int((x - u[0]) / (u[1] - u[0])), n - 2)
+    while j > 0 and x < u[j]:
+        j -= 1
+    while j < n - 2 and x >= u[j + 1]:
+        j += 1
+    if x == u[j + 1]:
+        return c[j + 1]
+    return (c[j + 1] - c[j]) / (u[j + 1] - u[j]) * (x - u[j]) + c[j]
+
+
+@numba.njit(cache=True)
+def _bar_sum(u, c, x, p, phase, n_k):
+    out = np.empty(x.size)
+    for j in range(x.size):
+        k0 = np.floor((x[j] + u[0] - phase) / p) - 1
+        s = 0.0
+        for m in range(n_k):
+            a = phase + (k0 + m) * p + p / 2 - x[j]
+            s += _cum(u, c, a + p / 2) - _cum(u, c, a)
+        out[j] = s
+    return out
+
+
+@numba.njit(cache=True)
+def _edge_sum(u, c, d, cross, w):
+    out = np.empty(d.size)
+    for j in range(d.size):
+        s = 0.0
+        for i in range(w.size):
+            s += w[i] * _cum(u, c, d[j] - cross[i])
+        out[j] = s
+    return out
+
+
 def bar_fraction(sp: Spread, x_um: np.ndarray, period_um: float, phase_um: float):
     """White fraction seen by the columns at ``x_um`` of bars of ``period_um``, black on
     [phase + k P, phase + k P + P/2), white on the rest (a periodic chart)."""
-    x = np.asarray(x_um, dtype=np.float64)
+    x = np.ascontiguousarray(x_um, dtype=np.float64)
     p = float(period_um)
-    lo, hi = sp.u[0], sp.u[-1]
-    k0 = np.floor((x + lo - phase_um) / p) - 1
-    n_k = int(np.ceil((hi - lo) / p)) + 3
-    k = k0[:, None] + np.arange(n_k)[None, :]
-    a = phase_um + k * p + p / 2 - x[:, None]  # white from a to a + P/2 (in U)
-    c1 = np.interp(a + p / 2, sp.u, sp.cx, left=0.0, right=1.0)
-    c0 = np.interp(a, sp.u, sp.cx, left=0.0, right=1.0)
-    return (c1 - c0).sum(axis=1)
+    n_k = int(np.ceil((sp.u[-1] - sp.u[0]) / p)) + 3
+    return _bar_sum(sp.u, sp.cx, x, p, float(phase_um), n_k)
 
 
 def edge_fraction(sp: Spread, edge, pos_um: float, slope: float) -> np.ndarray:
@@ -214,7 +252,12 @@ def edge_fraction(sp: Spread, edge, pos_um: float, slope: float) -> np.ndarray:
         # -Y' has the cumulative 1 - C_y'(-m)
         main_u, main_c = -sp.u[::-1], 1.0 - sp.cy[::-1]
         cross = -slope * vals
-    # every node at once: one interpolation of (nodes, pixels) points
-    at = np.subtract.outer(-np.asarray(cross, dtype=np.float64), -np.asarray(d)).ravel()
-    f = np.asarray(w) @ np.interp(at, main_u, main_c, left=0.0, right=1.0).reshape(len(w), -1)
+    d = np.ascontiguousarray(np.broadcast_to(d, np.shape(edge.x_um)), dtype=np.float64)
+    f = _edge_sum(
+        np.ascontiguousarray(main_u, dtype=np.float64),
+        np.ascontiguousarray(main_c, dtype=np.float64),
+        d,
+        np.ascontiguousarray(cross, dtype=np.float64),
+        np.ascontiguousarray(w, dtype=np.float64),
+    )
     return f if edge.dark_after else 1.0 - f

@@ -221,7 +221,8 @@ class Problem:
 
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
         """Forward differences: every image for a physical column, one image's residuals
-        for its own nuisance columns (the spreads reused)."""
+        for its own nuisance columns (the spreads reused); the black and white levels'
+        columns exact (the model is linear in them: 1 - F and F over the item's noise)."""
         r0 = self.residuals(theta)
         sps = self.spreads(self.lay.physical(theta))
         sizes = [self.data[i][0].size for i in range(len(self.obs))]
@@ -234,9 +235,24 @@ class Problem:
             step = h[k] if t[k] + h[k] <= p.hi else -h[k]
             t[k] += step
             jac[:, k] = (self.residuals(t) - r0) / step
-        for i, (sl, _) in enumerate(self.lay.nuis):
+        for i, (sl, names) in enumerate(self.lay.nuis):
             a, b = starts[i], starts[i + 1]
+            level = [n.rsplit(".", 1)[1] for n in names]  # 4 an item: phase/pos, ...
+            unit = theta[sl].copy()  # every item's black 0, white 1: the fractions F
+            unit[[m for m, n in enumerate(level) if n == "black"]] = 0.0
+            unit[[m for m, n in enumerate(level) if n == "white"]] = 1.0
+            inv = 1.0 / self.data[i][1]
+            frac = predict(self.obs[i], sps[i], unit) * inv
+            items = self.obs[i].blocks if self.obs[i].kind == "bars" else self.obs[i].edges
+            ends = a + np.cumsum([0] + [it.value.size for it in items])
             for k in range(sl.start, sl.stop):
+                which = level[k - sl.start]
+                if which in ("black", "white"):  # (1 - F) / s, F / s on the item's rows
+                    item = (k - sl.start) // 4
+                    lo, hi = ends[item], ends[item + 1]
+                    f = frac[lo - a : hi - a]
+                    jac[lo:hi, k] = f if which == "white" else inv[lo - a : hi - a] - f
+                    continue
                 t = theta.copy()
                 t[k] += h[k]
                 jac[a:b, k] = (self.residual_of(i, sps[i], t) - r0[a:b]) / h[k]

@@ -130,11 +130,12 @@ class WaveModel:
             w = [_widen(x[z], n) for x in waves]
             f = [_widen(x[z], n) for x in fasts]
             base = (w[0].cx - f[0].cx, w[0].cy - f[0].cy)
-            slopes = [
-                ((wk.cx - w[0].cx - fk.cx + f[0].cx) / h, (wk.cy - w[0].cy - fk.cy + f[0].cy) / h)
-                for wk, fk, h in zip(w[1:], f[1:], steps, strict=True)
-            ]
-            table[z] = (base, slopes)
+            size = base[0].size
+            sx, sy = np.zeros((len(steps), size)), np.zeros((len(steps), size))
+            for k, (wk, fk, h) in enumerate(zip(w[1:], f[1:], steps, strict=True)):
+                sx[k] = (wk.cx - w[0].cx - fk.cx + f[0].cx) / h
+                sy[k] = (wk.cy - w[0].cy - fk.cy + f[0].cy) / h
+            table[z] = (base, (sx, sy))
         return Corrected(table, at, tuple(free))
 
 
@@ -154,11 +155,11 @@ def _widen(sp: Spread, n: int) -> Spread:
 @dataclass(frozen=True)
 class Corrected:
     """The fast model plus the wave model's difference from it, to first order about the
-    physical values ``at``: at each height Z, ``table[Z]`` = ((dcx, dcy), slopes), the
+    physical values ``at``: at each height Z, ``table[Z]`` = ((dcx, dcy), (sx, sy)), the
     wave spread's cumulatives minus the fast one's at ``at`` and their derivatives in the
-    parameters ``free`` (indices into the physical values), on k ``TABLE_UM``, |k| <= n
-    (0 at both ends: the cumulatives agree there, 0 and 1). At ``at`` its spreads and
-    their derivatives are the wave model's."""
+    parameters ``free`` (indices into the physical values; rows of ``sx``, ``sy``), on
+    k ``TABLE_UM``, |k| <= n (0 at both ends: the cumulatives agree there, 0 and 1). At
+    ``at`` its spreads and their derivatives are the wave model's."""
 
     table: dict
     at: np.ndarray
@@ -171,10 +172,7 @@ class Corrected:
             (dcx, dcy), slopes = self.table[float(z)]
             n = (dcx.size - 1) // 2
             f = spread(design, float(z), smear_um, reach_um=n * TABLE_UM)
-            dx, dy = dcx.copy(), dcy.copy()
-            for (sx, sy), v in zip(slopes, dv, strict=True):
-                dx += v * sx
-                dy += v * sy
+            dx, dy = dcx + dv @ slopes[0], dcy + dv @ slopes[1]
             o = (f.u.size - 1) // 2 - n  # the fast grid may reach further: 0 there
             cx, cy = f.cx.copy(), f.cy.copy()
             cx[o : o + dx.size] += dx
