@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import re
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -18,6 +19,7 @@ from opticalstamp.studies.waveestimate import (
     WAVE_ACCURACY,
     evaluate_wave,
     exact_wave_figures,
+    until_first_crossing,
     wave_disagreements,
     wave_errors,
 )
@@ -75,6 +77,47 @@ def test_estimator_counts_the_halo_that_a_narrow_band_drops():
     # the halo is light: the narrow band reads less of it, the full band as the exact
     assert narrow["efficiency_ratio"] < 0.97 * ex["efficiency_ratio"]
     assert est["efficiency_ratio"] == pytest.approx(ex["efficiency_ratio"], rel=0.02)
+
+
+def test_until_first_crossing_keeps_the_heights_before_the_grids_first_sample_under():
+    z = np.arange(0.0, 1.01, 0.25)
+    new = np.array([0.1, 0.3, 0.6, 0.8, 0.9])
+    assert until_first_crossing(new, z, np.array([0.2, 0.5, 0.4, 0.1, 0.2]), 0.3).size == 0
+    assert list(until_first_crossing(new, z, np.full(5, 0.5), 0.3)) == list(new)
+    # first sample under the threshold at Z = 0.75: a crossing in (0.5, 0.75], none later
+    got = until_first_crossing(new, z, np.array([0.9, 0.8, 0.5, 0.2, 0.4]), 0.3)
+    assert list(got) == [0.1, 0.3, 0.6]
+
+
+def test_refinement_up_to_the_first_crossing_gives_every_figure_of_the_full_one(monkeypatch):
+    """A 600-dpi design whose ghost light (fraction 0.5) takes the RMTF under 0.3 within
+    0.02 mm and back over it further on: the estimator refines only the heights that
+    can move the depth of field (the first crossing), a few of the 50-odd that refining
+    every flagged interval takes, and every figure is the full refinement's, bit for
+    bit."""
+    from opticalstamp.studies import waveestimate as we
+    from opticalstamp.studies.search import search_base
+
+    d = with_stack(
+        search_base(load_design("paper2016"), 600),
+        holes_um=(26, 16, 12),
+        thicknesses_um=(437.5, 875, 975),
+    )
+    seen = []
+
+    def spy(z_new, *args):
+        out = until_first_crossing(z_new, *args)
+        seen.append((len(z_new), len(out)))
+        return out
+
+    monkeypatch.setattr(we, "until_first_crossing", spy)
+    cut = evaluate_wave(d, dpi=400)
+    monkeypatch.setattr(we, "until_first_crossing", lambda z_new, *a: np.asarray(z_new))
+    full = evaluate_wave(d, dpi=400)
+    ((n_all, n_kept),) = seen
+    assert 0 < n_kept < n_all / 4
+    assert 0 < cut["dof_mm"] < 0.25
+    assert cut == full
 
 
 def test_disagreements_flag_beyond_the_stated_accuracy():

@@ -12,7 +12,8 @@ wave-optical light, depth of field and crosstalk. The figures are those of
   own path with its diffraction and the near crosstalk in that band; the light outside
   the band (the far ghost paths) traced (importance sampling, at least 2^19 rays,
   :func:`far_light`) and joined where it lands, as the analyses join it; the RMTF
-  crossings refined between heights by the exact figures' rule (``REFINE`` steps). What
+  crossings refined between heights by the exact figures' rule (``REFINE`` steps) up to
+  the grid's first crossing, past which no height can move the depth of field. What
   makes it cheaper than the exact figures: its modes compressed to 1e-3 of the light
   (``ESTIMATE_MODE_TOL``) instead of 1e-10, the light from the folded LSFs instead of a
   separate efficiency analysis, one trace of 2^19 rays for the far light and the LSFs
@@ -40,7 +41,13 @@ from types import MappingProxyType
 import numpy as np
 
 from ..analysis.efficiency import reference_etendue
-from ..analysis.rmtf import DEFAULT_Z_MM, period_of_dpi, refine_results, rmtf_from_lsf
+from ..analysis.rmtf import (
+    DEFAULT_Z_MM,
+    crossing_brackets,
+    period_of_dpi,
+    refine_crossings,
+    rmtf_from_lsf,
+)
 from ..analysis.wavebase import ORDERS, wave_sampling
 from ..design import Design
 from ..design.resolution import dof_chart_dpi
@@ -152,6 +159,28 @@ def far_light(
     }
 
 
+def until_first_crossing(
+    z_new: np.ndarray, z_grid: np.ndarray, curve: np.ndarray, threshold: float
+) -> np.ndarray:
+    """The heights ``z_new`` (mm) of a refinement that can move the depth of field of the
+    RMTF ``curve`` sampled at ``z_grid``: those below the grid's first sample under
+    ``threshold`` (all of them where none is under it; none where the curve starts under
+    it, the depth of field is then 0 whatever lies between). The depth of field is the
+    first crossing (:func:`~opticalstamp.analysis.dof.depth_of_field`): a sample past
+    the grid's first one under the threshold can neither precede it nor bracket a crossing
+    before it, so the refined depth of field is the same as with every height refined,
+    bit for bit (each height's RMTF is computed on its own). What it leaves out are the
+    ends of the spurious ranges past it, which the estimator does not report."""
+    z_new = np.asarray(z_new, dtype=np.float64)
+    c = np.asarray(curve, dtype=np.float64)
+    if c.size == 0 or c[0] < threshold:
+        return z_new[:0]
+    below = np.flatnonzero(c < threshold)
+    if below.size == 0:
+        return z_new
+    return z_new[z_new < float(np.asarray(z_grid, dtype=np.float64)[below[0]])]
+
+
 def _joined_lsf(design: Design, zs: np.ndarray, per: float, folds, n_rays: int, seed: int, tracer):
     """The wave engine's folded LSFs (``folds``: a
     :class:`~opticalstamp.analysis.wavecompare.WaveFolds`, the stack traversed once for
@@ -194,7 +223,9 @@ def evaluate_wave(
     to 20 mm), in the band of ``orders`` diffraction orders
     (:func:`~opticalstamp.analysis.wavebase.wave_sampling`), the light leaving the stack
     compressed to its coherent modes to ``mode_tol`` of its power, the crossings refined
-    in ``refine`` steps (:func:`~opticalstamp.analysis.rmtf.refine_results`); the light
+    in ``refine`` steps by the exact figures' rule
+    (:func:`~opticalstamp.analysis.rmtf.crossing_brackets`) up to the grid's first
+    crossing (:func:`until_first_crossing`: the depth of field is the same); the light
     beyond the band traced with ``ghost_rays`` rays, at least :data:`MIN_FAR_RAYS`
     (:func:`far_light`). The signal
     (efficiency) is the light in the band at Z = 0, the ghost fraction the light beyond
@@ -224,13 +255,12 @@ def evaluate_wave(
             break
         zs = extended_z(zs)  # the depth of field is a crossing: go on in the same step
     # the crossings found again between the grid's heights by the exact figures' rule
-    # (an RMTF near the threshold dips between heights where ghost light moves fast)
-    (res,) = refine_results(
-        [res],
-        lambda z: [_joined_lsf(design, z, per, folds, ghost_rays, seed, tracer)[1]],
-        design,
-        steps=refine,
-    )
+    # (an RMTF near the threshold dips between heights where ghost light moves fast),
+    # up to the grid's first crossing: no height past it can move the depth of field
+    fine = until_first_crossing(crossing_brackets([res], refine), zs, curve, dof_threshold)
+    if refine > 1 and fine.size:
+        lsf_fine = _joined_lsf(design, fine, per, folds, ghost_rays, seed, tracer)[1]
+        res = refine_crossings(res, lsf_fine, design)
     own = float(wave.h[0][0, 0, 0].sum())  # row A's in-band light at the first Z
     ghost = far["far_um2sr"]
     tot = own + ghost
