@@ -321,7 +321,7 @@ def lsf_source(
         return lsf_source_2d(design, z_max_mm, pixel=pixel, sampling=sampling, fresnel=fresnel)
     smp = wave_sampling(design) if sampling is None else sampling
     with one_blas_thread():
-        terms, axes, _, filters = _stack(design, pixel, smp, fresnel)
+        terms, axes, _, filters = _stack(design, pixel, smp, fresnel, budget=False)
         terms = _leave(terms, axes, smp, filters)
         keys = list(terms)
         side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, z_max_mm)
@@ -385,10 +385,13 @@ def _filters(design: Design, axes: list[_Axis], smp: WaveSampling, fresnel: bool
     return out
 
 
-def _stack(design: Design, pixel, smp: WaveSampling, fresnel: bool = False):
+def _stack(design: Design, pixel, smp: WaveSampling, fresnel: bool = False, budget: bool = True):
     """The source points stepped up through the stack: (terms {row sequence: (ux, uy)}
     just above the object-side mask, the axes, the budget mask by mask, the angular
-    filters (:func:`_filters`; the last one is the object side's))."""
+    filters (:func:`_filters`; the last one is the object side's)). ``budget`` False: no
+    budget (an empty list), which costs a propagation of every term and several Gram
+    matrices at each mask and changes nothing else (:func:`lsf_source` drops it)."""
+    want = budget
     lam, b, step = smp.wavelength_um, smp.band, smp.step_um
     if step > lam / (6 * b) * (1 + 1e-9):
         raise InputError(
@@ -411,7 +414,7 @@ def _stack(design: Design, pixel, smp: WaveSampling, fresnel: bool = False):
     for i in range(heights.size):
         if i > 0:
             terms = _step_terms(terms, axes, smp, heights[i] - heights[i - 1], filters[i], i)
-        rec = {"mask": i, "incoming": _power(terms, step)}
+        rec = {"mask": i, "incoming": _power(terms, step)} if want else {}
         new = {}
         for hist, (ux, uy) in terms.items():
             for r in range(n_rows):
@@ -419,12 +422,15 @@ def _stack(design: Design, pixel, smp: WaveSampling, fresnel: bool = False):
                     continue
                 tx, ty = axes[0].trans[i][r], axes[1].trans[i][r]
                 new[hist + (r,)] = (ux * tx[:, None], uy * ty[:, None])
-        rec["transmitted"] = _transmitted(terms, axes, i, n_rows, step)
+        if want:
+            rec["transmitted"] = _transmitted(terms, axes, i, n_rows, step)
         new = _prune(new, step, smp.prune_tol)
         keys = list(new)
         cx = _compress([new[k][0] for k in keys], smp.mode_tol)
         cy = _compress([new[k][1] for k in keys], smp.mode_tol)
         terms = {k: (cx[j], cy[j]) for j, k in enumerate(keys)}
+        if not want:
+            continue
         rec["in_band"] = _power(_band_only(terms, axes, smp), step)
         rec["sequences"] = _names(keys)
         rec["modes"] = (int(cx[0].shape[1]), int(cy[0].shape[1])) if keys else (0, 0)
