@@ -260,7 +260,11 @@ def evaluate_wave(
     fine = until_first_crossing(crossing_brackets([res], refine), zs, curve, dof_threshold)
     if refine > 1 and fine.size:
         lsf_fine = _joined_lsf(design, fine, per, folds, ghost_rays, seed, tracer)[1]
-        res = refine_crossings(res, lsf_fine, design)
+        # one batch: the refined heights' standard errors (the RMTF of each of the 16
+        # batches) feed only the range at +-2 SE and a second round, neither of which
+        # the estimator makes; the RMTF itself is of the batches' sum either way
+        one = [h.sum(axis=1, keepdims=True) for h in lsf_fine.h]
+        res = refine_crossings(res, replace(lsf_fine, h=one), design)
     own = float(wave.h[0][0, 0, 0].sum())  # row A's in-band light at the first Z
     ghost = far["far_um2sr"]
     tot = own + ghost
