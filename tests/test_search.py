@@ -203,6 +203,12 @@ def test_tolerance_study(paper, tmp_path):
 
 
 def test_cli_search_and_tolerance_write_netcdf(tmp_path):
+    """The CLI's search and tolerance study write their NetCDF with provenance. By ray
+    optics (--optics ray: the surrogate, the front verified by the exact tracer), a
+    fifth of the wave estimator's time: what is checked here (the front's fields, the
+    files, their attributes and sizes) is the same by either optics; the CLI by wave
+    optics (auto on the prototype) is run by test_artwork_files.py, test_back_from_search.py
+    (search) and test_tolerance_optics.py::test_cli_optics (tolerance)."""
     out = tmp_path / "s.nc"
     res = runner.invoke(
         app,
@@ -216,6 +222,8 @@ def test_cli_search_and_tolerance_write_netcdf(tmp_path):
             "1",
             "--workers",
             "1",
+            "--optics",
+            "ray",
             "-o",
             str(out),
             "--json",
@@ -246,6 +254,8 @@ def test_cli_search_and_tolerance_write_netcdf(tmp_path):
             "--json",
             "--spec",
             "dof>=2",
+            "--optics",
+            "ray",
             "-o",
             str(out),
         ],
@@ -300,6 +310,9 @@ def test_structural_variants_and_merged_front(paper):
 
 
 def test_cli_search_variants(tmp_path):
+    """--layers 2,3: one search per variant, a file each. By ray optics (the variants'
+    loop and files do not depend on the optics; the wave estimator took five times as
+    long)."""
     res = runner.invoke(
         app,
         [
@@ -312,6 +325,8 @@ def test_cli_search_variants(tmp_path):
             "1",
             "--workers",
             "1",
+            "--optics",
+            "ray",
             "--json",
             "-o",
             str(tmp_path / "v.nc"),
