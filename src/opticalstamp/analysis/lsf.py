@@ -266,7 +266,9 @@ def _traced_folds(
             for ghosts, out, sl in zip(kinds, outs, slopes, strict=True):
                 w = pb.w if ghosts else pb.w * pb.own
                 w = w if keep is None or not ghosts else w * keep
-                _fold(b.x, b.sx, b.sy, w, batch, src.x, zs * 1000.0, tr.n_obj, per, nb, out)
+                on = np.flatnonzero(w)  # the rays _fold would skip, left out in order
+                x, sx, sy = b.x[on], b.sx[on], b.sy[on]
+                _fold(x, sx, sy, w[on], batch[on], src.x, zs * 1000.0, tr.n_obj, per, nb, out)
                 sl += _slopes(b, w, tr.n_obj) / n_rays
         for out, res in zip(outs, on_gpu or (), strict=False):  # nothing on the CPU
             out += res.copy_to_host()
