@@ -388,7 +388,7 @@ def test_cli_bad_input_exit_2(tmp_path):
 def test_fit_says_when_its_ray_model_is_not_the_designs_optics():
     """A ray-optics fit of a design for which --optics auto takes wave optics (the
     prototype) warns; where ray optics holds, or the fit was by wave optics, it does not;
-    a wave fit whose defect correction did not converge does."""
+    a wave fit that did not converge does."""
     from opticalstamp.design import load_design
     from opticalstamp.design.variants import scale_to_dpi
     from opticalstamp.studies.fitresult import fit_optics

@@ -28,7 +28,7 @@ from opticalstamp.io.files import encode_tiff16
 from opticalstamp.report.fitsection import fit_section, load_fit
 from opticalstamp.studies.fit import Problem, fit, layout_for
 from opticalstamp.studies.fitmodel import design_params, smear_of
-from opticalstamp.studies.fitwave import WaveModel
+from opticalstamp.studies.fitwave import WaveModel, held_sampling
 
 NOMINAL = load_design("paper2016")
 TRUTH = {"layer2.x": 4.0, "slab2": 420.0, "ref": 200.0}
@@ -133,8 +133,9 @@ def test_wave_fit_is_the_wave_models_optimum():
     w = _fits()["wave"]
     obs = _observations()
     lay = layout_for(NOMINAL, obs, w.names, w.pinned)
-    wave = WaveModel(resolve_optics(NOMINAL, "wave").sampling)
-    prob = Problem(NOMINAL, obs, lay, model=wave)
+    zs = sorted({o.z_mm for o in obs})
+    wave = WaveModel(held_sampling(NOMINAL, resolve_optics(NOMINAL, "wave").sampling, max(zs)))
+    prob = Problem(NOMINAL, obs, lay, model=wave.held(NOMINAL, zs, smear_of(NOMINAL)))
     theta = np.asarray(w.theta)
     chi0 = float(np.sum(prob.residuals(theta) ** 2))
     assert chi0 == pytest.approx(w.chi2, rel=1e-3)

@@ -70,6 +70,11 @@ class WaveSampling:
     margin_um : room left beyond the reach of the band on every side of each domain
     source_points : Gauss-Legendre nodes across the sensitive width and height
     mode_tol, prune_tol : relative power dropped by mode compression and by pruning
+    min_points : the stack's and the object side's grids hold at least these many points
+        (0: what the design needs). A grid that changes size changes the periodic domain
+        and the band's frequency bins: the figures jump by about 1e-6 of the light where
+        a design's length crosses such a step. A fit holds its grids at its nominal
+        design's sizes (:meth:`held`), so that its model is smooth in the parameters.
     """
 
     wavelength_um: float
@@ -79,6 +84,18 @@ class WaveSampling:
     source_points: tuple[int, int]
     mode_tol: float = MODE_TOL
     prune_tol: float = PRUNE_TOL
+    min_points: tuple[int, int] = (0, 0)
+
+    def held(self, stack_points: int, object_points: int) -> WaveSampling:
+        """This sampling with every stack grid at least ``stack_points`` and every object
+        grid at least ``object_points`` points (FFT-friendly lengths)."""
+        return replace(
+            self,
+            min_points=(
+                sfft.next_fast_len(int(stack_points)),
+                sfft.next_fast_len(int(object_points)),
+            ),
+        )
 
     def refined(self, step: float = 1.0, margin: float = 1.0, points: float = 1.0):
         """This sampling with the step divided by ``step``, the margin and the source
@@ -368,9 +385,10 @@ def gauss_legendre(lo: float, hi: float, n: int) -> tuple[np.ndarray, np.ndarray
     return lo + (t + 1) * (hi - lo) / 2, w * (hi - lo) / 2
 
 
-def grid(lo: float, hi: float, step: float) -> np.ndarray:
-    """A uniform grid of FFT-friendly length covering [lo, hi], centred on it."""
-    n = sfft.next_fast_len(int(math.ceil((hi - lo) / step)) + 1)
+def grid(lo: float, hi: float, step: float, min_points: int = 0) -> np.ndarray:
+    """A uniform grid of FFT-friendly length (at least ``min_points``) covering [lo, hi],
+    centred on it."""
+    n = max(sfft.next_fast_len(int(math.ceil((hi - lo) / step)) + 1), int(min_points))
     mid = 0.5 * (lo + hi)
     return mid + (np.arange(n) - n // 2) * step
 
@@ -381,7 +399,7 @@ def stack_grid(source: tuple[float, float], top_um: float, smp: WaveSampling) ->
     ``top_um``) and the margin; in-band light from the pixel never leaves it, so the
     FFT's periodic copies never overlap (the band-limited ASM condition holds)."""
     reach = top_um * smp.band + smp.margin_um
-    return grid(source[0] - reach, source[1] + reach, smp.step_um)
+    return grid(source[0] - reach, source[1] + reach, smp.step_um, smp.min_points[0])
 
 
 def object_grid(x: np.ndarray, d_um: float, smp: WaveSampling) -> tuple[np.ndarray, int]:
@@ -389,9 +407,24 @@ def object_grid(x: np.ndarray, d_um: float, smp: WaveSampling) -> tuple[np.ndarr
     the object-side mask to the farthest object plane) and the margin, on the same
     points: (grid, index of x[0] in it)."""
     reach = d_um * smp.band + smp.margin_um
-    xf = grid(x[0] - reach, x[-1] + reach, smp.step_um)
+    xf = grid(x[0] - reach, x[-1] + reach, smp.step_um, smp.min_points[1])
     off = int(round((x[0] - xf[0]) / smp.step_um))
     return x[0] + (np.arange(xf.size) - off) * smp.step_um, off
+
+
+def grid_points(
+    design: Design, z_max_mm: float, smp: WaveSampling, pixel: tuple[int, int] = (0, 0)
+) -> tuple[int, int]:
+    """The points of the largest stack grid and of the largest object grid (up to the
+    object plane ``z_max_mm``) that a run of ``design``'s ``pixel`` at ``smp`` makes
+    (:func:`stack_grid`, :func:`object_grid`; each hole's box: any hole shape)."""
+    planes = stack_axes(design, pixel, bounds=True)
+    st = [stack_grid(pl.source, pl.heights[-1], smp) for pl in planes]
+    ob = [
+        object_grid(x, pl.reduced(float(z_max_mm)) - pl.heights[-1], smp)[0]
+        for x, pl in zip(st, planes, strict=True)
+    ]
+    return max(x.size for x in st), max(x.size for x in ob)
 
 
 def fwhm_of(x: np.ndarray, profile: np.ndarray) -> float:

@@ -41,7 +41,7 @@ from .fitproblem import (  # noqa: F401 - the fit's problem, re-exported
     predict,
 )
 from .fitresult import HELD, FitResult
-from .fitwave import STEP, WaveModel
+from .fitwave import WaveModel, held_sampling
 
 #: A standard error beyond this many times a parameter's assembly scale: the parameter
 #: is reported as not determined (its error None), not with false precision.
@@ -53,20 +53,19 @@ PRIOR_SCALES = 1.0
 #: A direction not determined whose largest component (unit vector) is above this is
 #: that one parameter's: the parameter is held (pinned) at nominal.
 SINGLE = 0.99
-#: The defect correction stops where no free parameter moved by more than this many of
-#: its standard errors in a round (:func:`_defect`), or after DEFECT_ROUNDS rounds, ...
-DEFECT_TOL = 0.05
-DEFECT_ROUNDS = 8
-#: ... or where the wave model's chi2 fell by less than this in a round (a flat valley:
-#: within about sqrt(2 x 0.01) = 0.14 joint errors of its minimum).
-DEFECT_CHI2 = 0.01
+#: The wave model's own least squares (:func:`_polish`) stops where a step lowers its
+#: chi2 by less than this (within about sqrt(2 x 0.02) = 0.2 joint errors of its
+#: minimum), or after POLISH_NFEV evaluations (each one wave run, each Jacobian one a
+#: physical parameter).
+POLISH_CHI2 = 0.02
+POLISH_NFEV = 40
 #: The forward model of each engine, in words (fit.json's ``optics``).
 FORWARD = (
     ("ray", "paraxial own path (ray optics)"),
     (
         "wave",
-        "wave engine's light in its band (own path, diffraction, near crosstalk), "
-        "by defect correction of the paraxial own path",
+        "wave engine's light in its band (own path, diffraction, near crosstalk); the "
+        "starts on the paraxial own path corrected by it about the nominal design",
     ),
 )
 
@@ -82,7 +81,7 @@ def _draw_start(prob: Problem, rng: np.random.Generator) -> np.ndarray:
     return theta
 
 
-def _local(prob: Problem, theta0: np.ndarray, max_nfev: int):
+def _local(prob: Problem, theta0: np.ndarray, max_nfev: int, ftol: float = 1e-8):
     lo, hi = prob.bounds()
     pad = 1e-9 * (np.abs(np.where(np.isfinite(lo), lo, 0)) + 1)
     theta0 = np.clip(theta0, lo + pad, hi - pad)
@@ -97,6 +96,7 @@ def _local(prob: Problem, theta0: np.ndarray, max_nfev: int):
         method="trf",
         tr_solver="exact",
         max_nfev=max_nfev,
+        ftol=ftol,
     )
 
 
@@ -157,8 +157,9 @@ def fit(
     seed : of the other starts' draws
     optics : "ray", "wave" or "auto" (:func:`~opticalstamp.analysis.responsivity.
         resolve_optics`, resolved once for the nominal design): the forward model is the
-        paraxial own path (ray) or the wave engine's light in its band (wave), the latter
-        by defect correction of the former (:mod:`.fitwave`, :func:`_defect`)
+        paraxial own path (ray) or the wave engine's light in its band (wave: the starts
+        and holds on the former corrected by the latter about the nominal design,
+        :mod:`.fitwave`, then the wave model's own least squares, :func:`_polish`)
     """
     if not observations:
         raise FitError("no images to fit")
@@ -171,8 +172,11 @@ def fit(
 
 def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt) -> FitResult:
     lay = layout_for(design, observations, free, pinned)
-    wave = WaveModel(opt.sampling) if opt.engine == "wave" else None
     zs = sorted({o.z_mm for o in observations})
+    wave = None
+    if opt.engine == "wave":  # its grids held: no jump as the parameters move
+        wave = WaveModel(held_sampling(design, opt.sampling, max(zs)))
+        wave = wave.held(design, zs, smear_of(design))
     # the wave model at first: the fast one corrected by the difference at nominal, to
     # first order in the free parameters
     model = spreads
@@ -263,7 +267,7 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt) -> Fit
         chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     info = opt.to_dict() | {"forward_model": dict(FORWARD)[opt.engine]}
     if wave is not None:
-        theta, prob, info["scheme"] = _defect(prob, theta, wave, cov, max_nfev)
+        theta, prob, info["scheme"] = _polish(prob, theta, wave)
         chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     msgs = said + [m for m in msgs if m not in said]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -306,27 +310,21 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt) -> Fit
     )
 
 
-def _defect(prob: Problem, theta: np.ndarray, wave: WaveModel, cov: np.ndarray, max_nfev: int):
-    """The wave model's optimum from ``theta`` by defect correction (:mod:`.fitwave`): the
-    fast model plus the wave model's difference from it, to first order about the current
-    parameters (1 + free wave runs), is fitted; the step to its optimum is taken as far
-    as it lowers the wave model's own chi2 (halved up to 3 times, one wave run each);
-    again about the new point, until no free parameter moves by more than DEFECT_TOL of
-    its error (``cov``'s) or the wave chi2 falls by less than DEFECT_CHI2 in a round
-    (DEFECT_ROUNDS at most). The last model is the wave model to second order in the last
-    move, its Jacobian the wave model's (forward differences of :data:`~.fitwave.STEP`
-    assembly scales).
+def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel):
+    """The wave model's optimum from ``theta`` (the optimum of the fast model corrected
+    about the nominal design, :mod:`.fitwave`): a trust-region least squares
+    (:func:`_local`) of the wave model's own residuals, its Jacobian by forward
+    differences of the wave model (1e-3 assembly scales: one wave run a physical column;
+    the nuisance columns on the same spreads), each point run once. It stops where the
+    wave chi2 falls by less than POLISH_CHI2 in a step (or the step or the gradient
+    vanishes), after POLISH_NFEV evaluations at most.
 
-    Returns (theta, the problem at theta, scheme: each round's largest move in errors and
-    wave chi2, the wave runs, whether and how it converged).
+    Returns (theta, the wave model's problem, scheme: how it ran and converged).
     """
     design, obs, lay = prob.design, prob.obs, prob.lay
     zs, smear = sorted({o.z_mm for o in obs}), smear_of(design)
-    nf = lay.n_free
-    sd = np.sqrt(np.clip(np.diag(cov), 0, None))[:nf]
-    sd = np.where(sd > 0, sd, [lay.params[j].scale for j in lay.free])
     params, memo = list(lay.params), {}
-    runs = 1 + len(prob.model.free)  # the first correction's, made by the caller
+    runs = 1 + len(prob.model.free)  # the correction's about the nominal design
 
     def wave_at(phys):  # the wave model's spreads at physical values: each point run once
         nonlocal runs
@@ -337,58 +335,20 @@ def _defect(prob: Problem, theta: np.ndarray, wave: WaveModel, cov: np.ndarray, 
         return memo[key]
 
     exact = Problem(design, obs, lay, hold=prob.hold, model=lambda d, z, s, phys: wave_at(phys))
-
-    def chi2_of(t):
-        return float(np.sum(exact.residuals(t) ** 2))
-
-    moves, chis, why, stale = [], [], None, False
-    for _ in range(DEFECT_ROUNDS):
-        at = lay.physical(theta)  # its run made already where the last round stepped to
-        model = wave.correction(design, params, at, lay.free, zs, smear, wave_at=wave_at)
-        prob = Problem(design, obs, lay, hold=prob.hold, model=model)
-        chi_at = float(np.sum(prob.residuals(theta) ** 2))  # the wave model's, exactly
-        chis.append(chi_at)
-        new = _local(prob, theta, max_nfev).x
-        step, chi_new = new - theta, chi2_of(new)
-        for _ in range(3):  # a step the wave model does not take downhill: shorter
-            if chi_new <= chi_at:
-                break
-            step = step / 2
-            chi_new = chi2_of(theta + step)
-        if chi_new > chi_at:  # at the wave model's minimum, or the linear model is poor
-            why = (
-                f"no step lowers the wave chi2 by {DEFECT_CHI2:g}"
-                if chi_new - chi_at < DEFECT_CHI2
-                else "no step lowered the wave model's chi2"
-            )
-            stale = False  # the last correction is about theta: the wave model there
-            break
-        theta, stale = theta + step, True
-        moves.append(float(np.max(np.abs(step[:nf]) / sd, initial=0.0)))
-        if moves[-1] < DEFECT_TOL:
-            why = f"moves below {DEFECT_TOL:g} of the errors"
-        elif chi_at - chi_new < DEFECT_CHI2:
-            why = f"the wave chi2 fell by less than {DEFECT_CHI2:g}"
-        if why:
-            break
-    else:
-        why = None
-    if stale:  # the model about the final point: the wave model there
-        at = lay.physical(theta)
-        model = wave.correction(design, params, at, lay.free, zs, smear, wave_at=wave_at)
-        prob = Problem(design, obs, lay, hold=prob.hold, model=model)
-        chis.append(float(np.sum(prob.residuals(theta) ** 2)))
+    chi_start = float(np.sum(exact.residuals(theta) ** 2))
+    r = _local(exact, theta, POLISH_NFEV, ftol=POLISH_CHI2 / max(chi_start, 1.0))
+    chi_end = float(2 * r.cost)
     scheme = {
-        "method": "defect correction: the fast model plus the wave model's difference from "
-        "it to first order about each round's start; each step shortened until it lowers "
-        "the wave model's chi2",
-        "rounds": len(moves),
-        "moves_in_errors": moves,
-        "wave_chi2": chis,
-        "converged": why is not None and not why.startswith("no step lowered"),
-        "stopped": why or f"after {DEFECT_ROUNDS} rounds",
+        "method": "trust-region least squares of the wave model's own residuals (its "
+        "Jacobian by forward differences of the wave model), from the optimum of the fast "
+        "model corrected about the nominal design",
+        "evaluations": int(r.nfev),
+        "jacobians": int(r.njev),
+        "wave_chi2": [chi_start, chi_end],
+        "converged": bool(r.status > 0),
+        "stopped": str(r.message),
         "wave_runs": runs,
-        "jacobian": "the wave model's at the optimum (its difference from the fast model "
-        f"by forward differences of {STEP:g} assembly scales)",
+        "jacobian": "the wave model's at the optimum (forward differences of 1e-3 assembly "
+        "scales for the physical columns; the nuisance columns on the same spreads)",
     }
-    return theta, prob, scheme
+    return r.x, exact, scheme

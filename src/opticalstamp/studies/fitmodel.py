@@ -40,8 +40,6 @@ TABLE_UM = 0.25
 SMEAR_SUBS = 9
 #: Step (um) of the nodes of the cross spread of a slanted edge (times its slope).
 CROSS_UM = 6.0
-#: Mass under which a wave spread's cross bins are merged into one node (Spread.nodes).
-NODE_MASS = 2e-3
 
 
 @dataclass(frozen=True)
@@ -118,14 +116,12 @@ class Spread:
     cx: np.ndarray
     cy: np.ndarray
     half_um: float
-    node_mass: float = 0.0  # NODE_MASS for the wave's wide tables, 0: every bin a node
 
     def nodes(self, cum: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(positions, weights) of a distribution from its cumulative on ``u``, on
-        CROSS_UM bins; bins lighter than ``node_mass`` (the far tails of a wave spread)
-        merged in order into nodes of about that mass at their mean position (the cross
-        term is a small correction there, slope x position, and each node costs a pass
-        over the edge's pixels)."""
+        CROSS_UM bins of a fixed grid (each bin a node at its centre; the bins so fixed
+        and never merged by mass, the model is smooth in the parameters: a fit's
+        derivatives by differences need that)."""
         k0 = np.floor(self.u[0] / CROSS_UM)  # a fixed grid, as the table's
         edges = (k0 + np.arange(int(np.ceil((self.u[-1] - self.u[0]) / CROSS_UM)) + 2)) * CROSS_UM
         c = np.interp(edges, self.u, cum)
@@ -133,14 +129,7 @@ class Spread:
         mid = (edges[1:] + edges[:-1]) / 2
         keep = w > 1e-9
         mid, w = mid[keep], w[keep]
-        if not self.node_mass:
-            return mid, w / w.sum()
-        # a bin of NODE_MASS or more starts a node of its own (its mass before it lies in
-        # an earlier quantum than its successor's)
-        g = np.floor((np.cumsum(w) - w) / self.node_mass).astype(np.int64)
-        g = np.unique(g, return_inverse=True)[1]
-        mass = np.bincount(g, w)
-        return np.bincount(g, w * mid) / mass, mass / mass.sum()
+        return mid, w / w.sum()
 
 
 def spread(design: Design, z_mm: float, smear_um: float, reach_um: float = 0.0) -> Spread:

@@ -81,16 +81,16 @@ def fit_optics(design: Design, optics: dict) -> str | None:
     one the other commands pick for this design: a ray-optics fit (the paraxial own path)
     of a design for which ``--optics auto`` takes wave optics
     (:func:`~opticalstamp.analysis.responsivity.resolve_optics`), whose fitted geometry
-    absorbs the diffraction blur the model leaves out; or a wave fit whose defect
-    correction did not converge. None otherwise."""
+    absorbs the diffraction blur the model leaves out; or a wave fit whose wave model's
+    least squares did not converge. None otherwise."""
     from ..analysis.responsivity import resolve_optics
 
     if optics.get("engine", "ray") != "ray":
         sc = optics.get("scheme", {})
         if sc and not sc.get("converged"):
             return (
-                f"the wave fit's defect correction did not converge ({sc.get('stopped')}; "
-                f"wave chi2 by round {', '.join(f'{c:.1f}' for c in sc.get('wave_chi2', []))}"
+                f"the wave fit did not converge ({sc.get('stopped')}; wave chi2 from "
+                f"{' to '.join(f'{c:.1f}' for c in sc.get('wave_chi2', []))}"
                 "): the estimates are not the wave model's optimum; a model that cannot "
                 "describe the images (free the parameters that differ) is the usual cause"
             )
@@ -114,12 +114,12 @@ def optics_words(o: dict | None) -> str:
         why = o.get("reason", "the fit's model before it chose its optics")
         return f"optics: ray, the paraxial own path ({why})"
     sc = o.get("scheme", {})
-    moves = ", ".join(f"{m:.2g}" for m in sc.get("moves_in_errors", []))
     state = "converged" if sc.get("converged") else "NOT converged"
+    chis = " to ".join(f"{c:.1f}" for c in sc.get("wave_chi2", []))
     return (
         f"optics: wave at {o['wavelength_um']:g} um, the wave engine's light in its band "
         f"|s| < {o['band']:.3f} (own path, diffraction, near crosstalk; {o['reason']}); "
-        f"the wave model's optimum by defect correction, {state} ({sc.get('stopped')}) in "
-        f"{sc.get('rounds')} rounds (each round's largest move: {moves} errors), "
+        f"the wave model's own least squares from the starts' best minimum, {state} "
+        f"({sc.get('stopped')}): wave chi2 {chis} in {sc.get('evaluations')} evaluations, "
         f"{sc.get('wave_runs')} wave runs; errors from the wave model's Jacobian"
     )

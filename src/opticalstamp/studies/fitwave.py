@@ -8,33 +8,44 @@ perturbed design, so that the grids and the band do not jump as the parameters m
 the light in its band, the own path with its diffraction and the near crosstalk, as the
 x and y marginals (the y one smeared by the document's motion, as the fast model's).
 
-One wave run (every height at once) costs about 0.5 s on the prototype, a hundred times
-the fast model's; a fit evaluates its model thousands of times. So the fit works by
-*defect correction*: the wave model is the fast one (:func:`~.fitmodel.spread`, the
-paraxial own path) plus the difference of the two, per height, evaluated at one set of
-parameters and held fixed (:class:`Corrected`) while the fast model's Jacobian drives the
-optimiser; the difference is then evaluated again at the new optimum, until the
-parameters move by less than a small fraction of their errors (:mod:`.fit`). At that fixed
-point the model is the wave model exactly, and its optimum the wave model's to the extent
-that the two Jacobians agree; the final errors come from the wave model's own Jacobian.
+One wave run (every height at once) costs about 0.4 s on the prototype, a hundred times
+the fast model's; a multi-start search evaluates its model thousands of times. So the
+search (starts and holds, :mod:`.fit`) runs on the fast model (:func:`~.fitmodel.spread`,
+the paraxial own path) plus the wave model's difference from it about the nominal design,
+to first order in the parameters (:class:`Corrected`: 1 + free wave runs), and the wave
+model's own least squares takes its best minimum to the wave model's optimum
+(:func:`~.fit._polish`), whose Jacobian gives the errors. (Repeating the correction about
+each new point instead, a defect correction, converged poorly on the default free set: the
+fast model's kinks, where two holes' shadow edges cross, make the difference nonlinear
+over a step; the wave model itself is smooth.)
+
+The model is smooth in the parameters only if nothing discrete moves with them: every
+design is run at the nominal design's sampling with its grids held at one size
+(:func:`held_sampling`; a grid that grew by one FFT length with a slab's thickness moved
+the chi2 of the charts by ~50), and each height's spread is tabulated on one table
+(:meth:`WaveModel.held`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..analysis.wavebase import WaveSampling
+from ..analysis.wavebase import WaveSampling, grid_points
 from ..design import Design
-from .fitmodel import NODE_MASS, SMEAR_SUBS, TABLE_UM, Param, Spread, spread, with_params
+from .fitmodel import SMEAR_SUBS, TABLE_UM, Param, Spread, spread, with_params
 
 #: Light left beyond a wave spread's table on each side of each marginal: the table stops
 #: where the cumulative reaches it, and is renormalised to 0..1 on its grid.
 WAVE_TAIL = 1e-5
 #: Step (assembly scales) of the forward differences of the wave model's correction.
 STEP = 0.1
+#: The fit's wave grids are held at this multiple of the nominal design's sizes ...
+GRID_ROOM = 1.1
+#: ... and its spreads' tables at this multiple of the nominal design's reach.
+TABLE_ROOM = 1.25
 
 
 def _cumulative(x: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -74,15 +85,38 @@ def wave_spread(
     cy = np.mean([np.interp(u + s, y_um, cyw) for s in subs], axis=0)
     cx = (cx - cx[0]) / (cx[-1] - cx[0])
     cy = (cy - cy[0]) / (cy[-1] - cy[0])
-    return Spread(u, cx, cy, n * TABLE_UM, NODE_MASS)
+    return Spread(u, cx, cy, n * TABLE_UM)
+
+
+def held_sampling(design: Design, sampling: WaveSampling, z_max_mm: float) -> WaveSampling:
+    """``sampling`` with every grid of every wavelength of ``design``'s light held at
+    GRID_ROOM x the largest size that ``design`` needs up to ``z_max_mm``
+    (:meth:`~opticalstamp.analysis.wavebase.WaveSampling.held`): a grid that changed size
+    as the fit's parameters move would make the model jump (by ~1e-6 of the light, tens
+    of chi2 at the charts' noise)."""
+    from ..analysis.spectrum import one_channel
+    from ..analysis.wavespectral import at_wavelength, spectral_samplings
+
+    spec = one_channel(design, None)
+    sizes = [
+        grid_points(at_wavelength(design, lam), z_max_mm, s)
+        for lam, s in zip(
+            spec.wavelengths_um, spectral_samplings(design, spec, sampling), strict=True
+        )
+    ]
+    return sampling.held(*(math.ceil(GRID_ROOM * max(n)) for n in zip(*sizes, strict=True)))
 
 
 @dataclass(frozen=True)
 class WaveModel:
     """The wave engine as the fit's forward model: (design, heights, smear) -> {Z:
-    spread}, every design at one ``sampling`` (the nominal design's)."""
+    spread}, every design at one ``sampling`` (the nominal design's, its grids held:
+    :func:`held_sampling`) and, once :meth:`held` has fixed them, each height's spread on
+    one table (``reach_um``: {Z: half width}) whatever the design: a table that followed
+    each design's tails would renormalise the spread by a step as it grows."""
 
     sampling: WaveSampling
+    reach_um: dict = field(default_factory=dict)
 
     def __call__(self, design: Design, zs, smear_um: float, phys=None) -> dict[float, Spread]:
         from ..analysis.wavespectral import wave_response_spectral
@@ -90,9 +124,17 @@ class WaveModel:
         zs = [float(z) for z in zs]
         r = wave_response_spectral(design, zs, sampling=self.sampling)
         return {
-            z: wave_spread(r.x_um, r.lsf_x[i], r.y_um, r.lsf_y[i], smear_um)
+            z: wave_spread(
+                r.x_um, r.lsf_x[i], r.y_um, r.lsf_y[i], smear_um, self.reach_um.get(z, 0.0)
+            )
             for i, z in enumerate(zs)
         }
+
+    def held(self, design: Design, zs, smear_um: float) -> WaveModel:
+        """This model with each height's table fixed at TABLE_ROOM x the reach of
+        ``design``'s spread there (one run)."""
+        sp = self(design, zs, smear_um)
+        return replace(self, reach_um={z: TABLE_ROOM * s.half_um for z, s in sp.items()})
 
     def correction(
         self,
@@ -149,7 +191,7 @@ def _widen(sp: Spread, n: int) -> Spread:
 
     k = m + pad
     u = np.arange(-k, k + 1) * TABLE_UM
-    return Spread(u, ext(sp.cx), ext(sp.cy), k * TABLE_UM, sp.node_mass)
+    return Spread(u, ext(sp.cx), ext(sp.cy), k * TABLE_UM)
 
 
 @dataclass(frozen=True)
@@ -177,5 +219,5 @@ class Corrected:
             cx, cy = f.cx.copy(), f.cy.copy()
             cx[o : o + dx.size] += dx
             cy[o : o + dy.size] += dy
-            out[float(z)] = Spread(f.u, cx, cy, f.half_um, NODE_MASS)
+            out[float(z)] = Spread(f.u, cx, cy, f.half_um)
         return out
