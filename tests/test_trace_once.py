@@ -128,7 +128,12 @@ def _spy(monkeypatch) -> list:
 
 @pytest.mark.parametrize("quick", [True, False], ids=["quick", "report"])
 def test_the_report_traces_each_pixel_once(paper, quick, tmp_path, monkeypatch):
+    """The figures are not drawn (a third of the quick report's time, profiled): they
+    plot the sections' results and trace nothing (report/plotting imports no tracer),
+    and the report's pages and figures are tested in test_report.py and
+    test_report_presets.py."""
     monkeypatch.setattr(build, "report_work", _small(quick))
+    monkeypatch.setattr(build, "png", lambda plot, *args: b"")
     seen = _spy(monkeypatch)
     passes = TracePasses()
     data = build.build_report(paper, tmp_path / "r", quick=quick, passes=passes)
