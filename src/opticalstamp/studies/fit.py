@@ -58,7 +58,7 @@ SINGLE = 0.99
 #: minimum), or after POLISH_NFEV evaluations (each one wave run, each Jacobian one a
 #: physical parameter).
 POLISH_CHI2 = 0.02
-POLISH_NFEV = 40
+POLISH_NFEV = 30
 #: The forward model of each engine, in words (fit.json's ``optics``).
 FORWARD = (
     ("ray", "paraxial own path (ray optics)"),
