@@ -342,7 +342,9 @@ def test_cli_search_variants(tmp_path):
 def test_exact_search_and_tolerance(paper, dask_cluster):
     """--estimator trace: every candidate's figures are the exact tracer's
     (evaluate_exact of the same design, bit for bit), the same on one worker and on Dask;
-    a tolerance study traces its samples exactly too."""
+    a tolerance study traces its samples exactly too (only the holes erring: three
+    sensitivity rows traced, not thirteen, 15 -> 4 s measured; the estimator does not
+    depend on the sigmas)."""
     from opticalstamp.design import with_stack
     from opticalstamp.studies.tolerance import tolerance
     from opticalstamp.studies.verify import EXACT, evaluate_exact
@@ -357,6 +359,7 @@ def test_exact_search_and_tolerance(paper, dask_cluster):
     ex = evaluate_exact(d, dpi=200.0, near_mm=one.meta["near_mm"], seed=2)
     for k in ("dof_mm", "efficiency_ratio", "ghost_fraction", "diffraction_spill"):
         assert r[k] == ex[k], k
-    t = tolerance(paper, samples=2, seed=1, workers=1, estimator="trace")
+    holes = {"misregistration_um": 0.0, "hole_um": 1.0, "thickness_um": 0.0, "tilt_deg": 0.0}
+    t = tolerance(paper, samples=2, seed=1, workers=1, estimator="trace", sigmas=holes)
     assert t.meta["estimator"] == EXACT and "nominal_exact" not in t.meta
     assert t.nominal["estimator"] == EXACT
