@@ -18,6 +18,9 @@ physical parameters correlated beyond ``CORR_TOL`` are named too (:mod:`.fitiden
 
 from __future__ import annotations
 
+import os
+from contextlib import contextmanager
+
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import chi2 as chi2_dist
@@ -59,6 +62,10 @@ SINGLE = 0.99
 #: physical parameter).
 POLISH_CHI2 = 0.02
 POLISH_NFEV = 30
+#: Processes at most for the wave runs of a Jacobian (:func:`wave_pool`), and the fewest
+#: runs at once worth them.
+WAVE_WORKERS = 4
+POOL_MIN_RUNS = 6
 #: The forward model of each engine, in words (fit.json's ``optics``).
 FORWARD = (
     ("ray", "paraxial own path (ray optics)"),
@@ -167,10 +174,13 @@ def fit(
     # BLAS on one thread for the fit only (restored on leaving): the solves are small,
     # and OpenBLAS's spinning threads made a fit 5x slower on a loaded 2-core machine
     with threadpool_limits(limits=1, user_api="blas"):
-        return _fit(design, observations, free, pinned, starts, seed, max_nfev, opt)
+        if opt.engine != "wave":
+            return _fit(design, observations, free, pinned, starts, seed, max_nfev, opt)
+        with wave_pool() as pool:
+            return _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool)
 
 
-def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt) -> FitResult:
+def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=None):
     lay = layout_for(design, observations, free, pinned)
     zs = sorted({o.z_mm for o in observations})
     wave = None
@@ -181,7 +191,13 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt) -> Fit
     # first order in the free parameters
     model = spreads
     if wave is not None:
-        model = wave.correction(design, list(lay.params), lay.fixed, lay.free, zs, smear_of(design))
+        params, smear = list(lay.params), smear_of(design)
+        points = wave.points(params, lay.fixed, lay.free)
+        runs = _runs(pool, wave, [with_params(design, params, v) for v in points], zs, smear)
+        by_key = {v.tobytes(): r for v, r in zip(points, runs, strict=True)}
+        model = wave.correction(
+            design, params, lay.fixed, lay.free, zs, smear, wave_at=lambda v: by_key[v.tobytes()]
+        )
     prob = Problem(design, observations, lay, model=model)
     rng = np.random.default_rng([seed, 24])
     n_nu = sum(sl.stop - sl.start for sl, _ in lay.nuis)
@@ -267,7 +283,7 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt) -> Fit
         chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     info = opt.to_dict() | {"forward_model": dict(FORWARD)[opt.engine]}
     if wave is not None:
-        theta, prob, info["scheme"] = _polish(prob, theta, wave)
+        theta, prob, info["scheme"] = _polish(prob, theta, wave, pool)
         chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     msgs = said + [m for m in msgs if m not in said]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -310,12 +326,56 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt) -> Fit
     )
 
 
-def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel):
+def _wave_run(job):  # pragma: no cover - runs in the pool's processes
+    model, design, zs, smear = job
+    with threadpool_limits(limits=1, user_api="blas"):  # as the fit's own process
+        return model(design, zs, smear)
+
+
+@contextmanager
+def wave_pool():
+    """Processes (one a core, at most WAVE_WORKERS; none on one core) for the wave runs of
+    a Jacobian's columns, independent runs each on one core: a callable
+    ``(fn, jobs) -> results``, which starts them at its first call (spawning costs a few
+    seconds: a fit that never runs POOL_MIN_RUNS at once never starts them)."""
+    n = min(os.cpu_count() or 1, WAVE_WORKERS)
+    if n < 2:
+        yield None
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    from .runner import single_thread
+
+    made = []
+
+    def run(fn, jobs):
+        if not made:
+            ctx = mp.get_context("spawn")  # no fork of numba's threads
+            made.append(ProcessPoolExecutor(n, mp_context=ctx, initializer=single_thread))
+        return list(made[0].map(fn, jobs))
+
+    try:
+        yield run
+    finally:
+        for pool in made:
+            pool.shutdown()
+
+
+def _runs(pool, wave: WaveModel, designs: list, zs, smear: float) -> list:
+    """The wave model's spreads of each design: side by side on ``pool``, else in turn."""
+    if pool is None or len(designs) < POOL_MIN_RUNS:
+        return [wave(d, zs, smear) for d in designs]
+    return pool(_wave_run, [(wave, d, zs, smear) for d in designs])
+
+
+def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel, pool=None):
     """The wave model's optimum from ``theta`` (the optimum of the fast model corrected
     about the nominal design, :mod:`.fitwave`): a trust-region least squares
     (:func:`_local`) of the wave model's own residuals, its Jacobian by forward
-    differences of the wave model (1e-3 assembly scales: one wave run a physical column;
-    the nuisance columns on the same spreads), each point run once. It stops where the
+    differences of the wave model (1e-3 assembly scales: one wave run a physical column,
+    side by side on ``pool`` where there is one; the nuisance columns on the same
+    spreads), each point run once. It stops where the
     wave chi2 falls by less than POLISH_CHI2 in a step (or the step or the gradient
     vanishes), after POLISH_NFEV evaluations at most.
 
@@ -336,6 +396,25 @@ def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel):
 
     exact = Problem(design, obs, lay, hold=prob.hold, model=lambda d, z, s, phys: wave_at(phys))
     chi_start = float(np.sum(exact.residuals(theta) ** 2))
+    if pool is not None:  # each Jacobian's wave runs side by side, then read
+        serial = exact.jacobian
+
+        def jacobian(t):
+            nonlocal runs
+            todo = {}
+            for _, pt in exact.column_points(t):
+                phys = lay.physical(pt)
+                key = np.asarray(phys, dtype=np.float64).tobytes()
+                if key not in memo and key not in todo:
+                    todo[key] = with_params(design, params, phys)
+            for key, sp in zip(
+                todo, _runs(pool, wave, list(todo.values()), zs, smear), strict=True
+            ):
+                memo[key] = sp
+            runs += len(todo)
+            return serial(t)
+
+        exact.jacobian = jacobian
     r = _local(exact, theta, POLISH_NFEV, ftol=POLISH_CHI2 / max(chi_start, 1.0))
     chi_end = float(2 * r.cost)
     scheme = {

@@ -219,6 +219,18 @@ class Problem:
                     h[k] = 1e-4
         return h
 
+    def column_points(self, theta: np.ndarray) -> list[tuple[float, np.ndarray]]:
+        """(step, point) of each physical column's forward difference: a step of
+        :meth:`steps` up, or down where up would leave the parameter's bounds."""
+        h, out = self.steps(theta), []
+        for k in range(self.lay.n_free):
+            t = theta.copy()
+            p = self.lay.params[self.lay.free[k]]
+            step = h[k] if t[k] + h[k] <= p.hi else -h[k]
+            t[k] += step
+            out.append((step, t))
+        return out
+
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
         """Forward differences: every image for a physical column, one image's residuals
         for its own nuisance columns (the spreads reused); the black and white levels'
@@ -229,11 +241,7 @@ class Problem:
         starts = np.concatenate([[0], np.cumsum(sizes)])
         jac = np.zeros((r0.size, theta.size))
         h = self.steps(theta)
-        for k in range(self.lay.n_free):
-            t = theta.copy()
-            p = self.lay.params[self.lay.free[k]]
-            step = h[k] if t[k] + h[k] <= p.hi else -h[k]
-            t[k] += step
+        for k, (step, t) in enumerate(self.column_points(theta)):
             jac[:, k] = (self.residuals(t) - r0) / step
         for i, (sl, names) in enumerate(self.lay.nuis):
             a, b = starts[i], starts[i + 1]

@@ -136,6 +136,18 @@ class WaveModel:
         sp = self(design, zs, smear_um)
         return replace(self, reach_um={z: TABLE_ROOM * s.half_um for z, s in sp.items()})
 
+    def points(self, params: list[Param], phys: np.ndarray, free) -> list[np.ndarray]:
+        """The physical values at which :meth:`correction` runs the wave model: ``phys``
+        and a step of ``STEP`` assembly scales in each parameter of ``free`` (down where up
+        would leave its bounds)."""
+        at = np.asarray(phys, dtype=np.float64)
+        out = [at]
+        for j in free:
+            p = params[j]
+            out.append(at.copy())
+            out[-1][j] += STEP * p.scale if at[j] + STEP * p.scale <= p.hi else -STEP * p.scale
+        return out
+
     def correction(
         self,
         design: Design,
@@ -153,14 +165,8 @@ class WaveModel:
         already; default a run each)."""
         zs = [float(z) for z in zs]
         at = np.asarray(phys, dtype=np.float64)
-        points = [at]
-        steps = []
-        for j in free:
-            p = params[j]
-            h = STEP * p.scale if at[j] + STEP * p.scale <= p.hi else -STEP * p.scale
-            points.append(at.copy())
-            points[-1][j] += h
-            steps.append(h)
+        points = self.points(params, at, free)
+        steps = [(v - at)[j] for v, j in zip(points[1:], free, strict=True)]
         waves, fasts = [], []
         for v in points:
             d = with_params(design, params, v)

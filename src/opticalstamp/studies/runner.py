@@ -38,7 +38,7 @@ def task_key(payload: dict) -> str:
     return hashlib.sha256(blob).hexdigest()[:16]
 
 
-def _single_thread() -> None:  # pragma: no cover - runs in worker processes
+def single_thread() -> None:  # pragma: no cover - runs in worker processes
     import numba
 
     numba.set_num_threads(1)
@@ -158,7 +158,7 @@ def _run_pool(fn, todo, workers, retries, record) -> None:
     ctx = mp.get_context("spawn")  # no fork of numba's threads
 
     def pool(n: int):
-        return ProcessPoolExecutor(n, mp_context=ctx, initializer=_single_thread)
+        return ProcessPoolExecutor(n, mp_context=ctx, initializer=single_thread)
 
     def failed(key, payload, err, attempt) -> bool:
         """Record a final failure, or say that the task is to be tried again."""
