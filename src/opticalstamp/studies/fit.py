@@ -88,12 +88,16 @@ def _draw_start(prob: Problem, rng: np.random.Generator) -> np.ndarray:
     return theta
 
 
-def _local(prob: Problem, theta0: np.ndarray, max_nfev: int, ftol: float = 1e-8):
+def _local(prob: Problem, theta0: np.ndarray, max_nfev: int, ftol: float = 1e-8, scale=None):
     lo, hi = prob.bounds()
     pad = 1e-9 * (np.abs(np.where(np.isfinite(lo), lo, 0)) + 1)
     theta0 = np.clip(theta0, lo + pad, hi - pad)
     theta0 = prob.fit_nuisance(theta0)
-    scale = np.abs(prob.steps(theta0)) * 1e3
+    steps = np.abs(prob.steps(theta0)) * 1e3
+    if scale is None:
+        scale = steps
+    else:  # the caller's scales where they are usable, the steps' elsewhere
+        scale = np.where(np.isfinite(scale) & (scale > 0), scale, steps)
     return least_squares(
         prob.residuals,
         theta0,
@@ -283,7 +287,8 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
         chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     info = opt.to_dict() | {"forward_model": dict(FORWARD)[opt.engine]}
     if wave is not None:
-        theta, prob, info["scheme"] = _polish(prob, theta, wave, pool)
+        sd = np.sqrt(np.clip(np.diag(cov), 0, None))  # the starts' errors: the scales
+        theta, prob, info["scheme"] = _polish(prob, theta, wave, pool, sd)
         chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     msgs = said + [m for m in msgs if m not in said]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -369,7 +374,7 @@ def _runs(pool, wave: WaveModel, designs: list, zs, smear: float) -> list:
     return pool(_wave_run, [(wave, d, zs, smear) for d in designs])
 
 
-def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel, pool=None):
+def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel, pool=None, scale=None):
     """The wave model's optimum from ``theta`` (the optimum of the fast model corrected
     about the nominal design, :mod:`.fitwave`): a trust-region least squares
     (:func:`_local`) of the wave model's own residuals, its Jacobian by forward
@@ -377,7 +382,10 @@ def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel, pool=None):
     side by side on ``pool`` where there is one; the nuisance columns on the same
     spreads), each point run once. It stops where the
     wave chi2 falls by less than POLISH_CHI2 in a step (or the step or the gradient
-    vanishes), after POLISH_NFEV evaluations at most.
+    vanishes), after POLISH_NFEV evaluations at most. ``scale``: each parameter's scale of
+    the trust region, the starts' errors (on the captured start of the default free set:
+    chi2 3142.03 after 20 evaluations against 3142.60 with the assembly scales, and
+    3140.92 after 25, below where those stopped).
 
     Returns (theta, the wave model's problem, scheme: how it ran and converged).
     """
@@ -415,7 +423,7 @@ def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel, pool=None):
             return serial(t)
 
         exact.jacobian = jacobian
-    r = _local(exact, theta, POLISH_NFEV, ftol=POLISH_CHI2 / max(chi_start, 1.0))
+    r = _local(exact, theta, POLISH_NFEV, ftol=POLISH_CHI2 / max(chi_start, 1.0), scale=scale)
     chi_end = float(2 * r.cost)
     scheme = {
         "method": "trust-region least squares of the wave model's own residuals (its "
