@@ -197,7 +197,12 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
     if wave is not None:
         params, smear = list(lay.params), smear_of(design)
         points = wave.points(params, lay.fixed, lay.free)
-        runs = _runs(pool, wave, [with_params(design, params, v) for v in points], zs, smear)
+        designs = [with_params(design, params, v) for v in points]
+        runs = _runs(pool, wave, designs, zs, smear)
+        # a design of the correction with no light raises here, as a run of its own would
+        runs = [
+            r if r is not None else wave(d, zs, smear) for r, d in zip(runs, designs, strict=True)
+        ]
         by_key = {v.tobytes(): r for v, r in zip(points, runs, strict=True)}
         model = wave.correction(
             design, params, lay.fixed, lay.free, zs, smear, wave_at=lambda v: by_key[v.tobytes()]
@@ -334,7 +339,10 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
 def _wave_run(job):  # pragma: no cover - runs in the pool's processes
     model, design, zs, smear = job
     with threadpool_limits(limits=1, user_api="blas"):  # as the fit's own process
-        return model(design, zs, smear)
+        try:
+            return model(design, zs, smear)
+        except ValueError:  # no light: the fit's own process says so where it reads it
+            return None
 
 
 @contextmanager
@@ -368,10 +376,12 @@ def wave_pool():
 
 
 def _runs(pool, wave: WaveModel, designs: list, zs, smear: float) -> list:
-    """The wave model's spreads of each design: side by side on ``pool``, else in turn."""
+    """The wave model's spreads of each design (None where it raised a ValueError: no
+    light), side by side on ``pool``, else in turn."""
+    jobs = [(wave, d, zs, smear) for d in designs]
     if pool is None or len(designs) < POOL_MIN_RUNS:
-        return [wave(d, zs, smear) for d in designs]
-    return pool(_wave_run, [(wave, d, zs, smear) for d in designs])
+        return [_wave_run(j) for j in jobs]
+    return pool(_wave_run, jobs)
 
 
 def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel, pool=None, scale=None):
@@ -380,9 +390,9 @@ def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel, pool=None, scale=
     (:func:`_local`) of the wave model's own residuals, its Jacobian by forward
     differences of the wave model (1e-3 assembly scales: one wave run a physical column,
     side by side on ``pool`` where there is one; the nuisance columns on the same
-    spreads), each point run once. It stops where the
-    wave chi2 falls by less than POLISH_CHI2 in a step (or the step or the gradient
-    vanishes), after POLISH_NFEV evaluations at most. ``scale``: each parameter's scale of
+    spreads), each point run once. It stops where the wave chi2 falls by less than
+    POLISH_CHI2 in a step (or the step or the gradient vanishes), after POLISH_NFEV
+    evaluations at most. ``scale``: each parameter's scale of
     the trust region, the starts' errors (on the captured start of the default free set:
     chi2 3142.03 after 20 evaluations against 3142.60 with the assembly scales, and
     3140.92 after 25, below where those stopped).
@@ -414,12 +424,15 @@ def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel, pool=None, scale=
                 phys = lay.physical(pt)
                 key = np.asarray(phys, dtype=np.float64).tobytes()
                 if key not in memo and key not in todo:
-                    todo[key] = with_params(design, params, phys)
-            for key, sp in zip(
-                todo, _runs(pool, wave, list(todo.values()), zs, smear), strict=True
-            ):
-                memo[key] = sp
-            runs += len(todo)
+                    try:
+                        todo[key] = with_params(design, params, phys)
+                    except ValueError:  # a rule broken: the serial read says so
+                        continue
+            done = _runs(pool, wave, list(todo.values()), zs, smear)
+            for key, sp in zip(todo, done, strict=True):
+                if sp is not None:  # else the serial read raises and sends it back
+                    memo[key] = sp
+                    runs += 1
             return serial(t)
 
         exact.jacobian = jacobian
