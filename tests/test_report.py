@@ -9,7 +9,7 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from opticalstamp.cli.common import app
-from opticalstamp.report import build, studies
+from opticalstamp.report import build
 from opticalstamp.report.work import StudyBudget
 
 #: the background search and tolerance study's budget, by either optics: 8 designs over two
@@ -47,7 +47,6 @@ def _small(real):
 
 def test_report_writes_every_section(tmp_path, monkeypatch):
     monkeypatch.setattr(build, "report_work", _small(build.report_work))
-    monkeypatch.setattr(studies, "WAVE_STUDY_BUDGET", SMALL_STUDIES)  # by wave optics too
     out = tmp_path / "rep"
     res = CliRunner().invoke(
         app, ["report", "--design", "paper2016", "--out", str(out), "--rays", "262144"]

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 
@@ -164,6 +165,14 @@ def test_report_studies_follow_the_report_optics(paper, monkeypatch):
     budget = study_budget(work.budget, wave)
     assert args[3] == targs[4] == budget
     assert {k: getattr(budget, k) for k in WAVE_STUDY_BUDGET} == dict(WAVE_STUDY_BUDGET)
+    # a budget given below the wave caps is kept (by either optics), one above is cut
+    small = dataclasses.replace(
+        work.budget, search_population=4, search_generations=2, tolerance_samples=8
+    )
+    assert study_budget(small, wave) == small == study_budget(small, resolve_optics(paper, "ray"))
+    mixed = dataclasses.replace(work.budget, search_population=4)
+    assert study_budget(mixed, wave).search_population == 4
+    assert study_budget(mixed, wave).tolerance_samples == WAVE_STUDY_BUDGET["tolerance_samples"]
     ray = resolve_optics(paper, "ray")
     (_, rargs), (_, rtargs) = (study_jobs(paper, 0, False, work, 200.0, None, optics=ray)[k][0]
                                for k in ("search", "tolerance"))  # fmt: skip

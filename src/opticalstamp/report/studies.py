@@ -99,11 +99,13 @@ def job_order(jobs: dict, optics: Optics = RAY) -> list[str]:
 def study_budget(budget: StudyBudget, optics: Optics) -> StudyBudget:
     """The budget of the report's search and tolerance study by ``optics``: by wave
     optics each evaluation (the search's wave estimator) costs about six times a ray
-    surrogate's, so the designs searched and the samples drawn are cut to
-    :data:`WAVE_STUDY_BUDGET` (the report's time: benchmarks/bench_report.py)."""
+    surrogate's, so the designs searched and the samples drawn are cut to at most
+    :data:`WAVE_STUDY_BUDGET` (the report's time: benchmarks/bench_report.py); a
+    budget given smaller is kept."""
     if optics.engine != "wave":
         return budget
-    return dataclasses.replace(budget, **WAVE_STUDY_BUDGET)
+    caps = {k: min(getattr(budget, k), v) for k, v in WAVE_STUDY_BUDGET.items()}
+    return dataclasses.replace(budget, **caps)
 
 
 def join_job(name: str, results: list):
