@@ -19,6 +19,7 @@ physical parameters correlated beyond ``CORR_TOL`` are named too (:mod:`.fitiden
 from __future__ import annotations
 
 import os
+from collections import OrderedDict
 from contextlib import contextmanager
 
 import numpy as np
@@ -66,6 +67,8 @@ POLISH_NFEV = 30
 #: runs at once worth them.
 WAVE_WORKERS = 4
 POOL_MIN_RUNS = 6
+#: Wave runs kept for reading again (a Jacobian's, the points the optimiser revisits).
+MEMO_RUNS = 64
 #: The forward model of each engine, in words (fit.json's ``optics``).
 FORWARD = (
     ("ray", "paraxial own path (ray optics)"),
@@ -195,18 +198,9 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
     # first order in the free parameters
     model = spreads
     if wave is not None:
-        params, smear = list(lay.params), smear_of(design)
-        points = wave.points(params, lay.fixed, lay.free)
-        designs = [with_params(design, params, v) for v in points]
-        runs = _runs(pool, wave, designs, zs, smear)
-        # a design of the correction with no light raises here, as a run of its own would
-        runs = [
-            r if r is not None else wave(d, zs, smear) for r, d in zip(runs, designs, strict=True)
-        ]
-        by_key = {v.tobytes(): r for v, r in zip(points, runs, strict=True)}
-        model = wave.correction(
-            design, params, lay.fixed, lay.free, zs, smear, wave_at=lambda v: by_key[v.tobytes()]
-        )
+        at = _WaveRuns(wave, design, list(lay.params), zs, smear_of(design), pool)
+        at.prefetch(wave.points(at.params, lay.fixed, lay.free))
+        model = wave.correction(design, at.params, lay.fixed, lay.free, zs, at.smear, wave_at=at)
     prob = Problem(design, observations, lay, model=model)
     rng = np.random.default_rng([seed, 24])
     n_nu = sum(sl.stop - sl.start for sl, _ in lay.nuis)
@@ -293,7 +287,7 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
     info = opt.to_dict() | {"forward_model": dict(FORWARD)[opt.engine]}
     if wave is not None:
         sd = np.sqrt(np.clip(np.diag(cov), 0, None))  # the starts' errors: the scales
-        theta, prob, info["scheme"] = _polish(prob, theta, wave, pool, sd)
+        theta, prob, info["scheme"] = _polish(prob, theta, at, sd)
         chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     msgs = said + [m for m in msgs if m not in said]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -375,67 +369,77 @@ def wave_pool():
             pool.shutdown()
 
 
-def _runs(pool, wave: WaveModel, designs: list, zs, smear: float) -> list:
-    """The wave model's spreads of each design (None where it raised a ValueError: no
-    light), side by side on ``pool``, else in turn."""
-    jobs = [(wave, d, zs, smear) for d in designs]
-    if pool is None or len(designs) < POOL_MIN_RUNS:
-        return [_wave_run(j) for j in jobs]
-    return pool(_wave_run, jobs)
+class _WaveRuns:
+    """The wave model's spreads of the design at physical values of the fit's parameters,
+    each point run once (the last MEMO_RUNS kept): a call reads (or runs) one point,
+    :meth:`prefetch` runs the points not run yet side by side on the pool (batches of
+    POOL_MIN_RUNS or more; a point whose design breaks a rule or passes no light is left
+    to the call, which raises as a run of its own would)."""
+
+    def __init__(self, wave: WaveModel, design: Design, params: list, zs, smear, pool):
+        self.wave, self.design, self.params = wave, design, params
+        self.zs, self.smear, self.pool = zs, smear, pool
+        self.memo: OrderedDict[bytes, dict] = OrderedDict()
+        self.runs = 0
+
+    def _keep(self, key: bytes, spreads: dict) -> None:
+        self.memo[key] = spreads
+        self.runs += 1
+        while len(self.memo) > MEMO_RUNS:
+            self.memo.popitem(last=False)
+
+    def __call__(self, phys) -> dict:
+        key = np.asarray(phys, dtype=np.float64).tobytes()
+        if key not in self.memo:
+            d = with_params(self.design, self.params, phys)
+            self._keep(key, self.wave(d, self.zs, self.smear))
+        return self.memo[key]
+
+    def prefetch(self, points) -> None:
+        if self.pool is None:
+            return
+        todo = {}
+        for phys in points:
+            key = np.asarray(phys, dtype=np.float64).tobytes()
+            if key in self.memo or key in todo:
+                continue
+            try:
+                todo[key] = with_params(self.design, self.params, phys)
+            except ValueError:  # a rule broken: the call says so
+                continue
+        if len(todo) < POOL_MIN_RUNS:
+            return
+        jobs = [(self.wave, d, self.zs, self.smear) for d in todo.values()]
+        for key, sp in zip(todo, self.pool(_wave_run, jobs), strict=True):
+            if sp is not None:
+                self._keep(key, sp)
 
 
-def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel, pool=None, scale=None):
+def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns, scale=None):
     """The wave model's optimum from ``theta`` (the optimum of the fast model corrected
     about the nominal design, :mod:`.fitwave`): a trust-region least squares
     (:func:`_local`) of the wave model's own residuals, its Jacobian by forward
     differences of the wave model (1e-3 assembly scales: one wave run a physical column,
-    side by side on ``pool`` where there is one; the nuisance columns on the same
-    spreads), each point run once. It stops where the wave chi2 falls by less than
-    POLISH_CHI2 in a step (or the step or the gradient vanishes), after POLISH_NFEV
-    evaluations at most. ``scale``: each parameter's scale of
-    the trust region, the starts' errors (on the captured start of the default free set:
+    side by side on the pool where there is one; the nuisance columns on the same
+    spreads), each point run once (``runs``, the fit's). It stops where the wave chi2
+    falls by less than POLISH_CHI2 in a step (or the step or the gradient vanishes),
+    after POLISH_NFEV evaluations at most. ``scale``: each parameter's scale of the
+    trust region, the starts' errors (on the captured start of the default free set:
     chi2 3142.03 after 20 evaluations against 3142.60 with the assembly scales, and
     3140.92 after 25, below where those stopped).
 
     Returns (theta, the wave model's problem, scheme: how it ran and converged).
     """
-    design, obs, lay = prob.design, prob.obs, prob.lay
-    zs, smear = sorted({o.z_mm for o in obs}), smear_of(design)
-    params, memo = list(lay.params), {}
-    runs = 1 + len(prob.model.free)  # the correction's about the nominal design
-
-    def wave_at(phys):  # the wave model's spreads at physical values: each point run once
-        nonlocal runs
-        key = np.asarray(phys, dtype=np.float64).tobytes()
-        if key not in memo:
-            memo[key] = wave(with_params(design, params, phys), zs, smear)
-            runs += 1
-        return memo[key]
-
-    exact = Problem(design, obs, lay, hold=prob.hold, model=lambda d, z, s, phys: wave_at(phys))
+    lay = prob.lay
+    exact = Problem(prob.design, prob.obs, lay, hold=prob.hold, model=lambda d, z, s, v: runs(v))
     chi_start = float(np.sum(exact.residuals(theta) ** 2))
-    if pool is not None:  # each Jacobian's wave runs side by side, then read
-        serial = exact.jacobian
+    serial = exact.jacobian
 
-        def jacobian(t):
-            nonlocal runs
-            todo = {}
-            for _, pt in exact.column_points(t):
-                phys = lay.physical(pt)
-                key = np.asarray(phys, dtype=np.float64).tobytes()
-                if key not in memo and key not in todo:
-                    try:
-                        todo[key] = with_params(design, params, phys)
-                    except ValueError:  # a rule broken: the serial read says so
-                        continue
-            done = _runs(pool, wave, list(todo.values()), zs, smear)
-            for key, sp in zip(todo, done, strict=True):
-                if sp is not None:  # else the serial read raises and sends it back
-                    memo[key] = sp
-                    runs += 1
-            return serial(t)
+    def jacobian(t):  # each Jacobian's wave runs side by side first, then read
+        runs.prefetch(lay.physical(pt) for _, pt in exact.column_points(t))
+        return serial(t)
 
-        exact.jacobian = jacobian
+    exact.jacobian = jacobian
     r = _local(exact, theta, POLISH_NFEV, ftol=POLISH_CHI2 / max(chi_start, 1.0), scale=scale)
     chi_end = float(2 * r.cost)
     scheme = {
@@ -447,7 +451,7 @@ def _polish(prob: Problem, theta: np.ndarray, wave: WaveModel, pool=None, scale=
         "wave_chi2": [chi_start, chi_end],
         "converged": bool(r.status > 0),
         "stopped": str(r.message),
-        "wave_runs": runs,
+        "wave_runs": runs.runs,
         "jacobian": "the wave model's at the optimum (forward differences of 1e-3 assembly "
         "scales for the physical columns; the nuisance columns on the same spreads)",
     }
