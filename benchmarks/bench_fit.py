@@ -10,9 +10,10 @@ the depth of field (paraxial, design's DOF chart) of the truth, the nominal and 
 design, and the parameters held at nominal. Writes bench_fit.json.
 
 ``--wave``: the same charts scanned through wave kernels (``scan --kernel wave``) and
-fitted under wave optics (the prototype's ``--optics auto``; defect correction,
-docs/fit.md), default free set and three parameters; ``--runs N`` repeats each fit N
-times (the median is reported).
+fitted under wave optics (the prototype's ``--optics auto``; the starts on the
+corrected fast model, then the wave model's own geodesic least squares, docs/fit.md),
+default free set and three parameters; ``--runs N`` repeats each fit N times (the
+median is reported).
 """
 
 from __future__ import annotations

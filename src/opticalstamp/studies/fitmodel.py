@@ -141,20 +141,26 @@ def spread(design: Design, z_mm: float, smear_um: float, reach_um: float = 0.0) 
         lo, hi = paraxial_support(design, z_mm, axis)
         half = max(half, abs(lo), abs(hi))
     half = half + smear_um / 2 + 2 * TABLE_UM
-    n = max(int(np.ceil(half / TABLE_UM)), int(np.ceil(reach_um / TABLE_UM)))
-    u = np.arange(-n, n + 1) * TABLE_UM  # on a fixed grid: no jump as the support moves
+    m = int(np.ceil(half / TABLE_UM))  # the support's table ...
+    n = max(m, int(np.ceil(reach_um / TABLE_UM)))  # ... and the one asked for
+    u = np.arange(-m, m + 1) * TABLE_UM  # on a fixed grid: no jump as the support moves
     cx = paraxial_cumulative(design, z_mm, u, 0)
     subs = ((np.arange(SMEAR_SUBS) + 0.5) / SMEAR_SUBS - 0.5) * smear_um
     # P(Y - sub <= v) = mean over sub of C_y(v + sub); C_y is exact on the table's grid
     # and linear between its points (0.25 um apart)
     pad = int(np.ceil(smear_um / 2 / TABLE_UM)) + 1
-    uy = np.arange(-n - pad, n + pad + 1) * TABLE_UM
+    uy = np.arange(-m - pad, m + pad + 1) * TABLE_UM
     cy_grid = paraxial_cumulative(design, z_mm, uy, 1)
     cy = np.mean([np.interp(u + s, uy, cy_grid) for s in subs], axis=0)
     gx, gy = cx[-1], cy[-1]
     if not (gx > 0 and gy > 0):
         raise ValueError(f"no own-path light reaches the pixel at Z = {z_mm:g} mm")
-    return Spread(u, cx / gx, cy / gy, max(half, reach_um))
+    cx, cy = cx / gx, cy / gy
+    if n > m:  # beyond the support the cumulatives are 0 and 1: padded, not computed
+        ends = np.zeros(n - m), np.ones(n - m)
+        cx, cy = np.concatenate([ends[0], cx, ends[1]]), np.concatenate([ends[0], cy, ends[1]])
+        u = np.arange(-n, n + 1) * TABLE_UM
+    return Spread(u, cx, cy, max(half, reach_um))
 
 
 def spreads(design: Design, zs, smear_um: float, phys=None) -> dict[float, Spread]:

@@ -108,7 +108,7 @@ def fit_optics(design: Design, optics: dict) -> str | None:
 
 def optics_words(o: dict | None) -> str:
     """A fit's optics in words (its ``optics`` record, fit.json's): which forward model,
-    why, and under wave optics how its defect correction converged."""
+    why, and under wave optics how its own least squares converged."""
     o = o or {}
     if o.get("engine", "ray") != "wave":
         why = o.get("reason", "the fit's model before it chose its optics")

@@ -1,0 +1,142 @@
+"""Levenberg-Marquardt with geodesic acceleration (Transtrum & Sethna, arXiv:1201.5885,
+2012): the least squares of the wave fit's own model (issue 24), whose minimum lies at
+the end of a long, curved, narrow valley.
+
+A plain trust-region method (scipy's ``trf``) crawls along such a valley: its linear
+model of the residuals holds only over a short step, so each Jacobian (one wave run a
+physical parameter) buys a small step. The geodesic acceleration adds the second-order
+term of the residuals along the step, measured by one more run: r'' = (2/h)((r(x + h v)
+- r(x))/h - J v), a = -(J^T J + lambda D)^-1 J^T r'', step v + a/2, so that the step
+follows the valley's bend. A step whose acceleration is large against its velocity
+(2|a|/|v| > ``alpha``, D-norm) is not trusted: the damping rises and the step is
+shorter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class LMResult:
+    """What :func:`geodesic_lm` found: ``x``, its ``cost`` (half the sum of squares, as
+    scipy's), evaluations of the residuals (``nfev``) and of the Jacobian (``njev``),
+    ``status`` (> 0 converged, 0 out of evaluations, < 0 no step lowers the cost at any
+    damping) and ``message``."""
+
+    x: np.ndarray
+    cost: float
+    nfev: int
+    njev: int
+    status: int
+    message: str
+
+
+def _solve(m: np.ndarray, b: np.ndarray) -> np.ndarray:
+    try:
+        return np.linalg.solve(m, b)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(m, b, rcond=None)[0]
+
+
+def geodesic_lm(
+    fun: Callable[[np.ndarray], np.ndarray],
+    x0: np.ndarray,
+    jac: Callable[[np.ndarray], np.ndarray],
+    bounds: tuple[np.ndarray, np.ndarray],
+    *,
+    max_nfev: int = 100,
+    max_njev: int = 30,
+    chi2_tol: float = 0.02,
+    h: float = 0.1,
+    alpha: float = 0.75,
+    lam0: float = 1e-3,
+    lam_max: float = 1e12,
+    ahead: Callable[[list[np.ndarray]], None] | None = None,
+) -> LMResult:
+    """Minimise sum(fun(x)^2) within ``bounds`` from ``x0``.
+
+    Each iteration: the velocity v = -(J^T J + lambda D)^-1 J^T r; the second
+    directional derivative of the residuals along it, central (r(x + h v) - 2 r(x) +
+    r(x - h v)) / h^2 (two evaluations, which ``ahead`` may run side by side: it is
+    given both points first; a forward difference against J v would carry the
+    Jacobian's own difference error, which dominates as the steps shrink); the
+    acceleration a from it as v from r; the step v + a/2, tried only if 2|a|/|v| <=
+    ``alpha`` (D-norm). D is the largest diagonal of J^T J met so far (Marquardt's
+    scaling, invariant to the parameters' units); lambda / 3 after an accepted step, x 2
+    after a refused one or one whose acceleration is not trusted. Steps are clipped to
+    the bounds.
+
+    Stops (status): 1, the Gauss-Newton decrement g^T (J^T J)^+ g (the fall of
+    sum(fun^2) that the linear model still predicts) is below ``chi2_tol``; 2, the
+    damped step's predicted fall is below it (no step the model is trusted for would
+    lower sum(fun^2) by more: a flat, non-quadratic direction); 3, an accepted step
+    lowered it by less than ``chi2_tol``; 0, ``max_nfev`` evaluations or ``max_njev``
+    Jacobians made; -1, lambda beyond ``lam_max``.
+    """
+    lo, hi = (np.asarray(b, dtype=float) for b in bounds)
+    pad = 1e-9 * (np.abs(np.where(np.isfinite(lo), lo, 0)) + 1)
+    lo_in, hi_in = lo + pad, hi - pad
+
+    def clip(x):
+        return np.clip(x, lo_in, hi_in)
+
+    x = clip(np.asarray(x0, dtype=float))
+    r = fun(x)
+    c = float(r @ r)
+    nfev, njev, lam = 1, 0, lam0
+    dmax = np.zeros(x.size)
+    jj = None
+    status, message = 0, "the most evaluations allowed were made"
+    while nfev + 3 <= max_nfev:
+        if jj is None:
+            if njev >= max_njev:
+                message = "the most Jacobians allowed were made"
+                break
+            jj = jac(x)
+            njev += 1
+            a_mat, g = jj.T @ jj, jj.T @ r
+            dmax = np.maximum(dmax, np.diag(a_mat))
+            d = np.where(dmax > 0, dmax, 1.0)
+            s = 1 / np.sqrt(d)
+            gs = g * s
+            decrement = float(gs @ np.linalg.pinv(a_mat * np.outer(s, s), rcond=1e-12) @ gs)
+            if decrement < chi2_tol:
+                status = 1
+                message = f"the Gauss-Newton decrement {decrement:.3g} < {chi2_tol:g}"
+                break
+        m = a_mat + lam * np.diag(d)
+        v = -_solve(m, g)
+        pred = -float(2 * g @ v + v @ a_mat @ v)
+        if pred < chi2_tol:
+            status = 2
+            message = f"the damped step's predicted fall {pred:.3g} < {chi2_tol:g}"
+            break
+        pts = [clip(x + h * v), clip(x - h * v)]
+        if ahead is not None:
+            ahead(pts)
+        rp, rm = fun(pts[0]), fun(pts[1])
+        nfev += 2
+        acc = -_solve(m, jj.T @ ((rp - 2 * r + rm) / h**2))
+        if 2 * np.sqrt(acc @ (d * acc)) <= alpha * np.sqrt(v @ (d * v)):
+            xn = clip(x + v + acc / 2)
+            rn = fun(xn)
+            nfev += 1
+            cn = float(rn @ rn)
+            if cn < c:
+                fall = c - cn
+                x, r, c = xn, rn, cn
+                jj, lam = None, max(lam / 3, 1e-12)
+                if fall < chi2_tol:
+                    status = 3
+                    message = f"a step lowered the sum of squares by {fall:.3g} < {chi2_tol:g}"
+                    break
+                continue
+        lam *= 2
+        if lam > lam_max:
+            status, message = -1, "no step lowers the sum of squares"
+            break
+    return LMResult(x, c / 2, nfev, njev, status, message)

@@ -1,0 +1,84 @@
+"""Levenberg-Marquardt with geodesic acceleration (studies/fitlm.py), the wave fit's own
+least squares: checked against closed-form minima and scipy's least squares."""
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from opticalstamp.studies.fitlm import geodesic_lm
+
+
+def _rosen(x):
+    return np.array([10 * (x[1] - x[0] ** 2), 1 - x[0]])
+
+
+def _rosen_jac(x):
+    return np.array([[-20 * x[0], 10.0], [-1.0, 0.0]])
+
+
+def test_rosenbrock_valley_to_its_minimum():
+    """The curved valley the method is made for: from (-1.2, 1) to (1, 1), the sum of
+    squares 0 there."""
+    inf = np.full(2, np.inf)
+    r = geodesic_lm(_rosen, np.array([-1.2, 1.0]), _rosen_jac, (-inf, inf), chi2_tol=1e-14)
+    assert r.status > 0, r.message
+    assert np.allclose(r.x, [1.0, 1.0], atol=1e-5)
+    assert r.cost < 1e-10
+    assert r.njev < 40
+
+
+def _sloppy():
+    """A sum of three decaying exponentials (a sloppy model: rates hard to tell apart)
+    sampled with fixed noise."""
+    t = np.linspace(0, 5, 60)
+    true = np.array([1.0, 0.5, 2.0, 1.5, 0.7, 4.0])  # amplitude, rate pairs
+    rng = np.random.default_rng(3)
+    y = sum(true[2 * i] * np.exp(-true[2 * i + 1] * t) for i in range(3))
+    y = y + 1e-3 * rng.standard_normal(t.size)
+
+    def fun(p):
+        return (sum(p[2 * i] * np.exp(-p[2 * i + 1] * t) for i in range(3)) - y) / 1e-3
+
+    def jac(p):
+        cols = []
+        for i in range(3):
+            e = np.exp(-p[2 * i + 1] * t)
+            cols += [e / 1e-3, -p[2 * i] * t * e / 1e-3]
+        return np.column_stack(cols)
+
+    return fun, jac, np.array([0.8, 0.4, 1.8, 1.2, 0.9, 3.0])
+
+
+def test_sloppy_model_reaches_scipys_minimum():
+    fun, jac, x0 = _sloppy()
+    lo, hi = np.zeros(6), np.full(6, 10.0)
+    ref = least_squares(fun, x0, jac=jac, bounds=(lo, hi), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    r = geodesic_lm(fun, x0, jac, (lo, hi), max_nfev=400, max_njev=200, chi2_tol=1e-6)
+    assert r.status > 0, r.message
+    assert abs(2 * r.cost - 2 * ref.cost) < 1e-3  # chi2 ~ 54: the same minimum
+    assert np.allclose(r.x, ref.x, rtol=1e-3, atol=1e-3)
+
+
+def test_bounds_hold_and_acceleration_points_are_announced():
+    """Every evaluation lies within the bounds, the minimum on a bound stays there, and
+    ``ahead`` is told both acceleration points before they are evaluated."""
+    seen, told = [], []
+
+    def fun(x):
+        seen.append(x.copy())
+        return np.array([x[0] - 3.0, 2 * (x[1] + 1.0)])
+
+    def jac(x):
+        return np.array([[1.0, 0.0], [0.0, 2.0]])
+
+    lo, hi = np.array([-1.0, 0.0]), np.array([1.0, 5.0])
+    r = geodesic_lm(fun, np.array([0.0, 2.0]), jac, (lo, hi), ahead=told.extend)
+    assert np.allclose(r.x, [1.0, 0.0], atol=1e-6)
+    assert all(np.all(x >= lo) and np.all(x <= hi) for x in seen)
+    assert told and all(any(np.array_equal(t, s) for s in seen) for t in told)
+
+
+def test_out_of_jacobians_is_not_converged():
+    inf = np.full(2, np.inf)
+    r = geodesic_lm(_rosen, np.array([-1.2, 1.0]), _rosen_jac, (-inf, inf), max_njev=2)
+    assert r.status == 0 and r.njev == 2
+    assert "Jacobians" in r.message
