@@ -170,6 +170,12 @@ def traced_kernels(
 #: bin of the wave engine's near-field maps that wave kernels are made of (um): the traced
 #: kernels' (maps.traced_map_sets fine_bin_um)
 WAVE_BIN_UM = 4.0
+#: separable terms of a wave map kept down to this fraction of the first singular value:
+#: the prototype's near crosstalk from the staggered row (300-600 um away in y) is a
+#: second term of 3e-4, 0.06 % of the light, which puts the map's y centroid at +0.11 to
+#: +0.23 um (0.5-3.5 mm); the traced kernels' 0.02 dropped it, and a fit of scans made so
+#: put the layers' y shifts 15 errors off (docs/fit.md)
+WAVE_RANK_TOL = 1e-4
 
 
 def wave_near_kernels(
@@ -178,7 +184,8 @@ def wave_near_kernels(
     """One row's near-field kernels by wave optics at each height, the stack traversed
     once: the wave engine's map of the light in its band (own path, its diffraction,
     near crosstalk; :func:`~opticalstamp.analysis.wavespectral.wave_response_spectral`,
-    the design's light) on ``WAVE_BIN_UM`` bins, SVD-separated (partial SVD).
+    the design's light) on ``WAVE_BIN_UM`` bins, SVD-separated (partial SVD, terms down
+    to ``WAVE_RANK_TOL`` of the first).
     :func:`stamp_kernel_sets` adds the traced ghost map of the light beyond the band
     (traced with ``outside_band``): the join of :mod:`~opticalstamp.analysis.responsivity`.
     ``fresnel``: the wave engine's Fresnel losses (:mod:`~opticalstamp.analysis.wavefilter`),
@@ -197,7 +204,9 @@ def wave_near_kernels(
     with one_blas_thread():  # thin products: BLAS's threads only spin (the engine's rule)
         for iz, z in enumerate(zs):
             edges, m = r.spot(iz, WAVE_BIN_UM)
-            k = map_kernel(z, m * WAVE_BIN_UM**2, float(edges[0]), WAVE_BIN_UM, partial=True)
+            k = map_kernel(
+                z, m * WAVE_BIN_UM**2, float(edges[0]), WAVE_BIN_UM, WAVE_RANK_TOL, partial=True
+            )
             out.append(k)
     return out
 

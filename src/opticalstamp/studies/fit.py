@@ -263,44 +263,66 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
     said: list[str] = []  # why each held parameter or combination is held
     rows = np.zeros((0, lay.n_free))  # the combinations held, in assembly scales
     extra = set(apart)  # held in the first round with the single directions
-    for _ in range(HOLD_ROUNDS):
-        if not len(weak) and not extra:
-            break
-        names_now = [lay.params[j].name for j in lay.free]
-        # a direction along one parameter: that parameter held (pinned) at nominal;
-        # a combination of several: held at nominal as a combination
-        single = {int(np.argmax(np.abs(v))) for v in weak if np.abs(v).max() > SINGLE}
-        single, extra = single | extra, set()
-        for k in sorted(single):
-            j = lay.free[k]
-            held[names_now[k]] = float(lay.params[j].nominal)
-            why = [m for m in msgs if names_in(m, names_now[k]) and "hard to tell" not in m]
-            said += [m for m in why if m not in said] or [f"{names_now[k]}: {HELD}"]
-        keep = [k for k in range(lay.n_free) if k not in single]
-        new = [
-            v[keep] / np.linalg.norm(v[keep])
-            for v in weak
-            if np.abs(v).max() <= SINGLE and np.linalg.norm(v[keep]) > 0.5
-        ]
-        for v in new:
-            combos.append(combination(v, [names_now[k] for k in keep]))
-            terms = " ".join(f"{c:+.2f} {n}" for n, c in combos[-1].items())
-            said.append(
-                f"the combination {terms} (each in its assembly scale) is {HELD}: its "
-                "members' values and errors are given it; pin one to choose otherwise"
+
+    def hold_rounds(theta, prob, est, refit):
+        """Hold what ``est`` (an :func:`_estimate`) finds undetermined and fit the rest
+        again by ``refit(problem, start) -> (theta, problem)``, up to HOLD_ROUNDS times."""
+        nonlocal lay, rows, extra
+        msgs, weak = est[4], est[6]
+        for _ in range(HOLD_ROUNDS):
+            if not len(weak) and not extra:
+                break
+            names_now = [lay.params[j].name for j in lay.free]
+            # a direction along one parameter: that parameter held (pinned) at nominal;
+            # a combination of several: held at nominal as a combination
+            single = {int(np.argmax(np.abs(v))) for v in weak if np.abs(v).max() > SINGLE}
+            single, extra = single | extra, set()
+            for k in sorted(single):
+                j = lay.free[k]
+                held[names_now[k]] = float(lay.params[j].nominal)
+                why = [m for m in msgs if names_in(m, names_now[k]) and "hard to tell" not in m]
+                said.extend([m for m in why if m not in said] or [f"{names_now[k]}: {HELD}"])
+            keep = [k for k in range(lay.n_free) if k not in single]
+            new = [
+                v[keep] / np.linalg.norm(v[keep])
+                for v in weak
+                if np.abs(v).max() <= SINGLE and np.linalg.norm(v[keep]) > 0.5
+            ]
+            for v in new:
+                combos.append(combination(v, [names_now[k] for k in keep]))
+                terms = " ".join(f"{c:+.2f} {n}" for n, c in combos[-1].items())
+                said.append(
+                    f"the combination {terms} (each in its assembly scale) is {HELD}: its "
+                    "members' values and errors are given it; pin one to choose otherwise"
+                )
+            rows = np.vstack([rows[:, keep]] + [v[None] for v in new])
+            lay = layout_for(
+                design, observations, [names_now[k] for k in keep], dict(pinned or {}) | held
             )
-        rows = np.vstack([rows[:, keep]] + [v[None] for v in new])
-        lay = layout_for(
-            design, observations, [names_now[k] for k in keep], dict(pinned or {}) | held
-        )
-        prob = Problem(design, observations, lay, hold=rows, model=model)
-        t0 = np.concatenate([theta[keep], theta[len(names_now) :]])
-        theta = _local(prob, t0, max_nfev).x
-        chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
+            prob = Problem(design, observations, lay, hold=rows, model=model)
+            t0 = np.concatenate([theta[keep], theta[len(names_now) :]])
+            theta, prob = refit(prob, t0)
+            est = _estimate(prob, theta)
+            msgs, weak = est[4], est[6]
+        return theta, prob, est
+
+    est = (chi2, dof, scale2, cov, msgs, blind, weak)
+    theta, prob, est = hold_rounds(theta, prob, est, lambda p, t0: (_local(p, t0, max_nfev).x, p))
     info = opt.to_dict() | {"forward_model": dict(FORWARD)[opt.engine]}
     if wave is not None:
-        theta, prob, info["scheme"] = _polish(prob, theta, at)
-        chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
+        # the wave model's own optimum; what it finds undetermined there (the y shifts'
+        # tilt, flat and not quadratic, can wander far) is held and polished again
+        schemes = []
+
+        def polish(p, t0):
+            t, exact, sc = _polish(p, _on_held(p, t0), at)
+            schemes.append(sc)
+            return t, exact
+
+        theta, prob = polish(prob, theta)
+        theta, prob, est = hold_rounds(theta, prob, _estimate(prob, theta), polish)
+        info["scheme"] = _schemes(schemes)
+    chi2, dof, scale2, cov, msgs, blind, weak = est
     msgs = said + [m for m in msgs if m not in said]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     nf = lay.n_free
@@ -425,6 +447,37 @@ class _WaveRuns:
         for key, sp in zip(todo, self.pool(_wave_run, jobs), strict=True):
             if sp is not None:
                 self._keep(key, sp)
+
+
+def _on_held(prob: Problem, theta: np.ndarray) -> np.ndarray:
+    """``theta`` with its physical part moved onto the combinations ``prob`` holds at
+    nominal (its distance from nominal, in assembly scales, without its component along
+    each held direction): the wave polish starts there, not 10^4 x that component away
+    in its residuals."""
+    if not prob.hold.shape[0]:
+        return theta
+    lay = prob.lay
+    nf = lay.n_free
+    scale = np.array([lay.params[j].scale for j in lay.free])
+    nominal = lay.fixed[list(lay.free)]
+    d = (theta[:nf] - nominal) / scale
+    q, _ = np.linalg.qr(prob.hold.T)
+    out = theta.copy()
+    out[:nf] = nominal + scale * (d - q @ (q.T @ d))
+    return out
+
+
+def _schemes(schemes: list[dict]) -> dict:
+    """One record of the wave fit's polishes (the first, and one after each round of
+    holding what it found undetermined): counts summed, chi2 from the first's start to
+    the last's end, converged and why stopped the last's."""
+    last = schemes[-1]
+    out = dict(last)
+    for key in ("evaluations", "jacobians"):
+        out[key] = sum(sc[key] for sc in schemes)
+    out["wave_chi2"] = [schemes[0]["wave_chi2"][0], last["wave_chi2"][1]]
+    out["polishes"] = len(schemes)
+    return out
 
 
 def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns):
