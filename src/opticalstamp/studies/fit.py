@@ -59,9 +59,9 @@ PRIOR_SCALES = 1.0
 #: that one parameter's: the parameter is held (pinned) at nominal.
 SINGLE = 0.99
 #: The wave model's own least squares (:func:`_polish`) stops where no step it trusts
-#: would lower its chi2 by this, or a step lowered it by less; or after POLISH_JACOBIANS
-#: Jacobians (each one wave run a physical parameter) or POLISH_NFEV other evaluations
-#: (each one wave run).
+#: would lower its chi2 by this (or its Gauss-Newton decrement is below it); or after
+#: POLISH_JACOBIANS Jacobians (each one wave run a physical parameter) or POLISH_NFEV
+#: other evaluations (each one wave run).
 POLISH_CHI2 = 0.1
 POLISH_JACOBIANS = 25
 POLISH_NFEV = 120
@@ -488,8 +488,8 @@ def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns):
     run a physical column, side by side on the pool where there is one; the nuisance
     columns on the same spreads), the acceleration's two runs side by side too, each
     point run once (``runs``, the fit's). It stops where no step the model is trusted
-    for would lower the wave chi2 by POLISH_CHI2 (or a step lowered it by less), after
-    POLISH_JACOBIANS Jacobians at most.
+    for would lower the wave chi2 by POLISH_CHI2, after POLISH_JACOBIANS Jacobians at
+    most.
 
     Returns (theta, the wave model's problem, scheme: how it ran and converged).
     """

@@ -73,9 +73,11 @@ def geodesic_lm(
     Stops (status): 1, the Gauss-Newton decrement g^T (J^T J)^+ g (the fall of
     sum(fun^2) that the linear model still predicts) is below ``chi2_tol``; 2, the
     damped step's predicted fall is below it (no step the model is trusted for would
-    lower sum(fun^2) by more: a flat, non-quadratic direction); 3, an accepted step
-    lowered it by less than ``chi2_tol``; 0, ``max_nfev`` evaluations or ``max_njev``
-    Jacobians made; -1, lambda beyond ``lam_max``.
+    lower sum(fun^2) by more: a flat, non-quadratic direction); 0, ``max_nfev``
+    evaluations or ``max_njev`` Jacobians made; -1, lambda beyond ``lam_max``. A step
+    that lowered it by little is no stop: along a curved valley every step does (the
+    wave fit's default free set stopped so at chi2 2921.1, 3 above a fit of three of its
+    parameters with the rest at nominal).
     """
     lo, hi = (np.asarray(b, dtype=float) for b in bounds)
     pad = 1e-9 * (np.abs(np.where(np.isfinite(lo), lo, 0)) + 1)
@@ -126,14 +128,9 @@ def geodesic_lm(
             rn = fun(xn)
             nfev += 1
             cn = float(rn @ rn)
-            if cn < c:
-                fall = c - cn
+            if cn < c:  # a small fall is no stop: in a curved valley the falls are small
                 x, r, c = xn, rn, cn
                 jj, lam = None, max(lam / 3, 1e-12)
-                if fall < chi2_tol:
-                    status = 3
-                    message = f"a step lowered the sum of squares by {fall:.3g} < {chi2_tol:g}"
-                    break
                 continue
         lam *= 2
         if lam > lam_max:
