@@ -315,7 +315,8 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
         schemes = []
 
         def polish(p, t0):
-            t, exact, sc = _polish(p, _on_held(p, t0), at)
+            # onto the held combinations: not 10^4 x their distance away in the residuals
+            t, exact, sc = _polish(p, p.onto_held(t0), at)
             schemes.append(sc)
             return t, exact
 
@@ -449,24 +450,6 @@ class _WaveRuns:
                 self._keep(key, sp)
 
 
-def _on_held(prob: Problem, theta: np.ndarray) -> np.ndarray:
-    """``theta`` with its physical part moved onto the combinations ``prob`` holds at
-    nominal (its distance from nominal, in assembly scales, without its component along
-    each held direction): the wave polish starts there, not 10^4 x that component away
-    in its residuals."""
-    if not prob.hold.shape[0]:
-        return theta
-    lay = prob.lay
-    nf = lay.n_free
-    scale = np.array([lay.params[j].scale for j in lay.free])
-    nominal = lay.fixed[list(lay.free)]
-    d = (theta[:nf] - nominal) / scale
-    q, _ = np.linalg.qr(prob.hold.T)
-    out = theta.copy()
-    out[:nf] = nominal + scale * (d - q @ (q.T @ d))
-    return out
-
-
 def _schemes(schemes: list[dict]) -> dict:
     """One record of the wave fit's polishes (the first, and one after each round of
     holding what it found undetermined): counts summed, chi2 from the first's start to
@@ -503,6 +486,8 @@ def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns):
         runs.prefetch(lay.physical(pt) for _, pt in exact.column_points(t))
         return serial(t)
 
+    exact.jacobian = jacobian  # the errors' Jacobian (_estimate) too
+
     def ahead(points):
         runs.prefetch((lay.physical(p) for p in points), min_runs=2)
 
@@ -510,7 +495,7 @@ def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns):
     r = geodesic_lm(
         exact.residuals,
         theta,
-        jacobian,
+        exact.jacobian,
         (lo, hi),
         max_nfev=POLISH_NFEV,
         max_njev=POLISH_JACOBIANS,

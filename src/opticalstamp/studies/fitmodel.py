@@ -117,6 +117,16 @@ class Spread:
     cy: np.ndarray
     half_um: float
 
+    def widened(self, n: int) -> Spread:
+        """This spread's table padded (its cumulatives 0 before, 1 after) out to k
+        ``TABLE_UM``, |k| <= n (itself where it reaches that far); ``half_um`` kept."""
+        pad = n - (self.u.size - 1) // 2
+        if pad <= 0:
+            return self
+        u = np.arange(-n, n + 1) * TABLE_UM
+        cx, cy = (np.pad(c, pad, constant_values=(0.0, 1.0)) for c in (self.cx, self.cy))
+        return Spread(u, cx, cy, self.half_um)
+
     def nodes(self, cum: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(positions, weights) of a distribution from its cumulative on ``u``, on
         CROSS_UM bins of a fixed grid (each bin a node at its centre; the bins so fixed
@@ -155,12 +165,8 @@ def spread(design: Design, z_mm: float, smear_um: float, reach_um: float = 0.0) 
     gx, gy = cx[-1], cy[-1]
     if not (gx > 0 and gy > 0):
         raise ValueError(f"no own-path light reaches the pixel at Z = {z_mm:g} mm")
-    cx, cy = cx / gx, cy / gy
-    if n > m:  # beyond the support the cumulatives are 0 and 1: padded, not computed
-        ends = np.zeros(n - m), np.ones(n - m)
-        cx, cy = np.concatenate([ends[0], cx, ends[1]]), np.concatenate([ends[0], cy, ends[1]])
-        u = np.arange(-n, n + 1) * TABLE_UM
-    return Spread(u, cx, cy, max(half, reach_um))
+    # beyond the support the cumulatives are 0 and 1: padded, not computed
+    return Spread(u, cx / gx, cy / gy, max(half, reach_um)).widened(n)
 
 
 def spreads(design: Design, zs, smear_um: float, phys=None) -> dict[float, Spread]:

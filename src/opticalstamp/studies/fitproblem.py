@@ -173,12 +173,28 @@ class Problem:
         self.prior = float(prior)
         self._cache: dict[bytes, list] = {}
 
+    def offset(self, theta: np.ndarray) -> np.ndarray:
+        """The free physical parameters' distance from nominal, in assembly scales."""
+        return (theta[: self.lay.n_free] - self._nominal) / self._scales
+
     def penalty(self, theta: np.ndarray) -> np.ndarray:
         """The held directions' residuals (HOLD_WEIGHT x their distance from nominal) and
         the prior's."""
-        d = (theta[: self.lay.n_free] - self._nominal) / self._scales
+        d = self.offset(theta)
         out = HOLD_WEIGHT * self.hold @ d
         return np.concatenate([out, self.prior * d]) if self.prior else out
+
+    def onto_held(self, theta: np.ndarray) -> np.ndarray:
+        """``theta`` with its physical part moved onto the combinations held at nominal
+        (its :meth:`offset` without its component along each held direction), where its
+        penalty is 0."""
+        if not self.hold.shape[0]:
+            return theta
+        d = self.offset(theta)
+        q, _ = np.linalg.qr(self.hold.T)
+        out = theta.copy()
+        out[: self.lay.n_free] = self._nominal + self._scales * (d - q @ (q.T @ d))
+        return out
 
     def spreads(self, phys: np.ndarray) -> list:
         """Each observation's spread at these physical values, or None where the design

@@ -175,8 +175,8 @@ class WaveModel:
         table = {}
         for z in zs:
             n = max((x[z].u.size - 1) // 2 for x in waves + fasts)
-            w = [_widen(x[z], n) for x in waves]
-            f = [_widen(x[z], n) for x in fasts]
+            w = [x[z].widened(n) for x in waves]
+            f = [x[z].widened(n) for x in fasts]
             base = (w[0].cx - f[0].cx, w[0].cy - f[0].cy)
             size = base[0].size
             sx, sy = np.zeros((len(steps), size)), np.zeros((len(steps), size))
@@ -185,19 +185,6 @@ class WaveModel:
                 sy[k] = (wk.cy - w[0].cy - fk.cy + f[0].cy) / h
             table[z] = (base, (sx, sy))
         return Corrected(table, at, tuple(free))
-
-
-def _widen(sp: Spread, n: int) -> Spread:
-    """A spread's table padded (0 before, 1 after) out to k ``TABLE_UM``, |k| <= n."""
-    m = (sp.u.size - 1) // 2
-    pad = max(n - m, 0)
-
-    def ext(c):
-        return np.concatenate([np.zeros(pad), c, np.ones(pad)])
-
-    k = m + pad
-    u = np.arange(-k, k + 1) * TABLE_UM
-    return Spread(u, ext(sp.cx), ext(sp.cy), k * TABLE_UM)
 
 
 @dataclass(frozen=True)
