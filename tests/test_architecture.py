@@ -284,3 +284,39 @@ def test_modules_stay_under_the_length_rule():
         if (n := len(py.read_text().splitlines())) > MAX_LINES and m not in LONG_MODULES
     }
     assert long == {}
+
+
+#: the modules that know where a batch's rays are (issue 22's tally layer)
+TALLY_MODULES = ("analysis.tallies", "analysis.cuda_tallies")
+
+
+def _device_branches(module: str, py: Path, tree: ast.Module) -> list[str]:
+    """Where ``module`` asks where rays were traced (an attribute ``.device``) or reaches
+    for the GPU's tallies (an import of analysis.cuda_tallies)."""
+    out = [
+        f"{module}:{node.lineno} {ast.unparse(node)}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Attribute) and node.attr == "device"
+    ]
+    out += [
+        f"{module}:{node.lineno} imports {target}"
+        for target, _, node in _imports(module, py, tree)
+        if target == "analysis.cuda_tallies"
+    ]
+    return out
+
+
+def test_no_analysis_branches_on_the_device():
+    """The analyses feed tally objects (analysis/tallies.py), which tally each batch on
+    the CPU or on the GPU where it is: no other analysis module reads a batch's
+    ``.device`` or imports the GPU's tallies."""
+    bad = [
+        line
+        for module, py, tree in MODULES
+        if module.startswith("analysis.") and module not in TALLY_MODULES
+        for line in _device_branches(module, py, tree)
+    ]
+    assert bad == []
+    code = "from . import cuda_tallies as gpu\nif pb.rays.device is not None:\n    pass\n"
+    py = SRC / "analysis" / "x.py"
+    assert len(_device_branches("analysis.x", py, ast.parse(code))) == 2  # the guard sees

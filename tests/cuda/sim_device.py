@@ -22,13 +22,14 @@ from opticalstamp.analysis import cuda_tallies as ct
 from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.analysis.lsf import traced_folded_lsf_pair
 from opticalstamp.analysis.maps import traced_map_sets
+from opticalstamp.analysis.tallies import FoldTally, GhostTally, MapTally
 from opticalstamp.design import load_design, with_stack
 from opticalstamp.device import DeviceUnavailable, simulated, using_device
 from opticalstamp.io.files import provenance
 from opticalstamp.raytrace import cuda
 from opticalstamp.raytrace.kernel import seed_key
-from opticalstamp.raytrace.launch import _kernel_args, launch
-from opticalstamp.raytrace.pixel import PixelTracer, Sampling, pixel_source
+from opticalstamp.raytrace.launch import DeviceRayBatch, RayBatch, _kernel_args, launch
+from opticalstamp.raytrace.pixel import PixelBatch, PixelTracer, Sampling, pixel_source
 from opticalstamp.raytrace.stack import reverse_path
 
 #: 2^N samples (the simulator is slow; a GPU takes 20)
@@ -220,6 +221,84 @@ def test_device_tallies_equal_the_cpu_tallies(tallied):
         assert u.own.sum() > 0 and u.ghost.sum() > 0
         np.testing.assert_allclose(v.own, u.own, rtol=1e-12, atol=1e-12 * u.own.max())
         np.testing.assert_allclose(v.ghost, u.ghost, rtol=1e-12, atol=1e-12 * u.ghost.max())
+
+
+def synthetic_rays(n=3000, n_masks=3, seed=11):
+    """Rays that no tracer made: positions over +-300 um, directions over the disk
+    |s| < 0.98 (some outside the pixel's acceptance), a tenth of the weights 0, holes of
+    rows 0/1 and k -2 ... 2 per mask with a third of the rays on the own path (0, 0)."""
+    rng = np.random.default_rng(seed)
+    rho, phi = 0.98 * np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
+    own = rng.random(n) < 1 / 3
+    hole_row = np.where(own[:, None], 0, rng.integers(0, 2, (n, n_masks))).astype(np.int8)
+    hole_k = np.where(own[:, None], 0, rng.integers(-2, 3, (n, n_masks))).astype(np.int32)
+    w = rng.random(n) * (rng.random(n) > 0.1)
+    ledger = np.zeros((5, 4), np.int64)
+    ledger[-1, 0] = n
+    cols = dict(
+        ids=np.sort(rng.choice(10 * n, n, replace=False)).astype(np.int64),
+        x=rng.uniform(-300, 300, n), y=rng.uniform(-300, 300, n),
+        sx=rho * np.cos(phi), sy=rho * np.sin(phi), w=w, hole_row=hole_row, hole_k=hole_k,
+    )  # fmt: skip
+    return RayBatch(**cols, ledger=ledger, n_launched=n, n_samples=n), cols
+
+
+def on_device(cols, ledger, n_samples, seed=12):
+    """The rays of ``cols`` kept on the device in a shuffled order (threads append
+    survivors in any order), as a GPU's chunk."""
+    order = np.random.default_rng(seed).permutation(cols["ids"].size)
+    out = np.stack([cols[f][order] for f in ("x", "y", "sx", "sy", "w")], axis=1)
+    dev = cuda.DeviceRays(
+        order.size, cuda.cuda.to_device(out), cuda.cuda.to_device(cols["ids"][order]),
+        cuda.cuda.to_device(cols["hole_row"][order]), cuda.cuda.to_device(cols["hole_k"][order]),
+        ledger, order.size,
+    )  # fmt: skip
+    return DeviceRayBatch(dev, n_samples)
+
+
+def test_each_tally_adds_synthetic_rays_alike_on_host_and_device():
+    """The three tallies fed the same synthetic rays, once as a host batch and once kept
+    on the (simulated) device in another order: folds (all light and own path, two
+    batches of ids), maps (two sets of Z) and ghost sums (per hole sequence, landings,
+    detector, nearest landings, ledger) agree to rounding, counts exactly; and each
+    tally is not empty, so the comparison compares something."""
+    host, cols = synthetic_rays()
+    dev = on_device(cols, host.ledger, host.n_samples)
+    pix = dict(row=0, k=0, s2_max=0.6, x0=5.0, y0=-3.0, n_obj=1.0)
+    pbs = [PixelBatch(host, **pix), PixelBatch(dev, **pix)]
+    assert np.array_equal(pbs[0].w, pbs[1].w) and pbs[0].w.min() == 0.0
+    zs, per = [0.0, 0.7], [84.6, 127.0]
+    made = []
+    for pb in pbs:
+        f = FoldTally((True, False), zs, per, 2, pix["x0"], 1.0, host.ids.size)
+        m = MapTally(
+            [([0.0], -200.0, 8.0, (50, 50)), ([0.3, 1.0], -400.0, 16.0, (50, 50))],
+            (-1000.0, -1000.0), 100.0, (20, 20), pix["x0"], pix["y0"], 1.0,
+        )  # fmt: skip
+        g = GhostTally(3, (0, 0), -4, 4, 1.5, zs, 84.6, 40, 150.0, 5)
+        for t in (f, m, g):
+            t.add(pb)
+        made.append((f, m, g))
+    (fc, mc, gc), (fd, md, gd) = made
+    assert fd._device is not None and md._device is not None  # tallied on the device
+    for a, b in [*zip(fc.sums, fd.sums, strict=True), *zip(mc.fine, md.fine, strict=True),
+                 *zip(mc.coarse, md.coarse, strict=True)]:  # fmt: skip
+        assert a.sum() > 0
+        np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12 * a.max())
+    assert all(np.isnan(sl).all() for sl in fd.slopes)  # the slopes: host only
+    codes = list(gc.sums.keys)  # slots in each tally's own order: compared by code
+    assert len(codes) > 20 and sorted(codes) == sorted(gd.sums.keys)
+    hs, ds = [gc.sums.keys[c] for c in codes], [gd.sums.keys[c] for c in codes]
+    assert np.array_equal(gc.sums.count[hs], gd.sums.count[ds])
+    for f in ("s1", "s2", "lo", "hi"):
+        a, b = getattr(gc.sums, f)[hs], getattr(gd.sums, f)[ds]
+        np.testing.assert_allclose(b, a, rtol=1e-12, err_msg=f)
+    for a, b in [(gc.hist, gd.hist), (gc.inside, gd.inside), (gc.inside2, gd.inside2),
+                 (gc.nearest[:, hs], gd.nearest[:, ds])]:  # fmt: skip
+        fin = np.isfinite(a)
+        assert fin.any() and a[fin].max() > 0 and np.array_equal(fin, np.isfinite(b))
+        np.testing.assert_allclose(b[fin], a[fin], rtol=1e-12, atol=1e-12 * a[fin].max())
+    assert np.array_equal(gc.ledger, gd.ledger) and gc.ledger.sum() == host.ids.size
 
 
 def test_the_ghost_table_grows_and_hands_back_what_it_cannot_take(open_design, tallied):

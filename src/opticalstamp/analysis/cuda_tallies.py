@@ -6,12 +6,13 @@ to the host: the folding of rays onto chart periods (the RMTF's folded LSFs,
 :func:`fold`), the responsivity maps of the scan kernels (:func:`maps`) and the ghost
 analysis's sums per hole sequence, landing histograms and nearest landings
 (:func:`ghost_tallies`). Each kernel computes, per ray, what the CPU's tally computes
-(:mod:`.lsf`'s ``_fold`` and ``_maps``, :func:`~.ghosts.analyse_ghosts`), in float64, and
+(:mod:`.tallies`' ``_fold``, ``_maps`` and :class:`~.tallies.GhostTally`), in float64, and
 adds it with atomics (products that the CPU rounds on their own are kept from fusing
 into FMAs, :func:`~opticalstamp.raytrace.cuda_ray.mul`): the sums equal the CPU's to rounding
 (the order of the additions differs, and varies from run to run), the counts are exact;
 angles and landing distances use libdevice's asin and hypot, within an ulp of the CPU's.
-Imported only where a GPU (or numba's CUDA simulator) traced the rays.
+The tally objects of :mod:`.tallies` call these where a batch's rays are on a GPU;
+imported only where a GPU (or numba's CUDA simulator) traced the rays.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ def _landing(out, i, z, n_obj):
 
 @cuda.jit(cache=True)
 def fold_kernel(out, ids, w, own, own_only, n, x0, z_um, n_obj, periods, n_bins, n_batch, res):
-    """res[p, id % n_batch, iz, bin] += w per ray and Z (the CPU's ``lsf._fold``)."""
+    """res[p, id % n_batch, iz, bin] += w per ray and Z (the CPU's ``tallies._fold``)."""
     t = cuda.grid(1)
     if t >= n * z_um.size:
         return
@@ -68,7 +69,7 @@ def fold_kernel(out, ids, w, own, own_only, n, x0, z_um, n_obj, periods, n_bins,
 
 def fold(pb, own_only: bool, z_um, n_obj, periods, n_bins, n_batches, res) -> None:
     """Fold a device batch's rays onto every period at every Z into device array ``res``
-    (periods, n_batches, nz, bins): the CPU's ``lsf._fold`` of ``pb.w`` (``own_only``:
+    (periods, n_batches, nz, bins): the CPU's ``tallies._fold`` of ``pb.w`` (``own_only``:
     of ``pb.w * pb.own``) on the device."""
     dev = pb.rays.device
     if dev.n == 0:
@@ -86,7 +87,7 @@ def fold(pb, own_only: bool, z_um, n_obj, periods, n_bins, n_batches, res) -> No
 def maps_kernel(
     out, w, own, n, x0, y0, z_um, n_obj, fine_lo, fine_bin, c_lo_y, c_lo_x, c_bin, fine, coarse
 ):
-    """fine[iz, iy, ix] += own-path w; coarse[iz, iy, ix] += ghost w (``lsf._maps``)."""
+    """fine[iz, iy, ix] += own-path w; coarse[iz, iy, ix] += ghost w (``tallies._maps``)."""
     t = cuda.grid(1)
     if t >= n * z_um.size:
         return
@@ -112,7 +113,7 @@ def maps_kernel(
 
 def maps(pb, z_um, n_obj, fine_lo, fine_bin, coarse_lo, coarse_bin, fine, coarse) -> None:
     """Bin a device batch's rays into the device arrays ``fine`` (own path) and
-    ``coarse`` (ghost light), as the CPU's ``lsf._maps``."""
+    ``coarse`` (ghost light), as the CPU's ``tallies._maps``."""
     dev = pb.rays.device
     if dev.n == 0:
         return
@@ -148,7 +149,8 @@ def ghost_kernel(
 ):  # fmt: skip
     """Per survivor: its hole sequence's slot (sums of w, w^2, count, emission angle range)
     and, for ghost light, where it lands at each Z (histogram of distances, the virtual
-    detector's sums, the nearest landing per sequence), as :func:`~.ghosts.analyse_ghosts`."""
+    detector's sums, the nearest landing per sequence), as :class:`~.tallies.GhostTally`
+    sums them on the host."""
     i = cuda.grid(1)
     if i >= n:
         return
@@ -187,7 +189,7 @@ def ghost_kernel(
 
 
 @dataclass(frozen=True)
-class GhostTally:
+class DeviceGhostSums:
     """One chunk's ghost-analysis sums, per hole sequence and per Z.
 
     ``sequences``: per hole sequence, ((other_row, dk), ...) per mask from the sensor up
@@ -213,7 +215,7 @@ class GhostTally:
 def ghost_tallies(
     pb, k_lo: int, k_hi: int, n0: float, z_um, bin_um: float, n_bins: int, half_um: float,
     capacity: int = 1 << 12, max_capacity: int = 1 << 20,
-) -> GhostTally | None:  # fmt: skip
+) -> DeviceGhostSums | None:  # fmt: skip
     """The ghost analysis's sums of one device batch, or None where the device cannot
     take them (hole sequences beyond an int64 key, or more than ``max_capacity`` of them):
     the caller then tallies the batch on the host. The hash table of hole sequences starts
@@ -265,7 +267,7 @@ def _ghost_tallies(pb, k_lo, radix, n0, z_um, bin_um, n_bins, half_um, capacity)
             v, d = divmod(v, radix)
             seq.append((d % 2, d // 2 + int(k_lo) - int(pb.k)))
         seqs.append(tuple(seq))
-    return GhostTally(
+    return DeviceGhostSums(
         seqs,
         sums[0].copy_to_host()[used],
         sums[1].copy_to_host()[used],

@@ -19,14 +19,8 @@ from ..raytrace.kernel import STATUS_NAMES
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 from ..raytrace.sampling import weight_bound
 from ..raytrace.stack import output_pitch
-from ..raytrace.tally import (
-    OWN_PATH,
-    Estimate,
-    KeyedSums,
-    PathRegistry,
-    estimate,
-    ratio_estimate,
-)
+from ..raytrace.tally import OWN_PATH, Estimate, KeyedSums, estimate, ratio_estimate
+from .tallies import GhostTally, run
 
 #: Ray-count schedule of the precision-driven run: checks after 2^20, 2^21, ... rays.
 FIRST_CHECK = 1 << 20
@@ -309,62 +303,22 @@ def analyse_ghosts(
     row, k = pixel
     src = tr.source(pixel)
     cx, cy = src.x, src.y
-    n0 = tr.n0
-    registry = PathRegistry(tr.path.n_masks, row, k)
-    own = OWN_PATH
-    sums = KeyedSums()
-    zs = [float(z) for z in z_mm]
+    lat = tr.path.lattice
     nbins = 400
     bin_um = output_pitch(design)  # landing distances in output pixels (84.6 um: paper)
-    hist = np.zeros((len(zs), nbins + 1))
-    inside = np.zeros(len(zs))
-    inside2 = np.zeros(len(zs))
-    nearest = np.full((len(zs), 0), np.inf)  # per Z and path slot
-    ledger = np.zeros((tr.path.slabs.shape[0], 4), np.int64)
+    t = GhostTally(
+        tr.path.n_masks, pixel, lat.k_lo, lat.k_hi, tr.n0, z_mm, bin_um, nbins,
+        detector_half_um, tr.path.slabs.shape[0],
+    )  # fmt: skip
+    own = OWN_PATH
+    sums = t.sums
+    zs = [float(z) for z in z_mm]
     w_max = weight_bound(tr.path, src, tr.hole_weights(pixel), tr.s2_max)
     done = 0
     # no ray the pixel accepts reaches any hole: no light at all, nothing to trace for
     schedule = [FIRST_CHECK] if w_max == 0 and sampling.n_rays is None else None
     for end in schedule or _schedule(sampling.n_rays, sampling.max_rays):
-        for pb in tr.trace(pixel, end - done, first_id=done, progress=progress):
-            b = pb.rays
-            ledger += b.ledger
-            t = None
-            if b.device is not None:  # tallied where the GPU keeps the rays
-                from .cuda_tallies import ghost_tallies
-
-                lat = tr.path.lattice
-                t = ghost_tallies(
-                    pb, lat.k_lo, lat.k_hi, n0, [z * 1000.0 for z in zs], bin_um, nbins,
-                    detector_half_um,
-                )  # fmt: skip
-            if t is not None:
-                codes = np.array([registry.id_of(q) for q in t.sequences], np.int64)
-                slot = sums.merge(codes, t.s1, t.s2, t.count, t.lo, t.hi)
-                nearest = _grown(nearest, len(sums.keys))
-                for iz in range(len(zs)):
-                    np.minimum.at(nearest[iz], slot, t.nearest[:, iz])
-                hist += t.hist
-                inside += t.inside
-                inside2 += t.inside2
-                continue
-            w = pb.w
-            codes = registry.ids(b)
-            theta = np.degrees(np.arcsin(np.sqrt(b.sx**2 + b.sy**2) / n0))
-            slot = sums.add(codes, w, theta)
-            g = (codes != own) & (w > 0)
-            for iz, z in enumerate(zs):
-                dx, dy = pb.offsets(z * 1000.0)
-                dx, dy = dx[g], dy[g]
-                dist = np.hypot(dx, dy)
-                ib = np.minimum((dist / bin_um).astype(np.int64), nbins)
-                np.add.at(hist[iz], ib, w[g])
-                box = (np.abs(dx) <= detector_half_um) & (np.abs(dy) <= detector_half_um)
-                wb = w[g][box]
-                np.add.at(inside, np.full(wb.size, iz), wb)
-                np.add.at(inside2, np.full(wb.size, iz), wb * wb)
-                nearest = _grown(nearest, len(sums.keys))
-                np.minimum.at(nearest[iz], slot[g], dist)
+        run(tr, pixel, [t], end - done, first_id=done, progress=progress)
         done = end
         n = done
         e_own = _path_estimate(sums, own, n)
@@ -392,7 +346,7 @@ def analyse_ghosts(
         e = estimate(sums.s1[sl], sums.s2[sl], n)
         holes = [
             {"mask": names[m], "row": "other" if o else "own", "dk": int(dk)}
-            for m, (o, dk) in enumerate(registry.decode(code))
+            for m, (o, dk) in enumerate(t.registry.decode(code))
         ][::-1]
         paths.append(
             GhostPath(
@@ -402,20 +356,22 @@ def analyse_ghosts(
                 share=e.value / e_gh.value if e_gh.value else 0.0,
                 n_rays=int(sums.count[sl]),
                 emission_angle_deg=(float(sums.lo[sl]), float(sums.hi[sl])),
-                nearest_landing_um={_zkey(z): _finite(nearest[iz, sl]) for iz, z in enumerate(zs)},
+                nearest_landing_um={
+                    _zkey(z): _finite(t.nearest[iz, sl]) for iz, z in enumerate(zs)
+                },
             )
         )
     paths.sort(key=lambda p: -p.etendue_um2sr)
     landing = {}
     for iz, z in enumerate(zs):
-        e_in = estimate(inside[iz], inside2[iz], n)
-        h = hist[iz] / n
+        e_in = estimate(t.inside[iz], t.inside2[iz], n)
+        h = t.hist[iz] / n
         nz = np.flatnonzero(h)
         median, beyond = _weighted_quantile(h, 0.5, bin_um)
         landing[_zkey(z)] = {
             "bin_um": bin_um,
             "etendue_by_distance_um2sr": h.tolist(),
-            "nearest_um": _finite(nearest[iz].min(initial=np.inf)),
+            "nearest_um": _finite(t.nearest[iz].min(initial=np.inf)),
             "median_um": median,
             "median_beyond": beyond,
             "within_detector_um2sr": e_in.value,
@@ -424,7 +380,7 @@ def analyse_ghosts(
             "last_nonzero_bin": int(nz[-1]) if nz.size else None,
         }
     led = {
-        name: {st: int(ledger[i, j]) for j, st in enumerate(STATUS_NAMES) if ledger[i, j]}
+        name: {st: int(t.ledger[i, j]) for j, st in enumerate(STATUS_NAMES) if t.ledger[i, j]}
         for i, name in enumerate(_plane_names(tr.path))
     }
     return GhostResult(
@@ -494,12 +450,6 @@ def etendue_bound(w_max: float, n_rays: int, confidence: float = BOUND_CONFIDENC
     if n_rays <= 0:
         return float("inf")
     return float(w_max * -np.expm1(np.log1p(-confidence) / n_rays))
-
-
-def _grown(nearest: np.ndarray, n_slots: int) -> np.ndarray:
-    """``nearest`` (nz, slots) with a column of inf for each slot it lacks."""
-    grow = n_slots - nearest.shape[1]
-    return np.hstack([nearest, np.full((nearest.shape[0], grow), np.inf)]) if grow > 0 else nearest
 
 
 def _finite(v: float) -> float | None:

@@ -20,15 +20,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-import numba
 import numpy as np
 
 from ..defaults import RAYS_LSF
 from ..design import Design
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
-
-#: Target width of the bins of a folded LSF (um); each period gets round(P / this) bins.
-FOLD_BIN_UM = 0.5
+from .tallies import SLOPE_EDGES, FoldTally, fold_bins, run
 
 
 @dataclass(frozen=True)
@@ -66,11 +63,6 @@ class FoldedLSF:
         return self.h[0].shape[1]
 
 
-#: bins of the lateral slope |dX/dZ| of the light in the object medium (the last bin
-#: takes every slope beyond)
-SLOPE_EDGES = np.linspace(0.0, 4.0, 161)
-
-
 def fast_light(lsf: FoldedLSF) -> dict | None:
     """How fast the light's image moves with Z: ``slope`` (lower edges of SLOPE_EDGES)
     and ``beyond``, the fraction of the light whose lateral slope |dX/dZ| in the object
@@ -82,40 +74,6 @@ def fast_light(lsf: FoldedLSF) -> dict | None:
         return None
     beyond = np.cumsum(lsf.slope_power[::-1])[::-1] / lsf.slope_power.sum()
     return {"slope": SLOPE_EDGES[:-1].tolist(), "beyond": beyond.tolist()}
-
-
-def _slopes(b, w: np.ndarray, n_obj: float) -> np.ndarray:
-    """Etendue per bin of SLOPE_EDGES of the rays ``b`` (weights ``w``)."""
-    keep = w != 0
-    sx, sy = b.sx[keep], b.sy[keep]
-    c = np.sqrt(np.maximum(n_obj * n_obj - sx * sx - sy * sy, 1e-300))
-    t = np.minimum(np.abs(sx) / c, SLOPE_EDGES[-1] * (1 - 1e-12))
-    return np.histogram(t, SLOPE_EDGES, weights=w[keep])[0]
-
-
-@numba.njit(parallel=True, cache=True)
-def _fold(x, sx, sy, w, batch, x0, z_um, n_obj, periods, n_bins, out):  # pragma: no cover
-    """out[p, b, iz, bin] += w for each ray; prange over z (no write conflicts)."""
-    for iz in numba.prange(z_um.size):
-        z = z_um[iz]
-        for i in range(x.size):
-            wi = w[i]
-            if wi == 0.0:
-                continue
-            c = np.sqrt(n_obj * n_obj - sx[i] * sx[i] - sy[i] * sy[i])
-            xo = x[i] + z * sx[i] / c - x0
-            for p in range(periods.size):
-                per = periods[p]
-                phi = xo - np.floor(xo / per) * per
-                j = int(phi / per * n_bins[p])
-                if j >= n_bins[p]:
-                    j = n_bins[p] - 1
-                out[p, batch[i], iz, j] += wi
-
-
-def fold_bins(periods_um: np.ndarray) -> np.ndarray:
-    """Bins of a folded LSF per period: round(P / FOLD_BIN_UM), at least 8."""
-    return np.maximum(8, np.round(periods_um / FOLD_BIN_UM)).astype(np.int64)
 
 
 def row_pixels(design: Design) -> list[tuple[int, int]]:
@@ -247,34 +205,11 @@ def _traced_folds(
     for row, k in row_pixels(design):
         src = tr.source((row, k))
         rows.append((src.x, src.y))
-        outs = [np.zeros((per.size, n_batches, zs.size, int(nb.max()))) for _ in kinds]
-        slopes = [np.zeros(SLOPE_EDGES.size - 1) for _ in kinds]
-        on_gpu = None  # the same tallies on the device, where a GPU keeps the rays
-        for pb in tr.trace((row, k), progress=progress):
-            b = pb.rays
-            if b.device is not None and outside_band is None:
-                from . import cuda_tallies as gpu
-
-                on_gpu = on_gpu or [gpu.zeros(out.shape) for out in outs]
-                for ghosts, res in zip(kinds, on_gpu, strict=True):
-                    gpu.fold(pb, not ghosts, zs * 1000.0, tr.n_obj, per, nb, n_batches, res)
-                continue
-            batch = (b.ids % n_batches).astype(np.int64)
-            keep = None
-            if outside_band is not None:
-                keep = (np.abs(b.sx) >= outside_band) | (np.abs(b.sy) >= outside_band)
-            for ghosts, out, sl in zip(kinds, outs, slopes, strict=True):
-                w = pb.w if ghosts else pb.w * pb.own
-                w = w if keep is None or not ghosts else w * keep
-                on = np.flatnonzero(w)  # the rays _fold would skip, left out in order
-                x, sx, sy = b.x[on], b.sx[on], b.sy[on]
-                _fold(x, sx, sy, w[on], batch[on], src.x, zs * 1000.0, tr.n_obj, per, nb, out)
-                sl += _slopes(b, w, tr.n_obj) / n_rays
-        for out, res in zip(outs, on_gpu or (), strict=False):  # nothing on the CPU
-            out += res.copy_to_host()
-        for tally, sl in zip(slope_tallies, slopes, strict=True):
-            tally += sl if on_gpu is None else np.nan  # not tallied on the device
-        for h, out in zip(hs, outs, strict=True):
+        t = FoldTally(kinds, zs, per, n_batches, src.x, tr.n_obj, n_rays, outside_band)
+        run(tr, (row, k), [t], progress=progress)
+        for tally, sl in zip(slope_tallies, t.slopes, strict=True):
+            tally += sl
+        for h, out in zip(hs, t.sums, strict=True):
             for p in range(per.size):
                 # each batch holds n_rays / n_batches samples: scale so batches sum to the mean
                 h[p][row] = out[p, :, :, : nb[p]] / n_rays

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from ..defaults import MAP_MAX_BINS, RAYS_MAP
@@ -18,49 +17,7 @@ from ..design import Design, square_holes
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 from ..validate import check_memory
 from .paraxial import paraxial_support
-
-
-@numba.njit(parallel=True, cache=True)
-def _maps(
-    x,
-    y,
-    sx,
-    sy,
-    w,
-    own,
-    x0,
-    y0,
-    z_um,
-    n_obj,
-    fine_lo,
-    fine_bin,
-    coarse_lo,
-    coarse_bin,
-    fine,
-    coarse,
-):  # pragma: no cover
-    """fine[iz, iy, ix] += own-path w; coarse[iz, iy, ix] += ghost w (prange over z)."""
-    nfy, nfx = fine.shape[1], fine.shape[2]
-    ncy, ncx = coarse.shape[1], coarse.shape[2]
-    for iz in numba.prange(z_um.size):
-        z = z_um[iz]
-        for i in range(x.size):
-            wi = w[i]
-            if wi == 0.0:
-                continue
-            c = np.sqrt(n_obj * n_obj - sx[i] * sx[i] - sy[i] * sy[i])
-            xo = x[i] + z * sx[i] / c - x0
-            yo = y[i] + z * sy[i] / c - y0
-            if own[i]:
-                jx = int(np.floor((xo - fine_lo) / fine_bin))
-                jy = int(np.floor((yo - fine_lo) / fine_bin))
-                if 0 <= jx < nfx and 0 <= jy < nfy:
-                    fine[iz, jy, jx] += wi
-            else:
-                jx = int(np.floor((xo - coarse_lo[1]) / coarse_bin))
-                jy = int(np.floor((yo - coarse_lo[0]) / coarse_bin))
-                if 0 <= jx < ncx and 0 <= jy < ncy:
-                    coarse[iz, jy, jx] += wi
+from .tallies import MapTally, run
 
 
 @dataclass(frozen=True)
@@ -167,7 +124,7 @@ def traced_map_sets(
     ncy = int(np.ceil(2 * coarse_half_um[0] / coarse_bin_um))
     ncx = int(np.ceil(2 * coarse_half_um[1] / coarse_bin_um))
     coarse_lo = np.array([-ncy * coarse_bin_um / 2, -ncx * coarse_bin_um / 2])
-    sets = []  # per set: Z (mm), fine grid start and bin, fine and coarse tallies
+    sets = []  # per set: Z (mm), fine grid start and bin, fine grid's shape
     for z_mm in z_sets:
         zs = np.asarray(z_mm, dtype=np.float64)
         half = _own_half_width(design, float(zs.max())) if half_um is None else half_um
@@ -175,53 +132,13 @@ def traced_map_sets(
         # coarser bins, never a grid that does not fit in memory
         fine_bin = max(fine_bin_um, 2 * half / MAP_MAX_BINS)
         nf = int(np.ceil(2 * half / fine_bin))
-        fine_lo = -nf * fine_bin / 2
         check_memory(
             8.0 * zs.size * max(nf * nf, ncy * ncx),
             f"the responsivity maps of {zs.size} object distances",
         )
-        sets.append(
-            (zs, fine_lo, fine_bin, np.zeros((zs.size, nf, nf)), np.zeros((zs.size, ncy, ncx)))
-        )
-    on_gpu = None  # the same maps on the device, where a GPU keeps the rays
-    for pb in tr.trace((row, 0), progress=progress):
-        b = pb.rays
-        if b.device is not None and outside_band is None:
-            from . import cuda_tallies as gpu
-
-            on_gpu = on_gpu or [(gpu.zeros(f.shape), gpu.zeros(c.shape)) for *_, f, c in sets]
-            for (zs, fine_lo, fine_bin, _, _), (fine, coarse) in zip(sets, on_gpu, strict=True):
-                gpu.maps(
-                    pb, zs * 1000.0, tr.n_obj, fine_lo, fine_bin, coarse_lo,
-                    coarse_bin_um, fine, coarse,
-                )  # fmt: skip
-            continue
-        w = pb.w
-        if outside_band is not None:  # ghost rays in the band: the wave engine's
-            out = (np.abs(b.sx) >= outside_band) | (np.abs(b.sy) >= outside_band)
-            w = w * (pb.own | out)
-        for zs, fine_lo, fine_bin, fine, coarse in sets:
-            _maps(
-                b.x,
-                b.y,
-                b.sx,
-                b.sy,
-                w,
-                pb.own,
-                src.x,
-                src.y,
-                zs * 1000.0,
-                tr.n_obj,
-                fine_lo,
-                fine_bin,
-                coarse_lo,
-                coarse_bin_um,
-                fine,
-                coarse,
-            )
-    for (*_, fine, coarse), dev in zip(sets, on_gpu or (), strict=False):  # none on a CPU
-        fine += dev[0].copy_to_host()
-        coarse += dev[1].copy_to_host()
+        sets.append((zs, -nf * fine_bin / 2, fine_bin, (nf, nf)))
+    t = MapTally(sets, coarse_lo, coarse_bin_um, (ncy, ncx), src.x, src.y, tr.n_obj, outside_band)
+    run(tr, (row, 0), [t], progress=progress)
     return [
         TracedMaps(
             zs,
@@ -233,7 +150,7 @@ def traced_map_sets(
             coarse_bin_um,
             sampling.n_rays,
         )
-        for zs, fine_lo, fine_bin, fine, coarse in sets
+        for (zs, fine_lo, fine_bin, _), fine, coarse in zip(sets, t.fine, t.coarse, strict=True)
     ]
 
 

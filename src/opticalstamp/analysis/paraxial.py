@@ -16,7 +16,8 @@ import numpy as np
 
 from ..design import Design, square_holes
 from ..raytrace.stack import lattice_of
-from .lsf import FoldedLSF, fold_bins
+from .lsf import FoldedLSF
+from .tallies import fold_bins
 
 
 @dataclass(frozen=True)

@@ -35,8 +35,9 @@ from ..defaults import RAYS_LSF
 from ..design import Design
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 from ..validate import InputError
-from .lsf import SLOPE_EDGES, FoldedLSF, traced_folded_lsf
+from .lsf import FoldedLSF, traced_folded_lsf
 from .paraxial import paraxial_folded_lsf
+from .tallies import SLOPE_EDGES
 from .wavebase import CIRCLE_MAPS, WaveSampling, rectangular, wave_sampling
 
 if TYPE_CHECKING:

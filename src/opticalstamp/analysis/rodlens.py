@@ -33,8 +33,8 @@ from ..design.rodlens import RodLensDesign
 from ..raytrace.rodlens import RodRays, trace_rods
 from ..units import mm_to_um, period_of_dpi
 from .efficiency import reference_etendue, reference_f_number
-from .lsf import FOLD_BIN_UM
 from .rmtf import chart_correlation
+from .tallies import FOLD_BIN_UM
 
 #: Rays of the efficiency estimate (about 0.2 % standard error on the presets).
 RAYS_EFFICIENCY = 1 << 20

@@ -26,10 +26,11 @@ from ..design.resolution import dof_chart_dpi
 from ..raytrace.pixel import PixelTracer, Sampling, tracer_for
 from ..raytrace.stack import lattice_of, output_pitch
 from ..units import period_of_dpi
-from .lsf import FOLD_BIN_UM, FoldedLSF
+from .lsf import FoldedLSF
 from .own_etendue import own_etendue, rectangular_holes
 from .rmtf import rmtf_curves
 from .spectrum import Spectrum, one_channel
+from .tallies import FOLD_BIN_UM
 from .wave import stack_reach
 from .wavebase import WaveSampling, fresnel_numbers, fwhm_of, wave_sampling
 from .wavespectral import (
