@@ -320,3 +320,42 @@ def test_no_analysis_branches_on_the_device():
     code = "from . import cuda_tallies as gpu\nif pb.rays.device is not None:\n    pass\n"
     py = SRC / "analysis" / "x.py"
     assert len(_device_branches("analysis.x", py, ast.parse(code))) == 2  # the guard sees
+
+
+#: one ray's arithmetic, defined once in raytrace/rayops.py and compiled for each device
+PER_RAY = ("mix", "uniform_pair", "centred", "hole", "fresnel_sp", "advance", "trace_one",
+           "reach", "solve_rho", "plain_draw", "importance_draw", "plain_sample")  # fmt: skip
+#: other definitions of those names, each with its reason
+PER_RAY_ELSEWHERE = MappingProxyType(
+    {
+        ("raytrace.sampling", "solve_rho"): "the Newton solve vectorised over a table of "
+        "holes (the importance table's probabilities, not a ray); checked against the per-ray "
+        "solve to 1e-14 in tests/test_rayops.py",
+        ("raytrace.sampling", "reach"): "its lateral reach, vectorised over the same table",
+        ("analysis.own_etendue", "reach"): "the closed-form own path's hole edges per plane "
+        "(rho, plane) for its quadrature: another quantity of the same name",
+        ("analysis.wavefilter", "fresnel_sp"): "the wave engine's transmittances over an "
+        "angular spectrum (0 past the critical angle); checked against the tracer's to 1e-15 "
+        "in tests/test_wave_fresnel.py",
+        ("studies.fitwave", "reach"): "the half width a spread's tails reach: another "
+        "quantity of the same name",
+    }
+)
+
+
+def test_one_definition_of_each_per_ray_function():
+    """The per-ray functions (names and their underscored forms) are defined in
+    raytrace/rayops.py only, but the exceptions listed with their reason."""
+    names = {*PER_RAY, *(f"_{n}" for n in PER_RAY)}
+    bad = [
+        f"{module}:{node.lineno} {node.name}"
+        for module, _, tree in MODULES
+        if module != "raytrace.rayops"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.FunctionDef) and node.name in names
+        if (module, node.name.lstrip("_")) not in PER_RAY_ELSEWHERE
+    ]
+    assert bad == []
+    defined = {n.name for m, _, t in MODULES if m == "raytrace.rayops" for n in ast.walk(t)
+               if isinstance(n, ast.FunctionDef)}  # fmt: skip
+    assert set(PER_RAY) - {"plain_sample"} <= defined

@@ -27,9 +27,13 @@ from opticalstamp.design import load_design, with_stack
 from opticalstamp.device import DeviceUnavailable, simulated, using_device
 from opticalstamp.io.files import provenance
 from opticalstamp.raytrace import cuda
+from opticalstamp.raytrace.cuda_ray import OPS as DEV
+from opticalstamp.raytrace.cuda_ray import cuda as nbcuda
+from opticalstamp.raytrace.kernel import OPS as CPU
 from opticalstamp.raytrace.kernel import seed_key
 from opticalstamp.raytrace.launch import DeviceRayBatch, RayBatch, _kernel_args, launch
 from opticalstamp.raytrace.pixel import PixelBatch, PixelTracer, Sampling, pixel_source
+from opticalstamp.raytrace.sampling import hole_targets
 from opticalstamp.raytrace.stack import reverse_path
 
 #: 2^N samples (the simulator is slow; a GPU takes 20)
@@ -143,6 +147,71 @@ def test_the_plain_kernels_queued_or_not_give_the_same_rays(wide, monkeypatch):
     same(a, joined(list(launch(path, src, 1 << N, 7, **kw))))
 
 
+@nbcuda.jit
+def ops_kernel(
+    key, src, isrc, slabs, n_out, masks, lat, lim, n_pre, tx, ty, tp, ta, tq, res, hr, hk
+):
+    """Per thread i: ray i's plain draw, its importance draw and the trace of the latter
+    with Fresnel losses, by the per-ray functions compiled for the device."""
+    i = nbcuda.grid(1)
+    if i < res.shape[0]:
+        ok, xa, ya, a, c2 = DEV.plain_draw(key, i, src)
+        x0, y0, sx, sy, w = DEV.importance_draw(
+            key, i, isrc, slabs, n_pre, masks, tx, ty, tp, ta, tq
+        )
+        st, pl, xe, ye, we = DEV.trace_one(
+            x0, y0, sx, sy, w, slabs, n_out, masks, lat, lim, True, hr, hk, i
+        )
+        vals = (ok, xa, ya, a, c2, x0, y0, sx, sy, w, st, pl, xe, ye, we)
+        for j in range(15):
+            res[i, j] = vals[j]
+
+
+def test_the_per_ray_functions_are_one_source_on_both_devices(wide):
+    """raytrace/rayops.py compiled by numba for the CPU and by numba.cuda for the device,
+    run on the same rays (a plain draw, an importance draw through the prototype's hole
+    table with the opened stack, its trace with Fresnel losses: positions, directions,
+    weights, fates, holes) give the same numbers: exactly under the simulator, to 1e-12 on
+    a GPU (libdevice's cos and sin)."""
+    path, src = wide
+    n = 1 << (N - 3)
+    slabs, n_out, masks, lat, lim = _kernel_args(path)
+    n0 = float(path.slabs[0, 1])
+    tg = hole_targets(path, src)
+    d, nn = slabs[: tg.n_pre, 0], slabs[: tg.n_pre, 1]
+    n_min = float(nn.min())
+    w0 = np.pi * n0 * n0 * src.area
+    isrc = np.array([src.x, src.y, src.width, src.height, w0, n0, n_min, (d * n_min / nn).sum()])
+    psrc = np.array([src.x, src.y, src.width, src.height, 1.0, n0, n0, 0.0])
+    key = seed_key(9)
+    table = (tg.x, tg.y, tg.prob, tg.alias, tg.q_per_area)
+    nm = masks.shape[0]
+    want = np.zeros((n, 15))
+    hr, hk = np.full((n, nm), -1, np.int8), np.zeros((n, nm), np.int32)
+    for i in range(n):
+        p = CPU.plain_draw(key, i, psrc)
+        q = CPU.importance_draw(key, i, isrc, slabs, tg.n_pre, masks, *table)
+        t = CPU.trace_one(*q, slabs, n_out, masks, lat, lim, True, hr, hk, i)
+        want[i] = (*p, *q, *t)
+    res = nbcuda.to_device(np.zeros((n, 15)))
+    dhr = nbcuda.to_device(np.full((n, nm), -1, np.int8))
+    dhk = nbcuda.to_device(np.zeros((n, nm), np.int32))
+    args = [nbcuda.to_device(np.ascontiguousarray(a)) for a in (psrc, isrc, slabs, masks, lat)]
+    ps, is_, sl, ms, la = args
+    ops_kernel[cuda.blocks(n), cuda.THREADS](
+        key, ps, is_, sl, n_out, ms, la, nbcuda.to_device(lim), tg.n_pre,
+        *(nbcuda.to_device(np.ascontiguousarray(a)) for a in table), res, dhr, dhk,
+    )  # fmt: skip
+    got = res.copy_to_host()
+    fates = want[:, 10]
+    assert 0 < want[:, 0].sum() < n and 50 < (fates == 0).sum() < n  # rays and survivors
+    assert np.array_equal(got[:, [0, 10, 11]], want[:, [0, 10, 11]])  # draws' fates, planes
+    assert np.array_equal(dhr.copy_to_host(), hr) and np.array_equal(dhk.copy_to_host(), hk)
+    if simulated():
+        assert np.array_equal(got, want)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
+
+
 def test_a_stack_beyond_the_kernels_arrays_is_refused(paper):
     path = reverse_path(paper)
     big = list(_kernel_args(path))
@@ -249,8 +318,8 @@ def on_device(cols, ledger, n_samples, seed=12):
     order = np.random.default_rng(seed).permutation(cols["ids"].size)
     out = np.stack([cols[f][order] for f in ("x", "y", "sx", "sy", "w")], axis=1)
     dev = cuda.DeviceRays(
-        order.size, cuda.cuda.to_device(out), cuda.cuda.to_device(cols["ids"][order]),
-        cuda.cuda.to_device(cols["hole_row"][order]), cuda.cuda.to_device(cols["hole_k"][order]),
+        order.size, nbcuda.to_device(out), nbcuda.to_device(cols["ids"][order]),
+        nbcuda.to_device(cols["hole_row"][order]), nbcuda.to_device(cols["hole_k"][order]),
         ledger, order.size,
     )  # fmt: skip
     return DeviceRayBatch(dev, n_samples)

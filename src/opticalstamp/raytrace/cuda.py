@@ -14,8 +14,6 @@ which is how the test suite checks them without a GPU.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import config
 
@@ -29,14 +27,12 @@ from .cuda_ray import (  # first: it shims numpy for numba-cuda before importing
     cuda,
     finish,
     flush_block,
+    importance_draw,
     mul,
     plain_sample,
     push,
-    reach,
-    solve_rho,
     stage2,
     trace_one,
-    uniform_pair,
     zero_block,
 )
 
@@ -225,35 +221,9 @@ def importance_kernel(
     if i < n_rays:
         cuda.atomic.add(launched, 0, 1)
         gid = first_id + i
-        m0 = int(slabs[n_pre - 1, 2])
-        hw = masks[m0, 1]
-        hh = masks[m0, 2]
-        circ = masks[m0, 0] == 1.0
-        nt = tgt_prob.size
-        u1, u2 = uniform_pair(key, gid, 0)
-        x0 = src[0] + mul(u1 - 0.5, src[2])
-        y0 = src[1] + mul(u2 - 0.5, src[3])
-        u3, u4 = uniform_pair(key, gid, 1)
-        t = min(int(u3 * nt), nt - 1)
-        if u4 >= tgt_prob[t]:
-            t = tgt_alias[t]
-        u5, u6 = uniform_pair(key, gid, 2)
-        if circ:
-            rr = hw * math.sqrt(u5)
-            ph = 2.0 * math.pi * u6
-            xt = tgt_x[t] + mul(rr, math.cos(ph))
-            yt = tgt_y[t] + mul(rr, math.sin(ph))
-        else:
-            xt = tgt_x[t] + mul(mul(2.0, u5) - 1.0, hw)
-            yt = tgt_y[t] + mul(mul(2.0, u6) - 1.0, hh)
-        dx = xt - x0
-        dy = yt - y0
-        r = math.sqrt(mul(dx, dx) + mul(dy, dy))
-        rho = solve_rho(r, slabs, n_pre, src[6], src[7])
-        f, fp, q = reach(rho, slabs, n_pre)
-        sx = rho * dx / r if r > 0.0 else 0.0
-        sy = rho * dy / r if r > 0.0 else 0.0
-        w = src[4] / (tgt_q[t] * fp * q * math.pi * src[5] * src[5])
+        x0, y0, sx, sy, w = importance_draw(
+            key, gid, src, slabs, n_pre, masks, tgt_x, tgt_y, tgt_prob, tgt_alias, tgt_q
+        )
         st, pl, xe, ye, we = trace_one(
             x0, y0, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, hrow, hk, 0
         )
