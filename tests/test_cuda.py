@@ -133,9 +133,9 @@ def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path, s
     assert res.returncode == 0, res.stderr[-3000:]
     got = {name: (int(f), int(u)) for name, f, u in map(str.split, res.stdout.splitlines())}
     plain = ("plain", "plain_queue", "plain_warp")
-    kernels = {"accept", "fold", "ghost", "importance", "maps", *plain}
+    kernels = {"accept", "fold", "ghost", "importance", "maps", "spot", *plain}
     assert set(got) == {f"{k}_kernel" for k in kernels}, got
-    for k in ("accept", "fold", "maps", *plain):  # (fma, fusable products): none
+    for k in ("accept", "fold", "maps", "spot", *plain):  # (fma, fusable products): none
         assert got[f"{k}_kernel"] == (0, 0), got
     # libdevice's cos and sin hold FMAs, but no product of the kernel's own is fusable
     assert got["importance_kernel"][1] == 0, got

@@ -22,7 +22,7 @@ from opticalstamp.analysis import cuda_tallies as ct
 from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.analysis.lsf import traced_folded_lsf_pair
 from opticalstamp.analysis.maps import traced_map_sets
-from opticalstamp.analysis.tallies import FoldTally, GhostTally, MapTally
+from opticalstamp.analysis.tallies import FoldTally, GhostTally, MapTally, SpotTally
 from opticalstamp.design import load_design, with_stack
 from opticalstamp.device import DeviceUnavailable, simulated, using_device
 from opticalstamp.io.files import provenance
@@ -292,7 +292,7 @@ def test_device_tallies_equal_the_cpu_tallies(tallied):
         np.testing.assert_allclose(v.ghost, u.ghost, rtol=1e-12, atol=1e-12 * u.ghost.max())
 
 
-def synthetic_rays(n=3000, n_masks=3, seed=11):
+def synthetic_rays(n=1200, n_masks=3, seed=11):
     """Rays that no tracer made: positions over +-300 um, directions over the disk
     |s| < 0.98 (some outside the pixel's acceptance), a tenth of the weights 0, holes of
     rows 0/1 and k -2 ... 2 per mask with a third of the rays on the own path (0, 0)."""
@@ -326,11 +326,12 @@ def on_device(cols, ledger, n_samples, seed=12):
 
 
 def test_each_tally_adds_synthetic_rays_alike_on_host_and_device():
-    """The three tallies fed the same synthetic rays, once as a host batch and once kept
+    """The four tallies fed the same synthetic rays, once as a host batch and once kept
     on the (simulated) device in another order: folds (all light and own path, two
-    batches of ids), maps (two sets of Z) and ghost sums (per hole sequence, landings,
-    detector, nearest landings, ledger) agree to rounding, counts exactly; and each
-    tally is not empty, so the comparison compares something."""
+    batches of ids), maps (two sets of Z), ghost sums (per hole sequence, landings,
+    detector, nearest landings, ledger) and spots (all light, the own path, the light
+    outside a band: grids, extents, centre cell, total) agree to rounding, counts and
+    extents exactly; and each tally is not empty, so the comparison compares something."""
     host, cols = synthetic_rays()
     dev = on_device(cols, host.ledger, host.n_samples)
     pix = dict(row=0, k=0, s2_max=0.6, x0=5.0, y0=-3.0, n_obj=1.0)
@@ -345,10 +346,23 @@ def test_each_tally_adds_synthetic_rays_alike_on_host_and_device():
             (-1000.0, -1000.0), 100.0, (20, 20), pix["x0"], pix["y0"], 1.0,
         )  # fmt: skip
         g = GhostTally(3, (0, 0), -4, 4, 1.5, zs, 84.6, 40, 150.0, 5)
-        for t in (f, m, g):
+        edges = [np.arange(-300.0, 300.5, 6.0), np.arange(-450.0, 450.5, 9.0)]
+        sp = [
+            SpotTally(zs, edges, [6.0, 9.0], 84.6, ghosts, band)
+            for ghosts, band in [(True, None), (False, None), (True, 0.3)]
+        ]
+        for t in (f, m, g, *sp):
             t.add(pb)
-        made.append((f, m, g))
-    (fc, mc, gc), (fd, md, gd) = made
+        made.append((f, m, g, sp))
+    (fc, mc, gc, sc), (fd, md, gd, sd) = made
+    for a, b in zip(sc, sd, strict=True):  # spots: all light, own path, outside a band
+        assert b._device is not None and a.total > 0 and np.isfinite(a.lo).all()
+        np.testing.assert_allclose(b.total, a.total, rtol=1e-12)
+        assert np.array_equal(b.lo, a.lo) and np.array_equal(b.hi, a.hi)
+        for u, v in [*zip(a.maps, b.maps, strict=True), (a.inside, b.inside)]:
+            assert u.sum() > 0
+            np.testing.assert_allclose(v, u, rtol=1e-12, atol=1e-12 * u.max())
+    assert sc[1].total < sc[0].total and sc[2].total < sc[0].total  # each tallies its own
     assert fd._device is not None and md._device is not None  # tallied on the device
     for a, b in [*zip(fc.sums, fd.sums, strict=True), *zip(mc.fine, md.fine, strict=True),
                  *zip(mc.coarse, md.coarse, strict=True)]:  # fmt: skip
@@ -400,5 +414,5 @@ def test_the_ghost_table_grows_and_hands_back_what_it_cannot_take(open_design, t
 def test_every_kernel_was_launched(recorded):
     """What the compilation test needs: each kernel's arguments as launched (the tests
     above launch them all; this one runs last)."""
-    want = {"accept", "fold", "ghost", "importance", "maps", "plain", "plain_queue"}
+    want = {"accept", "fold", "ghost", "importance", "maps", "plain", "plain_queue", "spot"}
     assert {f"{k}_kernel" for k in want} <= set(recorded), sorted(recorded)

@@ -279,3 +279,62 @@ def _ghost_tallies(pb, k_lo, radix, n0, z_um, bin_um, n_bins, half_um, capacity)
         inside.copy_to_host(),
         inside2.copy_to_host(),
     )
+
+
+def to_device(a: np.ndarray) -> object:
+    """A host array on the device (a tally's starting values)."""
+    return cuda.to_device(np.ascontiguousarray(a))
+
+
+@cuda.jit(cache=True)
+def spot_kernel(
+    out, w, own, n, x0, y0, z_um, n_obj, ghosts, band, start, step, size, cell_half,
+    maps, lo, hi, inside, total,
+):  # fmt: skip
+    """Per survivor and Z (as :class:`~.tallies.SpotTally` on the host): the own path's
+    landing extremes, the light on the grid of that Z and on the centre cell, and (once
+    per survivor) the light in all."""
+    t = cuda.grid(1)
+    if t >= n * z_um.size:
+        return
+    i = t % n
+    iz = t // n
+    o = own[i] != 0
+    wi = w[i] if ghosts or o else 0.0
+    if band >= 0.0 and not (abs(out[i, 2]) >= band or abs(out[i, 3]) >= band):
+        wi = 0.0  # in the band: the wave engine's light
+    if band >= 0.0 and not ghosts:
+        wi = 0.0
+    if iz == 0:
+        cuda.atomic.add(total, 0, wi)
+    dx, dy = _landing(out, i, z_um[iz], n_obj)
+    dx -= x0
+    dy -= y0
+    if o:
+        cuda.atomic.min(lo, (iz, 0), dx)
+        cuda.atomic.min(lo, (iz, 1), dy)
+        cuda.atomic.max(hi, (iz, 0), dx)
+        cuda.atomic.max(hi, (iz, 1), dy)
+    if size[iz] == 0 or wi == 0.0:
+        return
+    jx = int(math.floor((dx - start[iz]) / step[iz]))
+    jy = int(math.floor((dy - start[iz]) / step[iz]))
+    if 0 <= jx < size[iz] and 0 <= jy < size[iz]:
+        cuda.atomic.add(maps, (iz, jy, jx), wi)
+    if abs(dx) <= cell_half and abs(dy) <= cell_half:
+        cuda.atomic.add(inside, iz, wi)
+
+
+def spot(pb, z_um, start, step, size, cell_um, ghosts, band, maps, lo, hi, inside, total) -> None:
+    """Add a device batch's rays to a spot tally's device arrays (``band`` < 0: none)."""
+    dev = pb.rays.device
+    if dev.n == 0:
+        return
+    w, own = pb.on_device
+    z = np.ascontiguousarray(z_um, np.float64)
+    spot_kernel[blocks(dev.n * z.size), THREADS](
+        dev.out, w, own, dev.n, float(pb.x0), float(pb.y0), to_device(z), float(pb.n_obj),
+        bool(ghosts), float(band), to_device(np.asarray(start, np.float64)),
+        to_device(np.asarray(step, np.float64)), to_device(np.asarray(size, np.int64)),
+        float(cell_um) / 2, maps, lo, hi, inside, total,
+    )  # fmt: skip

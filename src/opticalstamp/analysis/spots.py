@@ -21,6 +21,7 @@ from ..raytrace.pixel import PixelTracer, Sampling, acceptance, tracer_for
 from ..raytrace.sampling import Source
 from ..raytrace.stack import forward_path, lattice_of, output_pitch
 from .responsivity import Optics, resolve_optics
+from .tallies import SpotTally, run
 
 
 @dataclass(frozen=True)
@@ -188,13 +189,11 @@ def spots(
     src = tr.source(pixel)
     zs = [float(z) for z in z_mm]
     # map half-widths from the own-path support of a pilot (its own random stream)
-    half = np.zeros(len(zs))
-    for pb in tr.trace(pixel, 1 << 18, stream=2):
-        o = pb.own
-        for iz, z in enumerate(zs):
-            dx, dy = pb.offsets(z * 1000)
-            half[iz] = max(half[iz], np.abs(dx[o]).max(initial=0), np.abs(dy[o]).max(initial=0))
     cell_um = output_pitch(design)  # the output pixel grid of paper Fig. 5 (84.6 um)
+    pilot = SpotTally(zs, None, None, cell_um)
+    run(tr, pixel, [pilot], 1 << 18, stream=2)
+    reach = np.maximum(np.abs(pilot.lo), np.abs(pilot.hi))  # inf where no own ray landed
+    half = np.where(np.isfinite(reach), reach, 0.0).max(axis=1)
     half = np.ceil((1.25 * half + 3 * bin_um) / cell_um * 2 + 1) * cell_um / 2
     # a spot wider than MAP_MAX_BINS bins (a stack too thin to confine the light) is
     # mapped on coarser bins, never on a grid that does not fit in memory
@@ -212,30 +211,10 @@ def spots(
             for iz, (h, b) in enumerate(zip(half, bins, strict=True))
         ]
         edges = [e for e, _ in wave_maps]
-    maps = [np.zeros((e.size - 1, e.size - 1)) for e in edges]
-    lo = np.full((len(zs), 2), np.inf)
-    hi = np.full((len(zs), 2), -np.inf)
-    inside = np.zeros(len(zs))
-    total = np.zeros(1)
-    for pb in tr.trace(pixel, progress=progress):
-        w, o = pb.w, pb.own
-        if not ghosts:
-            w = w * o
-        if wave is not None:  # the rays in the band are the wave engine's
-            b = pb.rays
-            w = w * ((np.abs(b.sx) >= opt.band) | (np.abs(b.sy) >= opt.band)) * ghosts
-        np.add.at(total, np.zeros(w.size, np.int64), w)
-        for iz, z in enumerate(zs):
-            dx, dy = pb.offsets(z * 1000)
-            lo[iz] = np.minimum(lo[iz], [dx[o].min(initial=np.inf), dy[o].min(initial=np.inf)])
-            hi[iz] = np.maximum(hi[iz], [dx[o].max(initial=-np.inf), dy[o].max(initial=-np.inf)])
-            e = edges[iz]
-            ix = np.floor((dx - e[0]) / bins[iz]).astype(np.int64)
-            iy = np.floor((dy - e[0]) / bins[iz]).astype(np.int64)
-            ok = (ix >= 0) & (ix < e.size - 1) & (iy >= 0) & (iy < e.size - 1)
-            np.add.at(maps[iz], (iy[ok], ix[ok]), w[ok])
-            cell = (np.abs(dx) <= cell_um / 2) & (np.abs(dy) <= cell_um / 2)
-            np.add.at(inside, np.full(int(cell.sum()), iz), w[cell])
+    band = None if wave is None else opt.band
+    t = SpotTally(zs, edges, bins, cell_um, ghosts, band)
+    run(tr, pixel, [t], progress=progress)
+    maps, lo, hi, inside, total = t.maps, t.lo, t.hi, t.inside, np.array([t.total])
     if wave is not None:
         light = wave.etendue_um2sr * n_rays  # in the tallies' units (etendue x rays)
         inside = inside + light * wave.center_cell_fraction

@@ -49,11 +49,12 @@ def run(
     n_rays: int | None = None,
     *,
     first_id: int = 0,
+    stream: int = 0,
     progress: bool = False,
 ) -> None:
-    """Trace ``n_rays`` rays of ``pixel`` (from ray ``first_id``; None: the tracer's
-    sampling) once and give every batch to every tally."""
-    for pb in tracer.trace(pixel, n_rays, first_id=first_id, progress=progress):
+    """Trace ``n_rays`` rays of ``pixel`` (from ray ``first_id`` of random stream
+    ``stream``; None: the tracer's sampling) once and give every batch to every tally."""
+    for pb in tracer.trace(pixel, n_rays, first_id=first_id, stream=stream, progress=progress):
         for t in tallies:
             t.add(pb)
 
@@ -378,3 +379,110 @@ class GhostTally:
         self.inside += t.inside
         self.inside2 += t.inside2
         return True
+
+
+# -- spots -------------------------------------------------------------------------------
+class SpotTally:
+    """One pixel's spots: at each object distance, the light on a square grid around the
+    pixel's axis, the own path's edge-to-edge extent, the light on the centre output cell
+    and the light in all.
+
+    Parameters
+    ----------
+    z_mm : object distances (mm above the reference plane)
+    edges, bins : per Z, the grid's bin edges (um from the pixel's axis, the same in x
+        and y) and their width, or None: the extents alone (a pilot that sizes the grids)
+    cell_um : the centre output cell's width (um)
+    ghosts : False: the own path's light alone
+    outside_band : count only the rays outside this band (|s_x| or |s_y| >= it; the
+        band's light is the wave engine's); the own path's extents take every own ray
+
+    ``maps[iz]`` (n, n), ``inside`` (nz,) and ``total``: summed weights; ``lo``, ``hi``
+    (nz, 2): the own path's landings' extremes in x and y (inf, -inf where none).
+    """
+
+    def __init__(self, z_mm, edges, bins, cell_um, ghosts=True, outside_band=None):
+        self.z_um = np.asarray(z_mm, dtype=np.float64) * 1000.0
+        nz = self.z_um.size
+        self.edges = edges
+        sizes = [0] * nz if edges is None else [e.size - 1 for e in edges]
+        self._size = np.array(sizes, np.int64)
+        self._start = np.array([0.0] * nz if edges is None else [e[0] for e in edges])
+        self._bin = np.ones(nz) if edges is None else np.asarray(bins, dtype=np.float64)
+        self.cell_um, self.ghosts, self.outside_band = float(cell_um), bool(ghosts), outside_band
+        self._maps = np.zeros((nz, max(sizes, default=0), max(sizes, default=0)))
+        self._lo = np.full((nz, 2), np.inf)
+        self._hi = np.full((nz, 2), -np.inf)
+        self._inside = np.zeros(nz)
+        self._total = np.zeros(1)
+        self._device = None
+
+    def add(self, pb: PixelBatch) -> None:
+        if _on_device(pb, False):
+            self._add_device(pb)
+        else:
+            self._add_host(pb)
+
+    def _weights(self, pb: PixelBatch) -> np.ndarray:
+        w = pb.w if self.ghosts else pb.w * pb.own
+        if self.outside_band is not None:  # the rays in the band are the wave engine's
+            w = w * _outside(pb, self.outside_band) * self.ghosts
+        return w
+
+    def _add_host(self, pb: PixelBatch) -> None:
+        w, o = self._weights(pb), pb.own
+        np.add.at(self._total, np.zeros(w.size, np.int64), w)
+        for iz, z in enumerate(self.z_um):
+            dx, dy = pb.offsets(z)
+            lo = [dx[o].min(initial=np.inf), dy[o].min(initial=np.inf)]
+            hi = [dx[o].max(initial=-np.inf), dy[o].max(initial=-np.inf)]
+            self._lo[iz] = np.minimum(self._lo[iz], lo)
+            self._hi[iz] = np.maximum(self._hi[iz], hi)
+            if self.edges is None:
+                continue
+            n, e0, b = self._size[iz], self._start[iz], self._bin[iz]
+            ix = np.floor((dx - e0) / b).astype(np.int64)
+            iy = np.floor((dy - e0) / b).astype(np.int64)
+            ok = (ix >= 0) & (ix < n) & (iy >= 0) & (iy < n)
+            np.add.at(self._maps[iz], (iy[ok], ix[ok]), w[ok])
+            cell = (np.abs(dx) <= self.cell_um / 2) & (np.abs(dy) <= self.cell_um / 2)
+            np.add.at(self._inside, np.full(int(cell.sum()), iz), w[cell])
+
+    def _add_device(self, pb: PixelBatch) -> None:
+        from . import cuda_tallies as gpu
+
+        if self._device is None:
+            self._device = [
+                gpu.zeros(self._maps.shape), gpu.to_device(np.full_like(self._lo, np.inf)),
+                gpu.to_device(np.full_like(self._hi, -np.inf)), gpu.zeros(self._inside.shape),
+                gpu.zeros(1),
+            ]  # fmt: skip
+        band = -1.0 if self.outside_band is None else float(self.outside_band)
+        gpu.spot(
+            pb, self.z_um, self._start, self._bin, self._size, self.cell_um, self.ghosts, band,
+            *self._device,
+        )  # fmt: skip
+
+    def _with_device(self, i: int, host: np.ndarray, join) -> np.ndarray:
+        return host if self._device is None else join(host, self._device[i].copy_to_host())
+
+    @property
+    def maps(self) -> list[np.ndarray]:
+        m = self._with_device(0, self._maps, np.add)
+        return [m[iz, :n, :n] for iz, n in enumerate(self._size)]
+
+    @property
+    def lo(self) -> np.ndarray:
+        return self._with_device(1, self._lo, np.minimum)
+
+    @property
+    def hi(self) -> np.ndarray:
+        return self._with_device(2, self._hi, np.maximum)
+
+    @property
+    def inside(self) -> np.ndarray:
+        return self._with_device(3, self._inside, np.add)
+
+    @property
+    def total(self) -> float:
+        return float(self._with_device(4, self._total, np.add)[0])
