@@ -317,6 +317,47 @@ def wave_folds(design: Design, optics: Optics, z_max_mm: float) -> WaveFolds | N
     return WaveFolds(design, z_max_mm, sampling=optics.sampling, fresnel=optics.fresnel)
 
 
+@dataclass(frozen=True)
+class BandSpots:
+    """What an engine gives a pixel's spots inside its band (:func:`band_spots`):
+    ``edges`` per Z, the grids' bin edges (um from the pixel's axis); ``maps`` per Z, the
+    in-band responsivity (sr) on them; ``light`` (nz,) its etendue (um^2 sr) and
+    ``center_cell`` (nz,) the share of it on the centre output cell; ``band``: the tracer
+    takes only the light outside it (None: all of it)."""
+
+    edges: list[np.ndarray]
+    maps: list[np.ndarray]
+    light: np.ndarray
+    center_cell: np.ndarray
+    band: float | None
+
+
+def band_spots(
+    design: Design, optics: Optics, z_mm, half_um, bins_um, pixel, progress: bool = False
+) -> BandSpots:
+    """A pixel's spots inside the engine's band, on square grids of half width
+    ``half_um`` and bins ``bins_um`` per Z: the wave engine's (the design's light, on its
+    own bins) with wave optics; none with ray optics (the tracer takes all the light)."""
+    if optics.engine != "wave":
+        edges = [np.arange(-h, h + b / 2, b) for h, b in zip(half_um, bins_um, strict=True)]
+        zero = np.zeros(len(edges))
+        return BandSpots(edges, [np.zeros((e.size - 1,) * 2) for e in edges], zero, zero, None)
+    from .wavespectral import wave_response_spectral
+
+    wave = wave_response_spectral(
+        design, z_mm, pixel=pixel, sampling=optics.sampling, fresnel=optics.fresnel,
+        progress=progress,
+    )  # fmt: skip
+    spots = [
+        wave.spot(iz, float(b), float(h))
+        for iz, (h, b) in enumerate(zip(half_um, bins_um, strict=True))
+    ]
+    return BandSpots(
+        [e for e, _ in spots], [m for _, m in spots], np.asarray(wave.etendue_um2sr),
+        np.asarray(wave.center_cell_fraction), optics.band,
+    )  # fmt: skip
+
+
 def _n_obj(design: Design) -> float:
     return float(design.index(design.object_medium))
 

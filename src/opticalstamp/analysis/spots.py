@@ -20,7 +20,7 @@ from ..raytrace.launch import launch
 from ..raytrace.pixel import PixelTracer, Sampling, acceptance, tracer_for
 from ..raytrace.sampling import Source
 from ..raytrace.stack import forward_path, lattice_of, output_pitch
-from .responsivity import Optics, resolve_optics
+from .responsivity import Optics, band_spots, resolve_optics
 from .tallies import SpotTally, run
 
 
@@ -198,33 +198,17 @@ def spots(
     # a spot wider than MAP_MAX_BINS bins (a stack too thin to confine the light) is
     # mapped on coarser bins, never on a grid that does not fit in memory
     bins = np.maximum(bin_um, 2 * half / MAP_MAX_BINS)
-    edges = [np.arange(-h, h + b / 2, b) for h, b in zip(half, bins, strict=True)]
-    wave = None
-    if opt.engine == "wave":  # the in-band light by the wave engine, on its own bins
-        from .wavespectral import wave_response_spectral
-
-        wave = wave_response_spectral(
-            design, zs, pixel=pixel, sampling=opt.sampling, fresnel=opt.fresnel, progress=progress
-        )
-        wave_maps = [
-            wave.spot(iz, float(b), float(h))
-            for iz, (h, b) in enumerate(zip(half, bins, strict=True))
-        ]
-        edges = [e for e, _ in wave_maps]
-    band = None if wave is None else opt.band
-    t = SpotTally(zs, edges, bins, cell_um, ghosts, band)
+    inband = band_spots(design, opt, zs, half, bins, pixel, progress)
+    edges = inband.edges
+    t = SpotTally(zs, edges, bins, cell_um, ghosts, inband.band)
     run(tr, pixel, [t], progress=progress)
-    maps, lo, hi, inside, total = t.maps, t.lo, t.hi, t.inside, np.array([t.total])
-    if wave is not None:
-        light = wave.etendue_um2sr * n_rays  # in the tallies' units (etendue x rays)
-        inside = inside + light * wave.center_cell_fraction
-        total = total + light[0]
+    light = inband.light * n_rays  # in the tallies' units (etendue x rays)
+    inside = t.inside + light * inband.center_cell
+    total = t.total + light[0]
     out = []
     for iz, z in enumerate(zs):
         e = edges[iz]
-        m = maps[iz] / (n_rays * bins[iz] * bins[iz])
-        if wave is not None:
-            m = m + wave_maps[iz][1]
+        m = t.maps[iz] / (n_rays * bins[iz] * bins[iz]) + inband.maps[iz]
         c = 0.5 * (e[1:] + e[:-1])
         out.append(
             Spot(
@@ -232,11 +216,11 @@ def spots(
                 e,
                 e.copy(),
                 m,
-                float(hi[iz, 0] - lo[iz, 0]),
-                float(hi[iz, 1] - lo[iz, 1]),
+                float(t.hi[iz, 0] - t.lo[iz, 0]),
+                float(t.hi[iz, 1] - t.lo[iz, 1]),
                 fwhm(m.sum(axis=0), c),
                 fwhm(m.sum(axis=1), c),
-                float(inside[iz] / total[0]) if total[0] else 0.0,
+                float(inside[iz] / total) if total else 0.0,
             )
         )
     return SpotResult(
