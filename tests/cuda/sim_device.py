@@ -292,7 +292,7 @@ def test_device_tallies_equal_the_cpu_tallies(tallied):
         np.testing.assert_allclose(v.ghost, u.ghost, rtol=1e-12, atol=1e-12 * u.ghost.max())
 
 
-def synthetic_rays(n=1200, n_masks=3, seed=11):
+def synthetic_rays(n=600, n_masks=3, seed=11):
     """Rays that no tracer made: positions over +-300 um, directions over the disk
     |s| < 0.98 (some outside the pixel's acceptance), a tenth of the weights 0, holes of
     rows 0/1 and k -2 ... 2 per mask with a third of the rays on the own path (0, 0)."""
