@@ -25,8 +25,8 @@ from .dof import depth_of_field
 #: (:mod:`.wave2dmaps`) takes minutes a height on a CPU
 NEEDS_RECTANGLES = (
     "holes that are not rectangles take the 2-D path of the wave engine, minutes a height on "
-    "a CPU: ask for it with --optics wave (report) or opticalstamp wave, or run on a CUDA "
-    "GPU with CuPy"
+    "a CPU: ask for it with --optics wave (report, compare) or opticalstamp wave, or run on "
+    "a CUDA GPU with CuPy"
 )
 #: Ray optics holds where the wave light is within this fraction of the ray light
 LIGHT_TOLERANCE = 0.05

@@ -549,18 +549,20 @@ def compare(
     ] = Path("compare"),
     seed: SeedOpt = 0,
     fresnel: FresnelOpt = False,
+    optics: OpticsOpt = "auto",
     as_json: JsonOpt = False,
 ) -> None:
     """Designs side by side: light vs F/10, working F-number, thickness, depth of field on
     one chart (the first design's, 2/3 of its resolution: 200 dpi for 300), ghost
     fraction, and contrast vs height on one axis (paper §4: the stamp has ~1/100 of a
-    rod-lens array's light; a rod-lens scanner is ≥ 15 mm thick)."""
+    rod-lens array's light; a rod-lens scanner is ≥ 15 mm thick). Each stamp's figures
+    by ``--optics`` (auto: each by its own validity rule; the row says which)."""
     from ..report.compare import wave_cells, write_comparison
 
     if len(designs) < 2:
         fail("compare: give at least two designs")
     ds = [open_design(s, kinds=BOTH_KINDS) for s in designs]
-    rows = write_comparison(ds, out, seed=seed, fresnel=fresnel)
+    rows = write_comparison(ds, out, seed=seed, fresnel=fresnel, optics=optics)
     dof_head = f"DOF{rows[0]['dof_dpi']:g} mm (low..high)"
     lines = [
         f"{'design':<22} {'kind':<15} {'light/F10':>10} {'vs first':>9} {'F_w':>6} "
@@ -573,6 +575,9 @@ def compare(
             f"{r['thickness_mm']:>8.2f} {r['dof_mm'][0]:>10.2f} .. {r['dof_mm'][1]:<9.2f} "
             f"{r['ghost_fraction']:>6.3f}"
         )
+    for r in rows:
+        if r.get("optics"):
+            lines.append(f"  {r['name']:<22} {optics_line(r['optics'])}")
     lines.append(
         f"ray vs wave optics (own path and near crosstalk, {rows[0]['dof_dpi']:g}-dpi chart):"
     )

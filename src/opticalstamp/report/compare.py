@@ -33,6 +33,7 @@ def rows_table(rows: list[dict]) -> str:
                 "{:.2f} .. {:.2f}".format(*r["dof_mm"]),
                 r["dof_span_mm"],
                 r["ghost_fraction"],
+                engine_cell(r),
                 *wave_cells(r),
             ]
         )
@@ -46,12 +47,24 @@ def rows_table(rows: list[dict]) -> str:
         f"{rows[0]['dof_dpi']:g}-dpi DOF (mm from nominal)",
         "DOF span (mm)",
         "ghost fraction",
+        "optics of these figures",
         "Fresnel number, smallest",
         "light wave/ray",
         "DOF wave / ray, own + near (mm)",
         "ray vs wave optics",
     ]
     return table(body, head)
+
+
+def engine_cell(r: dict) -> str:
+    """Which optics gave a row's light, contrast and depth of field: a stamp's engine
+    (ray or wave, and whether asked for or chosen by the validity rule); a rod-lens
+    array's own tracer."""
+    o = r.get("optics")
+    if not o:
+        return "rod-lens tracer" if r["kind"] == "rod-lens-array" else "ray"
+    how = "asked for" if o.get("asked") == o.get("engine") else "auto"
+    return f"{o['engine']} ({how})"
 
 
 def wave_cells(r: dict) -> list:
@@ -107,13 +120,14 @@ def page(rows: list[dict], figures: dict[str, str]) -> str:
 
 
 def write_comparison(
-    designs, out_dir: str | Path, *, seed: int = 0, fresnel: bool = False
+    designs, out_dir: str | Path, *, seed: int = 0, fresnel: bool = False, optics: str = "ray"
 ) -> list[dict]:
-    """Compare ``designs`` and write compare.json, PNGs and index.html into ``out_dir``
-    (replaced as a whole once everything is written)."""
+    """Compare ``designs`` (each stamp by ``optics``) and write compare.json, PNGs and
+    index.html into ``out_dir`` (replaced as a whole once everything is written)."""
     from . import plotting
 
-    rows = compare(designs, seed=seed, fresnel=fresnel)
+    rows = compare(designs, seed=seed, fresnel=fresnel, optics=optics)
+    engines = [(r.get("optics") or {}).get("engine") for r in rows]
     figures = {
         "contrast.png": "contrast vs object height",
         "light.png": "light and thickness",
@@ -122,7 +136,7 @@ def write_comparison(
     with replace_folder(Path(out_dir)) as tmp:
         save_figure(plotting.plot_compare_contrast(rows), tmp / "contrast.png")
         save_figure(plotting.plot_compare_light(rows), tmp / "light.png")
-        panels = text_scans(designs, seed=seed, fresnel=fresnel)
+        panels = text_scans(designs, seed=seed, fresnel=fresnel, engines=engines)
         fig = plotting.plot_scan_panels(
             panels,
             "heights from each design's document reference",

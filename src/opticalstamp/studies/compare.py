@@ -25,8 +25,11 @@ Every design is evaluated with the definitions shared by both kinds:
   for a rod-lens array. ``wave``: ray against wave optics on the same chart at
   :data:`WAVE_HEIGHTS_MM` (:func:`wave_figures`: the wave/ray light ratio, the RMTF and
   depth of field of the own path and near crosstalk by both engines, which optics holds);
-  for circular holes ``{"not_measurable": reason}``, for a rod-lens array ``{"note":
-  "n/a (not an aperture stack)"}``.
+  for circular holes ``{"not_measurable": reason}`` unless wave optics is asked for (or
+  the run has a GPU with CuPy), for a rod-lens array ``{"note": "n/a (not an aperture
+  stack)"}``.
+* ``optics``: the engine of a stamp's light, contrast and depth of field (``optics``
+  argument: "ray", "wave" or "auto", each stamp by its own validity rule), and why.
 """
 
 from __future__ import annotations
@@ -72,9 +75,19 @@ def _kind(design: AnyDesign) -> str:
 
 
 def evaluate_stamp(
-    design: Design, *, seed: int = 0, fresnel: bool = False, dof_dpi: float | None = None
+    design: Design,
+    *,
+    seed: int = 0,
+    fresnel: bool = False,
+    dof_dpi: float | None = None,
+    optics: str = "ray",
 ) -> dict:
-    eff = efficiency(design, seed=seed, fresnel=fresnel, area_scales=(1.0,), z_mm=(0.0,))
+    """A stamp's comparison figures; ``optics`` ("ray", "wave", "auto") gives its light,
+    contrast and depth of field (:func:`~opticalstamp.analysis.responsivity.
+    resolve_optics`; ``optics`` in the row says which engine and why)."""
+    eff = efficiency(
+        design, seed=seed, fresnel=fresnel, area_scales=(1.0,), z_mm=(0.0,), optics=optics
+    )
     r = rmtf(
         design,
         dpi=COMPARE_DPI,
@@ -82,19 +95,27 @@ def evaluate_stamp(
         seed=seed,
         fresnel=fresnel,
         dof_dpi=dof_dpi,
+        optics=optics,
     )
-    return stamp_row(design, eff, r) | wave_figures(design, seed=seed, dof_dpi=r.dof_dpi)
+    row = stamp_row(design, eff, r) | {"optics": r.meta.get("optics")}
+    return row | wave_figures(design, seed=seed, dof_dpi=r.dof_dpi, optics=optics)
 
 
-def wave_figures(design: Design, *, seed: int = 0, dof_dpi: float | None = None) -> dict:
+def wave_figures(
+    design: Design, *, seed: int = 0, dof_dpi: float | None = None, optics: str = "ray"
+) -> dict:
     """A stamp's ``fresnel_min`` and ``wave`` (see the module's docstring): the wave
     engine against the tracer in its band at :data:`WAVE_HEIGHTS_MM`, ``WAVE_RAYS`` rays
-    per pixel row, on the ``dof_dpi`` chart (default the design's)."""
+    per pixel row, on the ``dof_dpi`` chart (default the design's). Holes that are not
+    rectangles take the wave engine's 2-D path (minutes a height on a CPU): measured
+    where ``optics`` is "wave" or the run's device is a GPU with CuPy, else
+    ``{"not_measurable": reason}``."""
+    from ..analysis.wave2dmaps import maps_on_gpu
     from ..analysis.wavebase import fresnel_numbers, rectangular
 
     fres = fresnel_numbers(design)
     out: dict = {"fresnel_min": min(f["fresnel_number"] for f in fres) if fres else None}
-    if not rectangular(design):
+    if not rectangular(design) and optics != "wave" and not maps_on_gpu():
         return out | {"wave": {"not_measurable": NEEDS_RECTANGLES}}
     try:
         c, v = compare_and_judge(
@@ -229,13 +250,20 @@ def evaluate_rodlens(
 
 
 def evaluate(
-    design: AnyDesign, *, seed: int = 0, fresnel: bool = False, dof_dpi: float | None = None
+    design: AnyDesign,
+    *,
+    seed: int = 0,
+    fresnel: bool = False,
+    dof_dpi: float | None = None,
+    optics: str = "ray",
 ) -> dict:
     """One design's comparison figures (see the module's docstring for definitions);
     ``dof_dpi``: the depth-of-field chart (default: the design's own, 2/3 of its
-    resolution)."""
-    run = evaluate_rodlens if isinstance(design, RodLensDesign) else evaluate_stamp
-    row = run(design, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi)
+    resolution); ``optics``: a stamp's engine (a rod-lens array has its own tracer)."""
+    if isinstance(design, RodLensDesign):
+        row = evaluate_rodlens(design, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi)
+    else:
+        row = evaluate_stamp(design, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi, optics=optics)
     return labelled(design, row, seed, fresnel)
 
 
@@ -251,13 +279,21 @@ def labelled(design: AnyDesign, row: dict, seed: int, fresnel: bool) -> dict:
 
 
 def compare(
-    designs, *, seed: int = 0, fresnel: bool = False, dof_dpi: float | None = None
+    designs,
+    *,
+    seed: int = 0,
+    fresnel: bool = False,
+    dof_dpi: float | None = None,
+    optics: str = "ray",
 ) -> list[dict]:
     """Evaluate each design, every depth of field on one chart (``dof_dpi``; default the
-    first design's, 2/3 of its resolution); add each one's light relative to the first."""
+    first design's, 2/3 of its resolution), each stamp by ``optics`` ("auto": each by
+    its own rule); add each one's light relative to the first."""
     designs = list(designs)
     dof_dpi = dof_chart_dpi(designs[0]) if dof_dpi is None else float(dof_dpi)
-    rows = [evaluate(d, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi) for d in designs]
+    rows = [
+        evaluate(d, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi, optics=optics) for d in designs
+    ]
     return relative_to_first(rows)
 
 
@@ -269,25 +305,34 @@ def relative_to_first(rows: list[dict]) -> list[dict]:
     return rows
 
 
-def text_scans(designs, *, heights_mm=TEXT_HEIGHTS_MM, seed: int = 0, fresnel: bool = False):
+def text_scans(
+    designs,
+    *,
+    heights_mm=TEXT_HEIGHTS_MM,
+    seed: int = 0,
+    fresnel: bool = False,
+    engines=None,
+):
     """The same text (the built-in text chart's first half lines) scanned by each design at
     each height: [(title, image)] in design-major order, linear reflectance. Each scanner
     has its design's electronics and is exposed so that white fills WHITE_FILL of the full
     well (a rod-lens array collects about 100 times a stamp's light: at one exposure one
-    of them would clip or starve)."""
+    of them would clip or starve). ``engines``: per design, "wave" to scan through the
+    wave engine's kernels (the engine of its row), else the default kernels."""
     from ..imaging.charts import text_chart
     from ..imaging.scan import ScanSettings, prepare_kernels, simulate_scan
     from ..imaging.sensor import exposure_for_white
 
     doc, _ = text_chart(TEXT_DPI)
     doc = doc[: doc.shape[0] // 2, : doc.shape[1] // 2]  # two half lines of 8-pt text
-    base = ScanSettings(fresnel=fresnel)
     panels = []
-    for d in designs:
+    for d, engine in zip(designs, engines or [None] * len(designs), strict=True):
+        base = ScanSettings(fresnel=fresnel, kernel="wave" if engine == "wave" else "auto")
         kern = prepare_kernels(d, z_mm=heights_mm, settings=base, seed=seed)
         groups = kern.lookup(
-            d, [heights_mm[0]], fresnel=fresnel, n_rays=base.kernel_rays, seed=seed
-        )
+            d, [heights_mm[0]], source=base.kernel, fresnel=fresnel, n_rays=base.kernel_rays,
+            seed=seed,
+        )  # fmt: skip
         white = float(np.mean([k[0].own_etendue + k[0].ghost_etendue for k in groups]))
         ms = exposure_for_white(d.electronics, white, WHITE_FILL)
         st = base.model_copy(
