@@ -112,9 +112,11 @@ def test_the_light_section_has_each_channel_and_the_weakest_as_headline(report):
     assert figures["light"]["text"].endswith("(blue channel, the weakest)")
 
 
-def test_the_one_light_analyses_say_they_are_ray_optics(report):
-    """The spots, scans and restoration take one light: ray optics for a colour scanner,
-    saying so; the ray-vs-wave section compares the engines at the red channel."""
+def test_the_one_light_analyses_say_their_optics(report):
+    """The scans and restoration take one light: ray optics for a colour scanner, saying
+    so; the spots take the channels one by one by wave optics (each LED's light in the
+    band, the widest channel the headline); the ray-vs-wave section compares the engines
+    at the red channel."""
     _, out, data = report
     one = data["optics_one_light"]
     assert one["engine"] == "ray" and "rgb" in one["reason"]
@@ -122,13 +124,21 @@ def test_the_one_light_analyses_say_they_are_ray_optics(report):
         assert "not_measurable" not in data[key], key
     assert data["ray_vs_wave"]["meta"]["spectrum"]["name"] == "red"
     assert data["summary"]["optics"].startswith("(the red channel")
-    # each section recorded ray optics, and the verdict box says so, with the reason
-    assert data["summary"]["one_light_engines"] == dict.fromkeys(
-        ("spots", "scans", "restoration"), "ray"
-    )
+    # each section recorded its optics, and the verdict box says so, with the reason
+    assert data["summary"]["one_light_engines"] == {
+        "spots": "wave", "scans": "ray", "restoration": "ray"
+    }  # fmt: skip
+    sp = data["spots"]
+    chans, head = sp["meta"]["channels"], sp["meta"]["headline"]
+    assert list(chans) == RGB and [c["spectrum"]["name"] for c in chans.values()] == RGB
+    share = {n: sum(c["center_cell_fraction"]) for n, c in chans.items()}
+    assert head["channel"] == min(share, key=share.get)
+    assert sp["center_cell_fraction"] == chans[head["channel"]]["center_cell_fraction"]
+    assert len(set(share.values())) == 3  # each channel its own light
     page = (out / "index.html").read_text()
-    assert "and so are the spots, scans and restoration here" in page
-    assert "by wave optics (the wave engine" not in page
+    assert "and so are the scans and restoration here" in page
+    assert "the spots are by wave optics, channel by channel" in page
+    assert f"figure are the {head['channel']} channel's, the widest" in page
 
 
 def test_the_page_shows_the_channels(report):

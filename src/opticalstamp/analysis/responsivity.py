@@ -333,11 +333,19 @@ class BandSpots:
 
 
 def band_spots(
-    design: Design, optics: Optics, z_mm, half_um, bins_um, pixel, progress: bool = False
+    design: Design,
+    optics: Optics,
+    z_mm,
+    half_um,
+    bins_um,
+    pixel,
+    progress: bool = False,
+    spectrum=None,
 ) -> BandSpots:
     """A pixel's spots inside the engine's band, on square grids of half width
-    ``half_um`` and bins ``bins_um`` per Z: the wave engine's (the design's light, on its
-    own bins) with wave optics; none with ray optics (the tracer takes all the light)."""
+    ``half_um`` and bins ``bins_um`` per Z: the wave engine's (``spectrum``, None: the
+    design's light, on its own bins) with wave optics; none with ray optics (the tracer
+    takes all the light)."""
     if optics.engine != "wave":
         edges = [np.arange(-h, h + b / 2, b) for h, b in zip(half_um, bins_um, strict=True)]
         zero = np.zeros(len(edges))
@@ -346,7 +354,7 @@ def band_spots(
 
     wave = wave_response_spectral(
         design, z_mm, pixel=pixel, sampling=optics.sampling, fresnel=optics.fresnel,
-        progress=progress,
+        progress=progress, spectrum=spectrum,
     )  # fmt: skip
     spots = [
         wave.spot(iz, float(b), float(h))

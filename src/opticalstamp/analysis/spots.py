@@ -10,7 +10,7 @@ The *PSF* is forward: where light from a Lambertian object point lands on the se
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -20,7 +20,9 @@ from ..raytrace.launch import launch
 from ..raytrace.pixel import PixelTracer, Sampling, acceptance, tracer_for
 from ..raytrace.sampling import Source
 from ..raytrace.stack import forward_path, lattice_of, output_pitch
+from .colour import channel_designs
 from .responsivity import Optics, band_spots, resolve_optics
+from .spectrum import channels as light_channels
 from .tallies import SpotTally, run
 
 
@@ -177,17 +179,84 @@ def spots(
     optics : "ray", "wave" or "auto" (:func:`~opticalstamp.analysis.responsivity.
         resolve_optics`): with wave optics the maps are the wave engine's in its band
         (the design's light) plus the traced light beyond it, on the wave engine's
-        bins; the edge-to-edge extents stay those of the geometric own path
+        bins; the edge-to-edge extents stay those of the geometric own path. A colour
+        scanner (``electronics.illumination`` "rgb") under wave optics: each channel's
+        spots (its LED's light in the band, the light beyond traced through the design at
+        the channel's mean wavelength, :func:`~.colour.channel_designs`); the headline
+        the channel whose light spreads most (:data:`SPOT_RULE`), every channel's figures
+        in ``meta["channels"]``
     """
     if sampling is None:
         sampling = Sampling(n_rays, seed, fresnel, chunk)
     sampling = sampling.or_rays(n_rays)
+    opt = resolve_optics(design, optics, fresnel=sampling.fresnel, channels=True)
+    specs = light_channels(design)
+    kw = dict(pixel=pixel, sampling=sampling, bin_um=bin_um, ghosts=ghosts, progress=progress)
+    zs = [float(z) for z in z_mm]
+    if opt.engine != "wave" or len(specs) == 1:
+        return _spots(design, design, None, zs, opt, tracer=tracer, **kw)
+    traced = channel_designs(design)
+    per = {
+        name: _spots(
+            design,
+            traced[name],
+            spec,
+            zs,
+            opt,
+            tracer=tracer if traced[name] is design else None,
+            **kw,
+        )  # fmt: skip
+        for name, spec in specs.items()
+    }
+    return widest_channel(per, specs)
+
+
+#: the headline of a colour scanner's spots, in words
+SPOT_RULE = (
+    "a colour scanner's spots are its widest channel's (the least light on the centre "
+    "output cell over the heights): each channel is its own exposure, and a colour image "
+    "is as sharp as its most blurred channel"
+)
+
+
+def widest_channel(per: dict[str, SpotResult], specs: dict) -> SpotResult:
+    """The spots of the channel whose light spreads most (the least on the centre output
+    cell, summed over the heights; the first in red, green, blue order on a tie), with
+    every channel's figures in ``meta["channels"]`` and the rule in ``meta["headline"]``."""
+    share = {n: sum(s.center_cell_fraction for s in r.spots) for n, r in per.items()}
+    name = min(share, key=share.get)
+    head = per[name]
+    channels = {n: {k: v for k, v in r.to_dict().items() if k != "meta"} for n, r in per.items()}
+    for n, sp in specs.items():
+        channels[n]["spectrum"] = {
+            "name": sp.name, "wavelengths_um": list(sp.wavelengths_um),
+            "weights": [float(w) for w in sp.weights],
+        }  # fmt: skip
+    meta = head.meta | {"channels": channels, "headline": {"channel": name, "rule": SPOT_RULE}}
+    return replace(head, meta=meta)
+
+
+def _spots(
+    design: Design,
+    traced: Design,
+    spectrum,
+    zs: list[float],
+    opt: Optics,
+    *,
+    pixel: tuple[int, int],
+    sampling: Sampling,
+    bin_um: float,
+    ghosts: bool,
+    progress: bool,
+    tracer: PixelTracer | None,
+) -> SpotResult:
+    """:func:`spots` under one light: ``spectrum`` (None: the design's) in the wave
+    engine's band, the rest traced through ``traced`` (``design`` at that light's mean
+    wavelength where its media disperse, else ``design``)."""
     n_rays = sampling.n_rays
-    opt = resolve_optics(design, optics, fresnel=sampling.fresnel)
-    tr = tracer_for(design, sampling, tracer)
+    tr = tracer_for(traced, sampling, tracer)
     row, k = pixel
     src = tr.source(pixel)
-    zs = [float(z) for z in z_mm]
     # map half-widths from the own-path support of a pilot (its own random stream)
     cell_um = output_pitch(design)  # the output pixel grid of paper Fig. 5 (84.6 um)
     pilot = SpotTally(zs, None, None, cell_um)
@@ -198,7 +267,7 @@ def spots(
     # a spot wider than MAP_MAX_BINS bins (a stack too thin to confine the light) is
     # mapped on coarser bins, never on a grid that does not fit in memory
     bins = np.maximum(bin_um, 2 * half / MAP_MAX_BINS)
-    inband = band_spots(design, opt, zs, half, bins, pixel, progress)
+    inband = band_spots(design, opt, zs, half, bins, pixel, progress, spectrum=spectrum)
     edges = inband.edges
     t = SpotTally(zs, edges, bins, cell_um, ghosts, inband.band)
     run(tr, pixel, [t], progress=progress)

@@ -181,7 +181,8 @@ def build_report(
         tracer = PixelTracer(design, replay=True, passes=passes)
         shown = dict(traced, progress=progress)
         g = run(ghost_section, design, work, **shown, tracer=tracer)
-        sp = run(spot_section, design, work, **shown, tracer=tracer, optics=one)
+        # the spots take a colour scanner's channels one by one (the widest the headline)
+        sp = run(spot_section, design, work, **shown, tracer=tracer, optics=opt)
         psfs = run(psf_section, design, work, **shown)
         clock.lap("ghosts_spots_psf")
         concepts = (

@@ -121,9 +121,32 @@ def spots_html(sp: dict, pitch_um: float) -> str:
         f"fraction in centre {pitch_um:.1f} µm cell",
     ]
     return f"""<h2>{title}</h2>
-{table(spot_rows, head)}
+{table(spot_rows, head)}{_spot_channels(sp)}
 <img src="spots.png">
 """
+
+
+def _spot_channels(sp: dict) -> str:
+    """A colour scanner's spots per channel (wave optics): the centre-cell share and the
+    FWHM in x of each channel at each Z, and which one the table and figure show."""
+    meta = sp.get("meta") or {}
+    chans, head = meta.get("channels"), meta.get("headline")
+    if not chans or not head:
+        return ""
+    rows = [
+        [name]
+        + [
+            f"{f:.3f} / {w:.1f}"
+            for f, w in zip(c["center_cell_fraction"], c["fwhm_x_um"], strict=True)
+        ]
+        for name, c in chans.items()
+    ]
+    cols = ["channel"] + [f"Z = {z:g} mm: centre share / FWHM x (µm)" for z in sp["z_mm"]]
+    return (
+        f"<p>Colour: one exposure per LED (illumination rgb), the spots channel by channel by "
+        f"wave optics; the table above and the figure are the {html.escape(head['channel'])} "
+        f"channel's, the widest ({html.escape(head['rule'])}).</p>{table(rows, cols)}"
+    )
 
 
 def psf_html(psfs: list[dict] | dict) -> str:

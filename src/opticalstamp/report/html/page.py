@@ -218,9 +218,12 @@ def one_light_sentence(engines: dict | None, one: dict | None = None) -> str:
     wave = [_ONE_LIGHT[k] for k, e in engines.items() if e == "wave"]
     if one:
         why = html.escape(one["reason"].removeprefix("ray optics: "))
-        if not ray:
-            return "Ghosts and PSFs are ray optics."
-        return f"Ghosts and PSFs are ray optics, and so are the {_and(ray)} here ({why})."
+        text = "Ghosts and PSFs are ray optics"
+        if ray:
+            text += f", and so are the {_and(ray)} here ({why})"
+        if wave:
+            text += f"; the {_and(wave)} are by wave optics, channel by channel (the widest shown)"
+        return text + "."
     text = "G" + f"{_and(['ghosts'] + ray + ['PSFs'])} are ray optics"[1:]
     if wave:
         text += (
