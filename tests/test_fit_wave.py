@@ -162,10 +162,13 @@ def test_cli_fit_takes_the_designs_optics(tmp_path):
     """--optics auto (the default) takes wave optics for the prototype, as the other
     commands; fit.json and the report section say so; a bad --optics exits 2."""
     args = [_write(tmp_path, n) for n in ("b0.5", "b4.5")]
+    # one parameter free (the reference plane), the others pinned at the truth: the wave
+    # fit through the command line, converged and recovering the truth, at 32 wave runs
+    # (51 with layer2.x free too; the three-parameter wave fit is tested above)
     out, rep = tmp_path / "fitted.toml", tmp_path / "rep"
     r = CliRunner().invoke(
         app,
-        ["fit", *args, "-o", str(out), "--free", "layer2.x,ref", "--pin", "slab2=420"]
+        ["fit", *args, "-o", str(out), "--free", "ref", "--pin", "layer2.x=4,slab2=420"]
         + ["--starts", "1", "--json", "--report", str(rep)],
     )
     assert r.exit_code == 0, r.output
@@ -173,9 +176,8 @@ def test_cli_fit_takes_the_designs_optics(tmp_path):
     o = data["optics"]
     assert o["asked"] == "auto" and o["engine"] == "wave" and o["warning"] is None
     assert o["scheme"]["converged"] and o["scheme"]["wave_runs"] >= 4
-    for n in ("layer2.x", "ref"):
-        p = data["parameters"][n]
-        assert abs(p["value"] - TRUTH[n]) < 3 * p["error"], (n, p)
+    p = data["parameters"]["ref"]
+    assert abs(p["value"] - TRUTH["ref"]) < 3 * p["error"], p
     sec = fit_section(load_fit(rep), NOMINAL)
     assert "optics: wave" in sec["optics_text"] and sec["curves"].startswith("the wave")
     assert json.loads((rep / "fit.json").read_text())["rmtf"]["optics"] == "wave"
