@@ -63,8 +63,14 @@ SINGLE = 0.99
 #: POLISH_JACOBIANS Jacobians (each one wave run a physical parameter) or POLISH_NFEV
 #: other evaluations (each one wave run).
 POLISH_CHI2 = 0.1
-POLISH_JACOBIANS = 25
-POLISH_NFEV = 120
+POLISH_JACOBIANS = 40
+POLISH_NFEV = 400
+#: Steps in a row on a Broyden-updated Jacobian between full ones (:func:`~.fitlm.
+#: geodesic_lm`): on the default free set (bench_fit.py --wave's charts, 2026-11-26) the
+#: polish converged at wave chi2 2900.58 in 28 Jacobians and 302 evaluations (738 wave
+#: runs) with 6, 2901.26 in 31 and 363 (844) with 3, where without (a full Jacobian a
+#: step) it stood at 2915.73 after 40 and 255 (871), still moving along the valley.
+POLISH_BROYDEN = 6
 #: The polish's first damping (Marquardt's, relative to J^T J's diagonal): on the default
 #: free set its first step was accepted at about 0.5, after 9 refusals from 1e-3.
 POLISH_LAMBDA = 0.1
@@ -469,8 +475,9 @@ def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns):
     acceleration (:func:`~.fitlm.geodesic_lm`) on the wave model's own residuals, its
     Jacobian by forward differences of the wave model (1e-3 assembly scales: one wave
     run a physical column, side by side on the pool where there is one; the nuisance
-    columns on the same spreads), the acceleration's two runs side by side too, each
-    point run once (``runs``, the fit's). It stops where no step the model is trusted
+    columns on the same spreads; between full ones updated along each step, Broyden's way,
+    up to POLISH_BROYDEN steps in a row), the acceleration's two runs side by side too,
+    each point run once (``runs``, the fit's). It stops where no step the model is trusted
     for would lower the wave chi2 by POLISH_CHI2, after POLISH_JACOBIANS Jacobians at
     most.
 
@@ -502,11 +509,13 @@ def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns):
         chi2_tol=POLISH_CHI2,
         lam0=POLISH_LAMBDA,
         ahead=ahead,
+        broyden=POLISH_BROYDEN,
     )
     scheme = {
         "method": "Levenberg-Marquardt with geodesic acceleration on the wave model's own "
-        "residuals (its Jacobian by forward differences of the wave model), from the "
-        "optimum of the fast model corrected about the nominal design",
+        "residuals (its Jacobian by forward differences of the wave model, Broyden-updated "
+        f"for up to {POLISH_BROYDEN} steps between full ones), from the optimum of the fast "
+        "model corrected about the nominal design",
         "evaluations": int(r.nfev),
         "jacobians": int(r.njev),
         "wave_chi2": [chi_start, float(2 * r.cost)],
