@@ -43,7 +43,54 @@ def pytest_addoption(parser):
     parser.addoption("--runslow", action="store_true", help="also run tests marked slow")
 
 
+#: the test files that take longest (about the seconds of their tests on 2 cores: the
+#: sum of their tests' durations), longest first: under ``-n 2 --dist loadfile`` (scripts/test.sh)
+#: they go to the workers first and the many short files fill in behind them. xdist's
+#: own order (files by their number of tests, most first) sent these files of a few long
+#: tests last, one of them alone on a worker at the end while the other had finished
+HEAVY_FILES = (
+    "test_report_presets.py",  # 76 s
+    "test_fit_wave.py",  # 68
+    "test_report.py",  # 67
+    "test_cuda.py",  # 49
+    "test_search.py",  # 42
+    "test_trace_once.py",  # 39
+    "test_fit.py",  # 31
+    "test_wave_circle_maps.py",  # 27
+    "test_report_speed_paths.py",  # 25
+    "test_tolerance_optics.py",  # 24
+    "test_atomic.py",  # 23
+    "test_compare.py",  # 20
+    "test_rgb_report.py",  # 20
+    "test_wave_checks.py",  # 17
+    "test_report_sections.py",  # 15
+    "test_restore.py",  # 17
+    "test_edges_27b.py",  # 14
+    "test_wave_circle.py",  # 14
+)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config):
+    # under --dist loadfile the controller hands out the files in the order the workers
+    # collected them (pytest_collection_modifyitems below), not re-sorted by their
+    # number of tests
+    if getattr(config.option, "dist", "no") == "loadfile":
+        config.option.loadscopereorder = False
+
+
+def _heavy_first(items) -> None:
+    rank = {name: i for i, name in enumerate(HEAVY_FILES)}
+    order = {}  # the files in collection order, each at its first test
+    for item in items:
+        order.setdefault(item.path, len(order))
+    key = {p: (rank.get(p.name, len(rank)), i) for p, i in order.items()}
+    items.sort(key=lambda item: key[item.path])  # stable: a file's tests keep their order
+
+
 def pytest_collection_modifyitems(config, items):
+    if hasattr(config, "workerinput"):  # a pytest-xdist worker (its dist reads "no")
+        _heavy_first(items)
     if config.getoption("--runslow"):
         return
     skip = pytest.mark.skip(reason="slow: run with --runslow")
