@@ -63,8 +63,8 @@ HEAVY_FILES = (
     "test_compare.py",  # 20
     "test_rgb_report.py",  # 20
     "test_wave_checks.py",  # 17
-    "test_report_sections.py",  # 15
     "test_restore.py",  # 17
+    "test_report_sections.py",  # 15
     "test_edges_27b.py",  # 14
     "test_wave_circle.py",  # 14
 )
