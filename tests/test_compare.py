@@ -13,10 +13,16 @@ from opticalstamp.studies.compare import evaluate
 
 def test_compare_cli_writes_page_json_and_figures(tmp_path):
     out = tmp_path / "cmp"
-    res = run(["compare", "paper2016", "sla-1row-12deg", "-o", str(out), "--json"])
+    # --optics ray: the option reaches each stamp's row (the wave headline's figures are
+    # tests/test_compare_optics.py's); the ray-vs-wave block below runs either way
+    res = run(
+        ["compare", "paper2016", "sla-1row-12deg", "-o", str(out), "--json", "--optics", "ray"]
+    )
     assert res.exit_code == 0, res.output
     rows = json.loads(res.stdout)["designs"]
     assert [r["kind"] for r in rows] == ["stamp", "rod-lens-array"]
+    assert rows[0]["optics"]["engine"] == rows[0]["optics"]["asked"] == "ray"
+    assert "optics" not in rows[1]  # a rod-lens array has its own tracer
     for r in rows:
         for key in ("light_vs_f10", "working_f_number", "thickness_mm", "dof_mm", "ghost_fraction"):
             assert key in r
@@ -37,6 +43,7 @@ def test_compare_cli_writes_page_json_and_figures(tmp_path):
         "rodlens-1.png",
     }
     assert "sla-1row-12deg" in (out / "index.html").read_text()
+    assert "<td>ray (asked for)</td>" in (out / "index.html").read_text()
     # ray vs wave optics (issue 23): the stamp's smallest Fresnel number (48 um over the
     # 1 mm reference gap at 0.55 um), the wave figures judged; the rod-lens array has none
     assert stamp["fresnel_min"] == pytest.approx(24.0**2 / (0.55 * 1000.0))
