@@ -156,9 +156,11 @@ def ops_kernel(
     i = nbcuda.grid(1)
     if i < res.shape[0]:
         ok, xa, ya, a, c2 = DEV.plain_draw(key, i, src)
+        m0 = int(slabs[n_pre - 1, 2])
         x0, y0, sx, sy, w = DEV.importance_draw(
-            key, i, isrc, slabs, n_pre, masks, tx, ty, tp, ta, tq
-        )
+            key, i, isrc, slabs, n_pre, masks[m0, 1], masks[m0, 2], masks[m0, 0] == 1.0, tx,
+            ty, tp, ta, tq,
+        )  # fmt: skip
         st, pl, xe, ye, we = DEV.trace_one(
             x0, y0, sx, sy, w, slabs, n_out, masks, lat, lim, True, hr, hk, i
         )
@@ -190,7 +192,9 @@ def test_the_per_ray_functions_are_one_source_on_both_devices(wide):
     hr, hk = np.full((n, nm), -1, np.int8), np.zeros((n, nm), np.int32)
     for i in range(n):
         p = CPU.plain_draw(key, i, psrc)
-        q = CPU.importance_draw(key, i, isrc, slabs, tg.n_pre, masks, *table)
+        m0 = int(slabs[tg.n_pre - 1, 2])
+        hole = (masks[m0, 1], masks[m0, 2], masks[m0, 0] == 1.0)
+        q = CPU.importance_draw(key, i, isrc, slabs, tg.n_pre, *hole, *table)
         t = CPU.trace_one(*q, slabs, n_out, masks, lat, lim, True, hr, hk, i)
         want[i] = (*p, *q, *t)
     res = nbcuda.to_device(np.zeros((n, 15)))

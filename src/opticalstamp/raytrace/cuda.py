@@ -221,9 +221,11 @@ def importance_kernel(
     if i < n_rays:
         cuda.atomic.add(launched, 0, 1)
         gid = first_id + i
+        m0 = int(slabs[n_pre - 1, 2])
         x0, y0, sx, sy, w = importance_draw(
-            key, gid, src, slabs, n_pre, masks, tgt_x, tgt_y, tgt_prob, tgt_alias, tgt_q
-        )
+            key, gid, src, slabs, n_pre, masks[m0, 1], masks[m0, 2], masks[m0, 0] == 1.0,
+            tgt_x, tgt_y, tgt_prob, tgt_alias, tgt_q,
+        )  # fmt: skip
         st, pl, xe, ye, we = trace_one(
             x0, y0, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, hrow, hk, 0
         )

@@ -134,6 +134,10 @@ def run_importance(
     Survivors are written, in ray order, at b * block + (0 ... counts[b] - 1).
     """
     n_blocks = (n_rays + block - 1) // block
+    m0 = int(slabs[n_pre - 1, 2])
+    hw = masks[m0, 1]
+    hh = masks[m0, 2]
+    circ = masks[m0, 0] == 1.0
     for b in nb.prange(n_blocks):
         start = b * block
         stop = min(start + block, n_rays)
@@ -142,8 +146,9 @@ def run_importance(
         for j in range(start, stop):
             gid = first_id + j
             x0, y0, sx, sy, w = _importance_draw(
-                key, gid, src, slabs, n_pre, masks, tgt_x, tgt_y, tgt_prob, tgt_alias, tgt_q
-            )
+                key, gid, src, slabs, n_pre, hw, hh, circ, tgt_x, tgt_y, tgt_prob, tgt_alias,
+                tgt_q,
+            )  # fmt: skip
             slot = start + c
             st, pl, xe, ye, we = _trace_one(
                 x0, y0, sx, sy, w, slabs, n_out, masks, lat, lim, fresnel, o_hrow, o_hk, slot

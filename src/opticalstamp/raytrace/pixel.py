@@ -335,6 +335,7 @@ class PixelTracer:
         self._replays: dict[tuple, PixelBatch] | None = {} if replay else None
         self._kept_again: dict[tuple, list[PixelBatch]] = {}
         self._fingerprint: str | None = None
+        self._scratch: dict = {}  # the CPU kernel's buffers between launches (launch())
 
     def with_sampling(self, sampling: Sampling) -> PixelTracer:
         """A tracer of the same design under ``sampling``, sharing this one's pilots."""
@@ -492,6 +493,7 @@ class PixelTracer:
             progress=progress,
             hole_weights=weights,
             device=self.device,
+            scratch=self._scratch,
         ):
             self.passes.add(key, first_id + done, b.n_samples)  # each chunk as launched
             done += b.n_samples

@@ -210,15 +210,17 @@ def compile_ops(jit, mul) -> RayOps:  # noqa: C901 - one closure per per-ray fun
 
     @jit
     def importance_draw(
-        key, gid, src, slabs, n_pre, masks, tgt_x, tgt_y, tgt_prob, tgt_alias, tgt_q
-    ):
+        key, gid, src, slabs, n_pre, hole_w, hole_h, circ, tgt_x, tgt_y, tgt_prob, tgt_alias,
+        tgt_q,
+    ):  # fmt: skip
         """Ray ``gid`` of importance sampling: (x, y, sx, sy, w). A point on the source
         rectangle, a hole of the first mask from the alias table (tgt_*), a uniform
         point in it, and the direction that joins the two (:func:`solve_rho`); the
-        weight w0 / (pdf(s) pi n0^2), pdf(s) = tgt_q |J|, J = d(x_t)/d(s)."""
-        m0 = int(slabs[n_pre - 1, 2])
-        hw = masks[m0, 1]
-        hh = masks[m0, 2]
+        weight w0 / (pdf(s) pi n0^2), pdf(s) = tgt_q |J|, J = d(x_t)/d(s). hole_w, hole_h,
+        circ: the first mask's hole half sizes and whether it is a circle (the caller's, once
+        a kernel: the CPU's loop does not read them again ray by ray)."""
+        hw = hole_w
+        hh = hole_h
         nt = tgt_prob.size
         u1, u2 = uniform_pair(key, gid, 0)
         x0 = src[0] + mul(u1 - 0.5, src[2])
@@ -228,7 +230,7 @@ def compile_ops(jit, mul) -> RayOps:  # noqa: C901 - one closure per per-ray fun
         if u4 >= tgt_prob[t]:
             t = tgt_alias[t]
         u5, u6 = uniform_pair(key, gid, 2)
-        if masks[m0, 0] == 1.0:
+        if circ:
             rr = hw * math.sqrt(u5)
             ph = 2.0 * math.pi * u6
             xt = tgt_x[t] + mul(rr, math.cos(ph))
