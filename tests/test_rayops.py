@@ -66,3 +66,19 @@ def test_trace_one_through_one_slab_lands_where_snell_says():
     assert st == 0 and pl == 0 and y == 0.0
     assert x == pytest.approx(1000.0 * sx / np.sqrt(1.5**2 - sx**2), rel=1e-15)
     assert w == pytest.approx(0.5 * ((1 - rs**2) + (1 - rp**2)), rel=1e-15)
+
+
+def test_the_cached_kernels_name_the_per_ray_source_they_inline():
+    """numba caches kernel.py's and cuda.py's kernels by their own files' timestamps, not
+    by rayops.py's, whose functions they inline: each names rayops.py's hash, so that an
+    edit of rayops.py must edit them too (and their cached kernels are compiled again)."""
+    import hashlib
+    from pathlib import Path
+
+    from opticalstamp.raytrace import kernel
+
+    src = Path(kernel.__file__).parent
+    sha = hashlib.sha256((src / "rayops.py").read_bytes()).hexdigest()[:16]
+    assert kernel.RAYOPS_SHA == sha, "rayops.py changed: update RAYOPS_SHA in kernel.py"
+    cuda_text = (src / "cuda.py").read_text()
+    assert f'RAYOPS_SHA = "{sha}"' in cuda_text, "rayops.py changed: update it in cuda.py"

@@ -3,10 +3,11 @@
 Where a GPU traced a pixel's rays (:class:`~opticalstamp.raytrace.launch.DeviceRayBatch`)
 the survivors stay in device memory and are tallied there, so only the tallies come back
 to the host: the folding of rays onto chart periods (the RMTF's folded LSFs,
-:func:`fold`), the responsivity maps of the scan kernels (:func:`maps`) and the ghost
+:func:`fold`), the responsivity maps of the scan kernels (:func:`maps`), the ghost
 analysis's sums per hole sequence, landing histograms and nearest landings
-(:func:`ghost_tallies`). Each kernel computes, per ray, what the CPU's tally computes
-(:mod:`.tallies`' ``_fold``, ``_maps`` and :class:`~.tallies.GhostTally`), in float64, and
+(:func:`ghost_tallies`) and the spots' grids and extents (:func:`spot`). Each kernel
+computes, per ray, what the CPU's tally computes (:mod:`.tallies`' ``_fold``, ``_maps``,
+:class:`~.tallies.GhostTally` and :class:`~.tallies.SpotTally`), in float64, and
 adds it with atomics (products that the CPU rounds on their own are kept from fusing
 into FMAs, :func:`~opticalstamp.raytrace.cuda_ray.mul`): the sums equal the CPU's to rounding
 (the order of the additions differs, and varies from run to run), the counts are exact;

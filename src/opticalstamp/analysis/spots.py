@@ -274,10 +274,11 @@ def _spots(
     light = inband.light * n_rays  # in the tallies' units (etendue x rays)
     inside = t.inside + light * inband.center_cell
     total = t.total + light[0]
+    maps, lo, hi = t.maps, t.lo, t.hi  # each read once (from the device, where a GPU ran)
     out = []
     for iz, z in enumerate(zs):
         e = edges[iz]
-        m = t.maps[iz] / (n_rays * bins[iz] * bins[iz]) + inband.maps[iz]
+        m = maps[iz] / (n_rays * bins[iz] * bins[iz]) + inband.maps[iz]
         c = 0.5 * (e[1:] + e[:-1])
         out.append(
             Spot(
@@ -285,8 +286,8 @@ def _spots(
                 e,
                 e.copy(),
                 m,
-                float(t.hi[iz, 0] - t.lo[iz, 0]),
-                float(t.hi[iz, 1] - t.lo[iz, 1]),
+                float(hi[iz, 0] - lo[iz, 0]),
+                float(hi[iz, 1] - lo[iz, 1]),
                 fwhm(m.sum(axis=0), c),
                 fwhm(m.sum(axis=1), c),
                 float(inside[iz] / total) if total else 0.0,

@@ -7,7 +7,9 @@ One object per kind of tally, each with its CPU and its GPU accumulation side by
 * :class:`MapTally`: responsivity maps on the object plane, own path on a fine grid and
   ghost light on a coarse one (the scan kernels, :mod:`.maps`);
 * :class:`GhostTally`: sums per hole sequence, landing histograms, the virtual
-  detector's sums and the nearest landings (:mod:`.ghosts`).
+  detector's sums and the nearest landings (:mod:`.ghosts`);
+* :class:`SpotTally`: the spots' grids, the own path's extents, the centre output cell
+  and the total light (:mod:`.spots`).
 
 A batch is tallied where its rays are: on the GPU where a GPU traced them and keeps them
 (:class:`~opticalstamp.raytrace.launch.DeviceRayBatch`, the kernels of
@@ -395,7 +397,9 @@ class SpotTally:
     cell_um : the centre output cell's width (um)
     ghosts : False: the own path's light alone
     outside_band : count only the rays outside this band (|s_x| or |s_y| >= it; the
-        band's light is the wave engine's); the own path's extents take every own ray
+        band's light is the wave engine's); with ``ghosts`` False then none (the own
+        path lies inside the band: the spot is the wave engine's, whose band light
+        includes the near crosstalk); the own path's extents take every own ray
 
     ``maps[iz]`` (n, n), ``inside`` (nz,) and ``total``: summed weights; ``lo``, ``hi``
     (nz, 2): the own path's landings' extremes in x and y (inf, -inf where none).

@@ -37,6 +37,9 @@ from .cuda_ray import (  # first: it shims numpy for numba-cuda before importing
 )
 
 THREADS = 128
+#: the hash of rayops.py this file's cached kernels were compiled with: numba checks only
+#: this file's timestamp, so an edit of rayops.py must change this line (tests/test_rayops.py)
+RAYOPS_SHA = "b0192603c2d0f7b6"
 QUEUE = 2 * THREADS  # rays a block's queue holds (shared memory)
 QUEUE_BLOCKS = 4096  # blocks of the queued kernels (each loops over tiles of THREADS rays)
 WARP = 32

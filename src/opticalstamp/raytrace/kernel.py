@@ -32,6 +32,9 @@ from .rayops import ABSORBED, ESCAPED, TIR, TRANSMITTED, compile_ops
 __all__ = ["ABSORBED", "ESCAPED", "TIR", "TRANSMITTED"]  # the fates, named here too
 
 STATUS_NAMES = ("transmitted", "absorbed", "tir", "escaped")
+#: the hash of rayops.py this file's cached kernels were compiled with: numba checks only
+#: this file's timestamp, so an edit of rayops.py must change this line (tests/test_rayops.py)
+RAYOPS_SHA = "b0192603c2d0f7b6"
 
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
 

@@ -10,8 +10,15 @@ draws of a ray: :func:`compile_ops` compiles them with the compiler it is given,
 compilers, so that a ray's fate is the same on either device ray for ray.
 
 Every product that meets a sum is written ``mul(a, b)``: on the CPU a plain product
-(numba does not contract products into FMAs unless asked), on a GPU one that the device
-compiler cannot fuse into an FMA (``dmul_rn``), so that both round it on its own.
+(numba does not contract products into FMAs unless asked: the plain kernel, ``run_plain``,
+is compiled with fastmath and may fuse them, so its rays agree with the GPU's to rounding,
+the importance kernel's exactly), on a GPU one that the device compiler cannot fuse into
+an FMA (``dmul_rn``), so that both round it on its own.
+
+numba caches the kernels that inline these functions by their own files' timestamps
+(:mod:`.kernel`, :mod:`.cuda`), not this one's: each of those files carries this file's
+hash (``RAYOPS_SHA``), which tests/test_rayops.py checks, so that an edit here has to
+touch them too and their cached kernels are compiled again.
 """
 
 from __future__ import annotations
