@@ -61,10 +61,18 @@ def run(
             t.add(pb)
 
 
-def _on_device(pb: PixelBatch, host_only: bool) -> bool:
-    """Whether ``pb`` is tallied on the GPU: where a GPU keeps its rays, unless the tally
-    needs the host (a selection the device kernels do not make)."""
-    return pb.rays.device is not None and not host_only
+class _Split:
+    """A tally that adds each batch where its rays are: :meth:`_add_device` where a GPU
+    keeps them (unless :attr:`host_only`: a selection the device kernels do not make),
+    :meth:`_add_host` otherwise."""
+
+    host_only = False
+
+    def add(self, pb: PixelBatch) -> None:
+        if pb.rays.device is not None and not self.host_only:
+            self._add_device(pb)
+        else:
+            self._add_host(pb)
 
 
 def _outside(pb: PixelBatch, band: float) -> np.ndarray:
@@ -109,7 +117,7 @@ def _slopes(b, w: np.ndarray, n_obj: float) -> np.ndarray:
     return np.histogram(t, SLOPE_EDGES, weights=w[keep])[0]
 
 
-class FoldTally:
+class FoldTally(_Split):
     """One pixel's rays folded onto every chart period at every object distance.
 
     Parameters
@@ -144,11 +152,9 @@ class FoldTally:
         self._slopes = [np.zeros(SLOPE_EDGES.size - 1) for _ in self.kinds]
         self._device = None  # the same sums on the GPU, once a batch was tallied there
 
-    def add(self, pb: PixelBatch) -> None:
-        if _on_device(pb, self.outside_band is not None):
-            self._add_device(pb)
-        else:
-            self._add_host(pb)
+    @property
+    def host_only(self) -> bool:
+        return self.outside_band is not None
 
     def _add_host(self, pb: PixelBatch) -> None:
         b = pb.rays
@@ -218,7 +224,7 @@ def _maps(
                     coarse[iz, jy, jx] += wi
 
 
-class MapTally:
+class MapTally(_Split):
     """One pixel's responsivity maps: per set of object distances, the own-path light
     on a fine grid and the ghost light on a coarse grid, summed weights per bin.
 
@@ -248,11 +254,9 @@ class MapTally:
         self._coarse = [np.zeros((z.size, *coarse_shape)) for z, _, _ in self.sets]
         self._device = None
 
-    def add(self, pb: PixelBatch) -> None:
-        if _on_device(pb, self.outside_band is not None):
-            self._add_device(pb)
-        else:
-            self._add_host(pb)
+    @property
+    def host_only(self) -> bool:
+        return self.outside_band is not None
 
     def _add_host(self, pb: PixelBatch) -> None:
         b = pb.rays
@@ -339,7 +343,7 @@ class GhostTally:
 
     def add(self, pb: PixelBatch) -> None:
         self.ledger += pb.rays.ledger
-        if not (_on_device(pb, False) and self._add_device(pb)):
+        if not (pb.rays.device is not None and self._add_device(pb)):
             self._add_host(pb)
 
     def _add_host(self, pb: PixelBatch) -> None:
@@ -384,7 +388,7 @@ class GhostTally:
 
 
 # -- spots -------------------------------------------------------------------------------
-class SpotTally:
+class SpotTally(_Split):
     """One pixel's spots: at each object distance, the light on a square grid around the
     pixel's axis, the own path's edge-to-edge extent, the light on the centre output cell
     and the light in all.
@@ -420,12 +424,6 @@ class SpotTally:
         self._inside = np.zeros(nz)
         self._total = np.zeros(1)
         self._device = None
-
-    def add(self, pb: PixelBatch) -> None:
-        if _on_device(pb, False):
-            self._add_device(pb)
-        else:
-            self._add_host(pb)
 
     def _weights(self, pb: PixelBatch) -> np.ndarray:
         w = pb.w if self.ghosts else pb.w * pb.own
