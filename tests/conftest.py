@@ -7,6 +7,7 @@ the CLI over a thousand times (the fuzz tests 600)."""
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -14,6 +15,16 @@ import pytest
 import typer.testing
 
 sys.path.insert(0, str(Path(__file__).parent))  # the shared helpers (helpers.py, edges.py)
+
+#: one thread per pytest-xdist worker (numba's parallel loops, OpenMP, OpenBLAS), set
+#: before numpy and numba load in the worker and inherited by its subprocesses: two
+#: workers on two cores, each with two threads, lost a tenth of the run to threads that
+#: spin while they wait (libgomp's and OpenBLAS's; measured: 471 s and 905 CPU-s, 423 s
+#: and 804 CPU-s with one). Tests that need more threads ask for them in a process of
+#: their own (tests/test_sampling.py)
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
 
 
 def _registered(app) -> tuple:

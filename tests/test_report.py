@@ -7,17 +7,19 @@ from dataclasses import replace
 
 import pytest
 from PIL import Image
+from tests.passcount import assert_each_pixel_traced_once, spy_and_count
 from typer.testing import CliRunner
 
 from opticalstamp.cli.common import app
+from opticalstamp.design import load_design
 from opticalstamp.report import build
 from opticalstamp.report.work import StudyBudget
 
 #: the background search and tolerance study's budget, by either optics: 8 designs over two
-#: generations (the prototype among the first, a front to verify and plot), 8 samples (the
+#: generations (the prototype among the first, a front to verify and plot), 4 samples (the
 #: report's own budgets: 240 / 200 by ray optics, 40 / 50 by wave optics); what the test
 #: checks of them is that they run, are written, plotted and shown
-SMALL_STUDIES = {"search_population": 4, "search_generations": 2, "tolerance_samples": 8}
+SMALL_STUDIES = {"search_population": 4, "search_generations": 2, "tolerance_samples": 4}
 
 
 def _small(real):
@@ -40,6 +42,7 @@ def _small(real):
             concept_rays=1 << 17,
             lsf_rays=1 << 19,
             wave_rays=1 << 18,
+            wave_z_step_mm=0.5,  # the ray-vs-wave section every 0.5 mm (10 heights)
             budget=budget,
         )
 
@@ -57,18 +60,30 @@ def full_report(tmp_path_factory):
     JSON on stdout: run once for the tests of its sections and of its verdict (each had
     run a report of its own, the verdict's a quick one: what the verdict is checked for,
     its figures taken from the report's own sections and judged against the spec, is the
-    same for either)."""
+    same for either); with its launches spied on and its passes counted (each pixel
+    traced once, below)."""
     out = tmp_path_factory.mktemp("full") / "rep"
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(build, "report_work", _small(build.report_work))
+        seen, works, passes = spy_and_count(mp)
         args = ["report", "--design", "paper2016", "--out", str(out), "--rays", "262144"]
         res = CliRunner().invoke(app, [*args, "--spec", SPEC, "--json"])
     assert res.exit_code == 0, res.output
-    return out, res
+    return out, res, (seen, works, passes)
+
+
+def test_the_report_traces_each_pixel_once(full_report):
+    """Every traced analysis of a used pixel in the full report (every section, both
+    sensitive areas, scans at 1200 dpi; the background studies trace in processes of
+    their own) draws its rays from one tracer: counted by the tracer and by a spy."""
+    out, _, (seen, works, passes) = full_report
+    assert json.loads((out / "report.json").read_text())["optics"]["engine"] == "wave"
+    assert len(works) == 1 and not works[0].reduced
+    assert_each_pixel_traced_once(load_design("paper2016"), seen, works[0], passes)
 
 
 def test_report_writes_every_section(full_report):
-    out, _ = full_report
+    out, _, _ = full_report
     d = json.loads((out / "report.json").read_text())
     for key in (
         "ghosts",
@@ -159,7 +174,7 @@ def test_report_writes_every_section(full_report):
 def test_report_verdict_against_a_spec(full_report, tmp_path):
     from edges import assert_clean_refusal, run
 
-    out, res = full_report
+    out, res, _ = full_report
     s = json.loads(res.stdout)["summary"]
     fig = {f["figure"]: f for f in s["figures"]}
     d = json.loads((out / "report.json").read_text())

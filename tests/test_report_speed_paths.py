@@ -12,6 +12,7 @@ from dataclasses import fields
 import numpy as np
 import pytest
 from PIL import Image
+from tests.passcount import assert_each_pixel_traced_once, spy_and_count
 from typer.testing import CliRunner
 
 from opticalstamp.analysis.lsf import traced_folded_lsf, traced_folded_lsf_pair
@@ -118,9 +119,12 @@ def test_quick_report_writes_what_it_promises_and_says_so(tmp_path, monkeypatch)
         "wave_near_kernels",
         lambda d, z, row, *a: wave_runs.append(row) or real(d, z, row, *a),
     )
+    seen, works, passes = spy_and_count(monkeypatch)  # each pixel traced once, below
     out = tmp_path / "quick"
     res = CliRunner().invoke(app, ["report", "--quick", "--out", str(out)])
     assert res.exit_code == 0, res.output
+    assert len(works) == 1 and works[0].reduced
+    assert_each_pixel_traced_once(load_design("paper2016"), seen, works[0], passes)
     assert wave_runs == [0]  # scans and restoration share them, row B is A's mirror twin
     d = json.loads((out / "report.json").read_text())
     assert d["quick"] is True

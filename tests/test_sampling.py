@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
-import numba
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -15,6 +19,8 @@ from opticalstamp.raytrace.pixel import allocate_holes, pixel_source
 from opticalstamp.raytrace.sampling import Source
 from opticalstamp.raytrace.stack import forward_path, reverse_path
 from opticalstamp.raytrace.tally import is_own_path
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _etendues(path, src, n_rays, seed, **kw):
@@ -152,20 +158,39 @@ def test_chunk_size_does_not_change_results(importance):
     assert not np.array_equal(a[0][: min(a[0].size, c[0].size)], c[0][: min(a[0].size, c[0].size)])
 
 
+#: the comparison of thread counts, in a process of its own with up to 4 numba threads (the
+#: suite's workers run one thread each: tests/conftest.py)
+THREADS = """
+import numba, numpy as np
+from opticalstamp.design import load_design
+from opticalstamp.raytrace.launch import launch
+from opticalstamp.raytrace.pixel import pixel_source
+from opticalstamp.raytrace.stack import reverse_path
+
+design = load_design("paper2016")
+path, src = reverse_path(design), pixel_source(design, 0, 0)
+assert numba.config.NUMBA_NUM_THREADS == 4
+for imp in (True, False):
+    got = []
+    for threads in (1, 4):
+        numba.set_num_threads(threads)
+        bs = list(launch(path, src, 1 << 19, 9, importance=imp))
+        fields = ("ids", "w", "x", "sx", "hole_k")
+        got.append([np.concatenate([getattr(b, f) for b in bs]) for f in fields])
+    for u, v in zip(*got, strict=True):
+        np.testing.assert_array_equal(u, v)
+print("same")
+"""
+
+
 def test_thread_count_does_not_change_results():
-    design = load_design("paper2016")
-    path = reverse_path(design)
-    src = pixel_source(design, 0, 0)
-    before = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        one = [_collect(path, src, 1 << 19, 9, importance=imp) for imp in (True, False)]
-    finally:
-        numba.set_num_threads(before)
-    many = [_collect(path, src, 1 << 19, 9, importance=imp) for imp in (True, False)]
-    for a, b in zip(one, many, strict=True):
-        for u, v in zip(a[:5], b[:5], strict=True):
-            np.testing.assert_array_equal(u, v)
+    """One thread and four give the same rays, bit for bit (plain and importance
+    sampling)."""
+    env = os.environ | {"NUMBA_NUM_THREADS": "4", "PYTHONPATH": str(ROOT / "src")}
+    res = subprocess.run(
+        [sys.executable, "-c", THREADS], capture_output=True, text=True, env=env, timeout=600
+    )
+    assert res.returncode == 0 and res.stdout.strip() == "same", res.stderr[-3000:]
 
 
 def test_first_id_continues_the_sequence():

@@ -2,22 +2,19 @@
 hands out rays traced already (whole chunks, or cut on a block edge), and the report and
 the quick report on the prototype, whose every traced analysis of a used pixel draws its
 rays from one tracer: no ray of a pixel's stream is traced twice, and a pixel's stream
-holds as many rays as the analysis that asks for the most (not their sum)."""
+holds as many rays as the analysis that asks for the most (not their sum): that check runs on
+the reports the suite makes anyway (tests/passcount.py, used by tests/test_report.py and
+tests/test_report_speed_paths.py)."""
 
 from __future__ import annotations
-
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from opticalstamp.defaults import RAYS_LSF
 from opticalstamp.design import load_design
-from opticalstamp.raytrace import pixel as pixel_module
 from opticalstamp.raytrace.launch import BLOCK
 from opticalstamp.raytrace.passes import StreamKey, TracePasses
 from opticalstamp.raytrace.pixel import PILOT_RAYS, PixelTracer, Sampling
-from opticalstamp.report import build
 
 
 def _key(stream: int = 0) -> StreamKey:
@@ -89,96 +86,3 @@ def test_replay_hands_out_the_rays_a_fresh_trace_gives(paper):
             _arrays(list(fresh.trace((0, 0), 1000, first_id=100))),
         )
         assert tr.passes.passes(key) == 2 and tr.passes.rays(key) == 24 * BLOCK
-
-
-def _small(quick: bool):
-    """The report's work with few rays (every section still runs); the full report's
-    shape (its heights, RMTF grid, both sensitive areas, the concepts reusing the ghost
-    analysis) without its background studies and OCR, which trace other designs in
-    other processes."""
-    real = build.report_work
-
-    def work(*args, **kwargs):
-        w = real(*args, **kwargs)
-        w = replace(
-            w,
-            ghost_rays=1 << 16,
-            map_rays=1 << 14,
-            concept_rays=1 << 14 if quick else 1 << 16,
-            lsf_rays=1 << 15,
-            kernel_rays=1 << 14,
-            wave_rays=1 << 15,
-        )
-        return w if quick else replace(w, studies=False, ocr=False, scan_dpi=600.0)
-
-    return work
-
-
-def _spy(monkeypatch) -> list:
-    """Every launch from a pixel source in this process, however it is reached."""
-    seen, real = [], pixel_module.launch
-
-    def launch(path, src, n, seed, **kw):
-        seen.append((path, src, kw.get("stream", 0), kw.get("first_id", 0), n))
-        return real(path, src, n, seed, **kw)
-
-    monkeypatch.setattr(pixel_module, "launch", launch)
-    return seen
-
-
-@pytest.mark.parametrize("quick", [True, False], ids=["quick", "report"])
-def test_the_report_traces_each_pixel_once(paper, quick, tmp_path, monkeypatch):
-    """The figures are not drawn (a third of the quick report's time, profiled): they
-    plot the sections' results and trace nothing (report/plotting imports no tracer),
-    and the report's pages and figures are tested in test_report.py and
-    test_report_presets.py."""
-    monkeypatch.setattr(build, "report_work", _small(quick))
-    monkeypatch.setattr(build, "png", lambda plot, *args: b"")
-    seen = _spy(monkeypatch)
-    passes = TracePasses()
-    data = build.build_report(paper, tmp_path / "r", quick=quick, passes=passes)
-    assert data["optics"]["engine"] == "wave"  # the wave sections' traced light included
-    work = _small(quick)(quick)
-    mine = [k for k in passes.keys() if k.design == paper.fingerprint()]
-    rows = {(r, 0) for r in range(paper.sensor.rows)}
-    # every stream of every used pixel traced once: the analyses' rays (0), the hole
-    # pilot (1) and the spots' own sizing pilot (2, pixel A only), under one sampling
-    assert {k: passes.passes(k) for k in mine} == {k: 1 for k in mine}
-    assert {(k.pixel, k.stream) for k in mine} == {(p, s) for p in rows for s in (0, 1)} | {
-        ((0, 0), 2)
-    }
-    assert {(k.seed, k.fresnel) for k in mine} == {(0, False)}
-    got = {(k.pixel, k.stream): passes.rays(k) for k in mine}
-    # a stream holds as many rays as its most demanding analysis asks for: pixel A's the
-    # ghost analysis, spots, LSFs, scan kernels, ray-vs-wave and the wave light (RAYS_LSF),
-    # pixel B's the LSFs, kernels and ray-vs-wave
-    asked_a = (work.ghost_rays, work.map_rays, work.concept_rays, work.lsf_rays)
-    assert got[(0, 0), 0] == max(*asked_a, work.kernel_rays, work.wave_rays, RAYS_LSF)
-    assert got[(1, 0), 0] == max(work.lsf_rays, work.kernel_rays, work.wave_rays)
-    assert got[(0, 0), 1] == got[(1, 0), 1] == got[(0, 0), 2] == PILOT_RAYS
-    # the count is complete: every launch of the prototype's pixels in this process went
-    # through the report's tracer (the spy sees the rest too: other designs, among them
-    # the single-row concept on the same stack, and the larger sensitive area), and none
-    # of them overlaps another of its stream
-    proto = PixelTracer(paper).path
-
-    def is_proto(path, src) -> bool:
-        return (
-            np.array_equal(path.slabs, proto.slabs)
-            and np.array_equal(path.masks, proto.masks)
-            and np.array_equal(path.lattice.as_array(), proto.lattice.as_array())
-            and src.width == paper.sensor.sensitive_width_um
-            and src.height == paper.sensor.sensitive_height_um
-        )
-
-    spans: dict = {}
-    for path, src, stream, first, n in seen:
-        if is_proto(path, src):
-            spans.setdefault((round(src.x, 6), round(src.y, 6), stream), []).append((first, n))
-    assert sum(n for v in spans.values() for _, n in v) == sum(passes.rays(k) for k in mine), (
-        spans,
-        {(k.pixel, k.stream): passes.spans(k) for k in mine},
-    )
-    for v in spans.values():
-        v.sort()
-        assert all(a + n <= b for (a, n), (b, _) in zip(v, v[1:], strict=False)), v

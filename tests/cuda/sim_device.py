@@ -37,7 +37,7 @@ from opticalstamp.raytrace.sampling import hole_targets
 from opticalstamp.raytrace.stack import reverse_path
 
 #: 2^N samples (the simulator is slow; a GPU takes 20)
-N = int(os.environ.get("RAYS_LOG2", "12"))
+N = int(os.environ.get("RAYS_LOG2", "11"))
 FIELDS = ("ids", "x", "y", "sx", "sy", "w", "hole_row", "hole_k")
 #: the plain kernels compared: queued per block (the default) and not at all; per warp too
 #: on a GPU (the simulator has no warp intrinsics)
@@ -81,12 +81,13 @@ def paper():
 
 @pytest.fixture(scope="module")
 def wide(paper):
-    """The prototype's reverse path with every hole 160 um wide (beyond what a design may
-    hold: the neighbours' holes overlap), and its pixel A0: about 8 % of plain samples and
-    45 % of importance-sampled rays leave the stack, own and ghost paths alike."""
+    """The prototype's reverse path with every hole 400 um wide (beyond what a design may
+    hold: the neighbours' holes overlap), and its pixel A0: 15 % of plain samples and 45 %
+    of importance-sampled rays leave the stack, own and ghost paths alike (with 160-um
+    holes 8 % of plain samples did: twice the simulated threads for the same survivors)."""
     path = reverse_path(paper)
     masks = path.masks.copy()
-    masks[:, 1:3] = 80.0  # half width and height (um)
+    masks[:, 1:3] = 200.0  # half width and height (um)
     return dataclasses.replace(path, masks=masks), pixel_source(paper, 0, 0)
 
 
@@ -112,22 +113,22 @@ def same(a, b, exact=False):
     ("importance", "fresnel", "log2"), [(False, False, N), (True, True, N - 1)]
 )
 def test_launch_on_the_device_gives_the_cpus_rays(wide, importance, fresnel, log2):
-    """Plain sampling (4,096 samples) and importance sampling with Fresnel losses (2,048
+    """Plain sampling (2,048 samples) and importance sampling with Fresnel losses (1,024
     rays): the same survivors (ids), positions, directions and weights (to 1e-12), holes,
     ledger and launched counts as the CPU kernel, for the same seed; hundreds of rays
-    survive, own and ghost."""
+    survive (317 and 459), own and ghost."""
     path, src = wide
     kw = dict(importance=importance, fresnel=fresnel, chunk=1 << 12, first_id=123)
     cpu = joined(list(launch(path, src, 1 << log2, 7, device="cpu", **kw)))
     own = np.all((cpu["hole_row"] == 0) & (cpu["hole_k"] == 0), axis=1)
-    assert cpu["ids"].size > (150 << log2 >> 12) and 0 < own.sum() < own.size
+    assert cpu["ids"].size > (1 << log2) // 8 and 0 < own.sum() < own.size
     same(cpu, joined(list(launch(path, src, 1 << log2, 7, device="cuda", **kw))))
 
 
 def test_the_plain_kernels_queued_or_not_give_the_same_rays(wide, monkeypatch):
     """Plain sampling queued per block (the default), per warp (on a GPU) and not at all:
     the same rays, exactly, and the CPU's; with one block, so that each queue fills and
-    drains many times (a fifth of the samples pass the first mask, 8 % all the way)."""
+    drains many times (about 40 % of the samples pass the first mask, 15 % all the way)."""
     path, src = wide
     monkeypatch.setattr(cuda, "QUEUE_BLOCKS", 1)
     n0 = float(path.slabs[0, 1])
@@ -261,7 +262,7 @@ def tallied(open_design):
     """The ghost analysis, folded LSFs and maps of two pixels, traced once per device,
     in two chunks (one on a GPU); the pilots on the CPU."""
     d = open_design
-    s = Sampling(n_rays=1 << (N - 1), seed=5, chunk=1 << (N - 2))
+    s = Sampling(n_rays=1 << N, seed=5, chunk=1 << (N - 1))  # 2,048 rays: ~200 leave
     res = {}
     for dev in ("cpu", "cuda"):
         tr = PixelTracer(d, s, replay=True, device="cpu")  # each chunk traced once
