@@ -60,24 +60,27 @@ def pytest_addoption(parser):
 #: own order (files by their number of tests, most first) sent these files of a few long
 #: tests last, one of them alone on a worker at the end while the other had finished
 HEAVY_FILES = (
-    "test_report_presets.py",  # 76 s
-    "test_fit_wave.py",  # 68
-    "test_report.py",  # 67
-    "test_cuda.py",  # 49
-    "test_search.py",  # 42
-    "test_trace_once.py",  # 39
-    "test_fit.py",  # 31
-    "test_wave_circle_maps.py",  # 27
-    "test_report_speed_paths.py",  # 25
-    "test_tolerance_optics.py",  # 24
-    "test_atomic.py",  # 23
+    "test_report_presets.py",  # 92 s (2026-11-26, one thread a worker)
+    "test_report.py",  # 50
+    "test_fit_wave.py",  # 48
+    "test_cuda.py",  # 45
+    "test_search.py",  # 40
+    "test_wave_circle_maps.py",  # 26
+    "test_fit.py",  # 26
+    "test_rgb_report.py",  # 24
+    "test_tolerance_optics.py",  # 23
+    "test_reciprocity.py",  # 23
     "test_compare.py",  # 20
-    "test_rgb_report.py",  # 20
-    "test_wave_checks.py",  # 17
-    "test_restore.py",  # 17
-    "test_report_sections.py",  # 15
-    "test_edges_27b.py",  # 14
-    "test_wave_circle.py",  # 14
+    "test_report_speed_paths.py",  # 20
+    "test_atomic.py",  # 19
+    "test_wave_circle.py",  # 18
+    "test_restore.py",  # 16
+    "test_wave_fresnel.py",  # 14
+    "test_compare_optics.py",  # 14
+    "test_search_wave.py",  # 13
+    "test_rodlens.py",  # 12
+    "test_wave_checks.py",  # 11
+    "test_report_sections.py",  # 11
 )
 
 

@@ -35,6 +35,8 @@ def _small(real):
             search_ghost_rays=1 << 14,
             verify_ghost_rays=1 << 16,
             verify_lsf_rays=1 << 16,
+            parameter_rays=1 << 16,
+            rodlens_rays=1 << 18,
         )
         return replace(
             w,
@@ -52,6 +54,18 @@ def _small(real):
 #: the spec the report's verdict is judged against: met by the prototype's depth of field
 #: and ghost-free radius, not by its light
 SPEC = "dof>=2.2,ghost_radius>=5,light>=0.05"
+
+
+def test_the_study_budgets_defaults_are_the_studies_own():
+    """The report's parameter study and rod-lens rows trace as many rays as the functions
+    and `compare` do by default (the budget only moves the figure into the work)."""
+    import inspect
+
+    from opticalstamp.analysis.paper_study import parameter_study
+    from opticalstamp.analysis.rodlens import RAYS_CONTRAST
+
+    rays = inspect.signature(parameter_study).parameters["n_rays"].default
+    assert StudyBudget().parameter_rays == rays and StudyBudget().rodlens_rays == RAYS_CONTRAST
 
 
 @pytest.fixture(scope="module")

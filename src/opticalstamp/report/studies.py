@@ -73,8 +73,9 @@ def study_jobs(
     jobs = {}
     if work.paper:
         parts = [(i, STUDY_PARTS) for i in range(STUDY_PARTS)]
-        jobs["parameter_study"] = [(run_study, (design, seed, fresnel, p)) for p in parts]
-    jobs["rodlens"] = [(run_rodlens, (seed, fresnel, dpi))]
+        rays = work.budget.parameter_rays
+        jobs["parameter_study"] = [(run_study, (design, seed, fresnel, p, rays)) for p in parts]
+    jobs["rodlens"] = [(run_rodlens, (seed, fresnel, dpi, work.budget.rodlens_rays))]
     if all(m.shape != "circle" for m in design.masks):
         budget = study_budget(work.budget, optics)
         jobs["search"] = [(run_search, (design, seed, dpi, budget, optics.engine))]
@@ -119,7 +120,7 @@ def join_job(name: str, results: list):
 
 
 def run_study(
-    design: Design, seed: int, fresnel: bool, part: tuple[int, int]
+    design: Design, seed: int, fresnel: bool, part: tuple[int, int], n_rays: int
 ):  # pragma: no cover - a background process
     """Part ``part`` of the study of the paper's unstated parameters (background). The row
     of the design itself is left to :func:`~opticalstamp.analysis.paper_study.with_headline`
@@ -127,20 +128,24 @@ def run_study(
     from ..analysis.paper_study import parameter_study
 
     deferred = {(design.fingerprint(), fresnel)}
-    return parameter_study(design, seed=seed, deferred=deferred, part=part)
+    return parameter_study(design, seed=seed, deferred=deferred, part=part, n_rays=n_rays)
 
 
-def run_rodlens(seed: int, fresnel: bool, dof_dpi: float):  # pragma: no cover - background
+def run_rodlens(
+    seed: int, fresnel: bool, dof_dpi: float, n_rays: int
+):  # pragma: no cover - background
     """The rod-lens presets' comparison rows (the report's "stamp against a rod-lens
-    array" section): each preset evaluated as `compare` does, its depth of field on the
-    report's chart ``dof_dpi``."""
+    array" section): each preset evaluated as `compare` does (``n_rays`` the contrast
+    curves' rays), its depth of field on the report's chart ``dof_dpi``."""
     from ..studies.compare import RODLENS_PRESETS, evaluate_rodlens, labelled
 
     rows = []
     for name in RODLENS_PRESETS:
         d = load_design(name)
         curves = REPORT_ROD_CURVES | {"dpi": tuple(sorted({*REPORT_ROD_CURVES["dpi"], dof_dpi}))}
-        row = evaluate_rodlens(d, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi, **curves)
+        row = evaluate_rodlens(
+            d, seed=seed, fresnel=fresnel, dof_dpi=dof_dpi, n_rays=n_rays, **curves
+        )
         rows.append(labelled(d, row, seed, fresnel))
     return rows
 

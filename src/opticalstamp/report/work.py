@@ -27,6 +27,10 @@ class StudyBudget:
     verify_ghost_rays, verify_lsf_rays : rays of the exact re-verification of the front
         (ghost analysis; folded LSFs per pixel row)
     tolerance_samples : Monte Carlo samples of the tolerance study
+    parameter_rays : rays per pixel of each design of the study of the paper's unstated
+        parameters (:func:`~opticalstamp.analysis.paper_study.parameter_study`'s default)
+    rodlens_rays : rays of the rod-lens rows' contrast curves (`compare`'s,
+        :data:`~opticalstamp.analysis.rodlens.RAYS_CONTRAST`)
     """
 
     search_population: int = 24
@@ -35,6 +39,8 @@ class StudyBudget:
     verify_ghost_rays: int = 1 << 18
     verify_lsf_rays: int = 1 << 18
     tolerance_samples: int = 200
+    parameter_rays: int = 1 << 19
+    rodlens_rays: int = 1 << 21
 
 
 @dataclass(frozen=True)
