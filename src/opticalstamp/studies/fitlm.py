@@ -115,8 +115,9 @@ def geodesic_lm(
             updated, refresh = 0, False
         a_mat, g = jj.T @ jj, jj.T @ r
         # the updated Jacobians' diagonals too: from full ones only, the default free set
-        # of bench_fit.py --wave stopped at chi2 2915.03 by the damped step's rule (a
-        # heavily damped step predicts a small fall) where this reached 2900.58
+        # of bench_fit.py --wave took another path along its valley and stopped at chi2
+        # 2915.03 (lambda 8.8e-5, the Gauss-Newton decrement 0.19: a near-stationary
+        # point of the linear model, docs/fit.md) where this reached 2900.58
         dmax = np.maximum(dmax, np.diag(a_mat))
         d = np.where(dmax > 0, dmax, 1.0)
         s = 1 / np.sqrt(d)
