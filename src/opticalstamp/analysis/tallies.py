@@ -9,7 +9,10 @@ One object per kind of tally, each with its CPU and its GPU accumulation side by
 * :class:`GhostTally`: sums per hole sequence, landing histograms, the virtual
   detector's sums and the nearest landings (:mod:`.ghosts`);
 * :class:`SpotTally`: the spots' grids, the own path's extents, the centre output cell
-  and the total light (:mod:`.spots`).
+  and the total light (:mod:`.spots`);
+* :class:`BandTally`: the light beyond a wave engine's band and inside it, and where the
+  former lands nearest the pixel's axis (the search's wave estimator,
+  :func:`~opticalstamp.studies.waveestimate.far_light`).
 
 A batch is tallied where its rays are: on the GPU where a GPU traced them and keeps them
 (:class:`~opticalstamp.raytrace.launch.DeviceRayBatch`, the kernels of
@@ -22,6 +25,7 @@ its rays were traced.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Protocol
 
@@ -488,3 +492,32 @@ class SpotTally(_Split):
     @property
     def total(self) -> float:
         return float(self._with_device(4, self._total, np.add)[0])
+
+
+# -- the light beyond a wave band ----------------------------------------------------------
+class BandTally:
+    """The light of a pixel's rays beyond a wave engine's ``band`` (|s_x| or |s_y| >= it:
+    the far ghost paths, which the wave engine leaves to the tracer) and inside it, and
+    the nearest landing of the former from the pixel's axis on the object planes
+    ``z_mm``.
+
+    ``far``, ``inside``: summed weights; ``nearest`` (um; inf where none lands). Read on
+    the host (a batch that a GPU keeps is copied back): a few sums per batch, which no
+    device kernel makes.
+    """
+
+    def __init__(self, band: float, z_mm):
+        self.band = float(band)
+        self.z_um = [float(z) * 1000.0 for z in z_mm]
+        self.far = self.inside = 0.0
+        self.nearest = math.inf
+
+    def add(self, pb: PixelBatch) -> None:
+        w = pb.w
+        out = _outside(pb, self.band) & (w > 0)
+        self.far += float(w[out].sum())
+        self.inside += float(w[~out].sum())
+        if out.any():
+            for z in self.z_um:
+                dx, dy = pb.offsets(z)
+                self.nearest = min(self.nearest, float(np.hypot(dx[out], dy[out]).min()))

@@ -48,6 +48,7 @@ from ..analysis.rmtf import (
     refine_crossings,
     rmtf_from_lsf,
 )
+from ..analysis.tallies import BandTally, run
 from ..analysis.wavebase import ORDERS, wave_sampling
 from ..design import Design
 from ..design.resolution import dof_chart_dpi
@@ -140,22 +141,12 @@ def far_light(
     ``tracer``: a PixelTracer of this design whose pilot runs to reuse.
     """
     tr = tracer if tracer is not None else PixelTracer(design, Sampling(n_rays, seed))
-    far = inside = 0.0
-    nearest = math.inf
-    for pb in tr.trace((0, 0), n_rays):
-        b = pb.rays
-        w = pb.w
-        out = ((np.abs(b.sx) >= band) | (np.abs(b.sy) >= band)) & (w > 0)
-        far += float(w[out].sum())
-        inside += float(w[~out].sum())
-        if out.any():
-            for z in z_mm:
-                dx, dy = pb.offsets(float(z) * 1000.0)
-                nearest = min(nearest, float(np.hypot(dx[out], dy[out]).min()))
+    t = BandTally(band, z_mm)
+    run(tr, (0, 0), [t], n_rays)
     return {
-        "far_um2sr": far / n_rays,
-        "nearest_far_mm": nearest / 1000.0,
-        "ray_in_band_um2sr": inside / n_rays,
+        "far_um2sr": t.far / n_rays,
+        "nearest_far_mm": t.nearest / 1000.0,
+        "ray_in_band_um2sr": t.inside / n_rays,
     }
 
 
