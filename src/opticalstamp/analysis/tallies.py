@@ -92,6 +92,16 @@ def fold_bins(periods_um: np.ndarray) -> np.ndarray:
     return np.maximum(8, np.round(periods_um / FOLD_BIN_UM)).astype(np.int64)
 
 
+@numba.njit(inline="always", cache=True)
+def _landing(x, y, sx, sy, z, n_obj, x0, y0):  # pragma: no cover
+    """Where a ray (x, y, sx, sy) leaving the stack meets the object plane ``z`` (um above
+    the reference plane; a straight line in the medium of index ``n_obj``), from the
+    pixel's axis (x0, y0): (dx, dy). Inlined in the CPU tally kernels (the device's:
+    ``cuda_tallies._landing``)."""
+    c = np.sqrt(n_obj * n_obj - sx * sx - sy * sy)
+    return x + z * sx / c - x0, y + z * sy / c - y0
+
+
 @numba.njit(parallel=True, cache=True)
 def _fold(x, sx, sy, w, batch, x0, z_um, n_obj, periods, n_bins, out):  # pragma: no cover
     """out[p, b, iz, bin] += w for each ray; prange over z (no write conflicts)."""
@@ -101,8 +111,7 @@ def _fold(x, sx, sy, w, batch, x0, z_um, n_obj, periods, n_bins, out):  # pragma
             wi = w[i]
             if wi == 0.0:
                 continue
-            c = np.sqrt(n_obj * n_obj - sx[i] * sx[i] - sy[i] * sy[i])
-            xo = x[i] + z * sx[i] / c - x0
+            xo = _landing(x[i], 0.0, sx[i], sy[i], z, n_obj, x0, 0.0)[0]
             for p in range(periods.size):
                 per = periods[p]
                 phi = xo - np.floor(xo / per) * per
@@ -213,9 +222,7 @@ def _maps(
             wi = w[i]
             if wi == 0.0:
                 continue
-            c = np.sqrt(n_obj * n_obj - sx[i] * sx[i] - sy[i] * sy[i])
-            xo = x[i] + z * sx[i] / c - x0
-            yo = y[i] + z * sy[i] / c - y0
+            xo, yo = _landing(x[i], y[i], sx[i], sy[i], z, n_obj, x0, y0)
             if own[i]:
                 jx = int(np.floor((xo - fine_lo) / fine_bin))
                 jy = int(np.floor((yo - fine_lo) / fine_bin))
