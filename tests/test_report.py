@@ -91,7 +91,7 @@ def full_report(tmp_path_factory):
 
 def test_the_report_traces_each_pixel_once(full_report):
     """Every traced analysis of a used pixel in the full report (every section, both
-    sensitive areas, scans at 1200 dpi; the background studies trace in processes of
+    sensitive areas, scans with OCR; the background studies trace in processes of
     their own) draws its rays from one tracer: counted by the tracer and by a spy."""
     out, _, (seen, works, passes) = full_report
     assert json.loads((out / "report.json").read_text())["optics"]["engine"] == "wave"

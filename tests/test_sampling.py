@@ -179,13 +179,31 @@ for imp in (True, False):
         got.append([np.concatenate([getattr(b, f) for b in bs]) for f in fields])
     for u, v in zip(*got, strict=True):
         np.testing.assert_array_equal(u, v)
+# the parallel tally kernels (folds over Z, maps) and the rod-lens tracer
+from opticalstamp.analysis.lsf import traced_folded_lsf_pair
+from opticalstamp.analysis.maps import traced_map_sets
+from opticalstamp.raytrace.rodlens import trace_rods
+
+rods = load_design("sla-2row-20deg")
+got = []
+for threads in (1, 4):
+    numba.set_num_threads(threads)
+    a, b = traced_folded_lsf_pair(
+        design, z_mm=[0.5, 1.0, 2.0, 3.0], periods_um=[127.0, 84.6], n_rays=1 << 17, seed=1
+    )
+    (m,) = traced_map_sets(design, z_sets=[[0.5, 1.0, 2.0]], n_rays=1 << 17, seed=2)
+    r = trace_rods(rods, [0.0, 100.0, 250.0], n_rays=50_000, seed=5)
+    got.append([*a.h, *b.h, m.own, m.ghost, r.ids, r.x])
+for u, v in zip(*got, strict=True):
+    assert u.size and np.array_equal(u, v)
 print("same")
 """
 
 
 def test_thread_count_does_not_change_results():
     """One thread and four give the same rays, bit for bit (plain and importance
-    sampling)."""
+    sampling), the same folded LSFs and maps (the tally kernels' parallel loops) and the
+    same rod-lens rays."""
     env = os.environ | {"NUMBA_NUM_THREADS": "4", "PYTHONPATH": str(ROOT / "src")}
     res = subprocess.run(
         [sys.executable, "-c", THREADS], capture_output=True, text=True, env=env, timeout=600

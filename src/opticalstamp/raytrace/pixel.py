@@ -303,7 +303,7 @@ class PixelTracer:
         :attr:`passes`: how many times each pixel's rays were traced. A batch handed out
         again by ``replay`` is not a launch. Tracers made by :meth:`with_sampling` and
         :meth:`with_device` share it, so one count covers every analysis given the
-        tracer (the report's "each pixel traced once", tests/test_trace_once.py).
+        tracer (the report's "each pixel traced once", tests/passcount.py).
 
     Notes
     -----

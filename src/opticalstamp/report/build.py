@@ -177,7 +177,8 @@ def build_report(
 
         # one pilot per pixel for every traced analysis below, and each ray traced once:
         # the analyses of the design's pixels draw their rays from this tracer, which hands
-        # out again the rays it traced (tests/test_trace_once.py counts its passes)
+        # out again the rays it traced (tests/passcount.py counts its passes, in the
+        # report's and the quick report's tests)
         tracer = PixelTracer(design, replay=True, passes=passes)
         shown = dict(traced, progress=progress)
         g = run(ghost_section, design, work, **shown, tracer=tracer)
