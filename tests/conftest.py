@@ -84,6 +84,29 @@ HEAVY_FILES = (
 )
 
 
+def pytest_sessionstart(session):
+    """With workers (pytest-xdist's controller, before it starts them): numba's CPU
+    kernels compiled into their caches once, in two processes side by side
+    (tests/warm_numba.py), where in a fresh clone each worker and each background
+    process that reaches a kernel first would compile it again. A failure here is only
+    reported: the tests that use the kernel show it."""
+    config = session.config
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    import subprocess
+
+    script = str(Path(__file__).with_name("warm_numba.py"))
+    runs = [
+        subprocess.Popen([sys.executable, script, part], stdout=subprocess.DEVNULL,
+                         stderr=subprocess.PIPE, text=True)
+        for part in ("rays", "rest")
+    ]  # fmt: skip
+    for part, p in zip(("rays", "rest"), runs, strict=True):
+        _, err = p.communicate()
+        if p.returncode:
+            print(f"warm_numba.py {part} failed: {err.strip().splitlines()[-1:]}")
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_configure(config):
     # under --dist loadfile the controller hands out the files in the order the workers
