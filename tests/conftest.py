@@ -88,7 +88,8 @@ def pytest_sessionstart(session):
     """With workers (pytest-xdist's controller, before it starts them): numba's CPU
     kernels compiled into their caches once, in two processes side by side
     (tests/warm_numba.py), where in a fresh clone each worker and each background
-    process that reaches a kernel first would compile it again. A failure here is only
+    process that reaches a kernel first would compile it again (a fresh clone's suite: 438
+    -> 401 s; about 23 s here, 2.5 s where the caches are warm). A failure here is only
     reported: the tests that use the kernel show it."""
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
