@@ -97,12 +97,12 @@ def pytest_sessionstart(session):
     import subprocess
 
     script = str(Path(__file__).with_name("warm_numba.py"))
-    runs = [
-        subprocess.Popen([sys.executable, script, part], stdout=subprocess.DEVNULL,
-                         stderr=subprocess.PIPE, text=True)
+    runs = {
+        part: subprocess.Popen([sys.executable, script, part], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True)
         for part in ("rays", "rest")
-    ]  # fmt: skip
-    for part, p in zip(("rays", "rest"), runs, strict=True):
+    }  # fmt: skip
+    for part, p in runs.items():
         _, err = p.communicate()
         if p.returncode:
             print(f"warm_numba.py {part} failed: {err.strip().splitlines()[-1:]}")

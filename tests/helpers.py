@@ -1,14 +1,31 @@
-"""Small Monte Carlo helpers shared by the tests (independent of opticalstamp.raytrace.tally)."""
+"""Small Monte Carlo helpers shared by the tests (independent of opticalstamp.raytrace.tally),
+and a runner of Python code in a process of its own."""
 
 from __future__ import annotations
 
 import copy
 import math
+import os
+import subprocess
+import sys
 import tomllib
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_python(code: str, **env) -> subprocess.CompletedProcess:
+    """``python -c code`` from the repository's root with its sources on the path and
+    ``env`` added to the environment (a process of its own: another device, other
+    threads, a fresh import)."""
+    e = os.environ | {"PYTHONPATH": str(ROOT / "src")} | env
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=e, cwd=ROOT, timeout=600
+    )
 
 
 @dataclass

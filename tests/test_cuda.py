@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 from tests.edges import assert_clean_refusal, run
+from tests.helpers import run_python
 
 from opticalstamp.device import DeviceUnavailable, resolve_device
 
@@ -53,13 +54,6 @@ for name, args in sorted(launched.items()):
     fusable = sum(a.strip() in prod or b.strip() in prod for a, b in sums)
     print(name, ptx.count("fma.rn.f64"), fusable)
 """
-
-
-def _python(code: str, **env) -> subprocess.CompletedProcess:
-    e = os.environ | {"PYTHONPATH": str(ROOT / "src")} | env
-    return subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env=e, cwd=ROOT, timeout=600
-    )
 
 
 #: the simulator's tests: one module, one session (tests/cuda/sim_device.py)
@@ -106,7 +100,7 @@ def _compiler_missing() -> str:
         "def k(a):\n    a[0] = 1.0\n"
         "cuda.compile_ptx(k, (float64[:],), cc=(9, 0))\n"
     )
-    res = _python(code)
+    res = run_python(code)
     return "" if res.returncode == 0 else (res.stderr.strip().splitlines() or ["?"])[-1]
 
 
@@ -223,7 +217,7 @@ def test_the_cpu_path_imports_nothing_of_numba_cuda(device):
         "print(json.dumps({'cuda': 'numba.cuda' in sys.modules,"
         " 'device': json.loads(r.stdout)['provenance']['device']}))\n"
     )
-    res = _python(code)
+    res = run_python(code)
     assert res.returncode == 0, res.stderr[-2000:]
     got = json.loads(res.stdout.strip().splitlines()[-1])
     assert got == {"cuda": False, "device": "cpu"}

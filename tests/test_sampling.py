@@ -2,15 +2,10 @@
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from helpers import Tally, assert_agree
+from helpers import Tally, assert_agree, run_python
 from opticalstamp.analysis.ghosts import analyse_ghosts
 from opticalstamp.design import design_from_dict, load_design
 from opticalstamp.raytrace.kernel import ESCAPED, TIR
@@ -19,8 +14,6 @@ from opticalstamp.raytrace.pixel import allocate_holes, pixel_source
 from opticalstamp.raytrace.sampling import Source
 from opticalstamp.raytrace.stack import forward_path, reverse_path
 from opticalstamp.raytrace.tally import is_own_path
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _etendues(path, src, n_rays, seed, **kw):
@@ -204,10 +197,7 @@ def test_thread_count_does_not_change_results():
     """One thread and four give the same rays, bit for bit (plain and importance
     sampling), the same folded LSFs and maps (the tally kernels' parallel loops) and the
     same rod-lens rays."""
-    env = os.environ | {"NUMBA_NUM_THREADS": "4", "PYTHONPATH": str(ROOT / "src")}
-    res = subprocess.run(
-        [sys.executable, "-c", THREADS], capture_output=True, text=True, env=env, timeout=600
-    )
+    res = run_python(THREADS, NUMBA_NUM_THREADS="4")
     assert res.returncode == 0 and res.stdout.strip() == "same", res.stderr[-3000:]
 
 
