@@ -18,11 +18,19 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def source_env(**env) -> dict:
+    """This process's environment with the repository's sources first on PYTHONPATH
+    (what was there stays behind them: packages installed beside the interpreter's, as on
+    a GPU machine) and ``env`` added."""
+    path = os.pathsep.join(p for p in (str(ROOT / "src"), os.environ.get("PYTHONPATH")) if p)
+    return os.environ | {"PYTHONPATH": path} | env
+
+
 def run_python(code: str, **env) -> subprocess.CompletedProcess:
     """``python -c code`` from the repository's root with its sources on the path and
     ``env`` added to the environment (a process of its own: another device, other
     threads, a fresh import)."""
-    e = os.environ | {"PYTHONPATH": str(ROOT / "src")} | env
+    e = source_env(**env)
     return subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, env=e, cwd=ROOT, timeout=600
     )

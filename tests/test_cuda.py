@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 from tests.edges import assert_clean_refusal, run
-from tests.helpers import run_python
+from tests.helpers import run_python, source_env
 
 from opticalstamp.device import DeviceUnavailable, resolve_device
 
@@ -66,7 +66,7 @@ def _session(**env) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, *args, "-o", "python_files=sim_*.py", str(SIM)],
         capture_output=True, text=True, cwd=ROOT, timeout=900,
-        env=os.environ | {"PYTHONPATH": str(ROOT / "src")} | env,
+        env=source_env(**env),
     )  # fmt: skip
 
 
@@ -122,7 +122,7 @@ def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path, s
     script.write_text(COMPILE)
     res = subprocess.run(
         [sys.executable, str(script), str(rec)], capture_output=True, text=True, cwd=ROOT,
-        env=os.environ | {"PYTHONPATH": str(ROOT / "src")}, timeout=600,
+        env=source_env(), timeout=600,
     )  # fmt: skip
     assert res.returncode == 0, res.stderr[-3000:]
     got = {name: (int(f), int(u)) for name, f, u in map(str.split, res.stdout.splitlines())}
@@ -172,7 +172,7 @@ def test_cuda_refused_without_a_gpu(tmp_path, monkeypatch):
         res = subprocess.run(
             [sys.executable, "-c", "from opticalstamp.cli import main; main()", "ghosts"],
             capture_output=True, text=True, cwd=ROOT, timeout=120,
-            env=os.environ | {"OPTICALSTAMP_DEVICE": value, "PYTHONPATH": str(ROOT / "src")},
+            env=source_env(OPTICALSTAMP_DEVICE=value),
         )  # fmt: skip
         assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
         assert "OPTICALSTAMP_DEVICE" in res.stderr

@@ -138,6 +138,46 @@ def test_circles_take_wave_optics_where_asked_for():
     assert "--optics wave" in auto.reason
 
 
+def test_object_side_in_batches_of_heights_equals_one_at_a_time(squares, monkeypatch):
+    """The object side on a backend (the 2-D path's on a GPU: batches of heights, one
+    transform each) gives the host loop's LSFs to rounding, run here on the CPU backend,
+    with batches of several heights and of one (a tiny byte bound)."""
+    from opticalstamp.analysis import waveobject
+
+    d, smp = squares
+    src = lsf_source_2d(d, 0.4, sampling=smp, propagator="paraxial")
+    zs = np.linspace(0.0, 0.4, 7)
+    loop = waveobject.lsf_x_from(src.side, src.modes, zs)
+    batched = waveobject.lsf_x_from(src.side, src.modes, zs, backend("cpu"))
+    assert np.abs(batched - loop).max() < 1e-12 * loop.max()
+    monkeypatch.setattr(waveobject, "BATCH_BYTES", 1)
+    ones = waveobject.lsf_x_from(src.side, src.modes, zs, backend("cpu"))
+    assert np.abs(ones - loop).max() < 1e-12 * loop.max()
+
+
+def test_2d_sources_propagate_the_marginals_modes_uncompressed(squares):
+    """The 2-D path's source carries the x marginal's coherent modes as they are (one
+    row each, no second compression): orthogonal rows (to 1e-5 of the strongest: the
+    object grid's band takes a few 1e-6 of each field's power), holding the light to
+    1e-4; their LSFs equal those of the modes compressed once more (the object side's
+    x_modes, which the path used to apply) within that compression's tolerance, L1."""
+    from opticalstamp.analysis import waveobject
+
+    d, smp = squares
+    src = lsf_source_2d(d, 0.4, sampling=smp, propagator="paraxial")
+    step, n = smp.step_um, src.side.grids[0].size
+    g = src.modes @ src.modes.conj().T * (step / n)  # Gram of the modes' fields (um sr)
+    assert np.trace(g).real == pytest.approx(src.light, rel=1e-4)
+    off = np.abs(g - np.diag(np.diag(g)))
+    assert off.max() < 1e-5 * np.abs(np.diag(g)).max()
+    again, _ = waveobject.x_modes(src.side)
+    assert again.shape[0] <= src.modes.shape[0]
+    zs = np.array([0.0, 0.2, 0.4])
+    a = waveobject.lsf_x_from(src.side, src.modes, zs)
+    b = waveobject.lsf_x_from(src.side, again, zs)
+    assert (np.abs(a - b).sum(axis=1) * step).max() <= 1.01 * smp.mode_tol * src.light
+
+
 @pytest.mark.skipif(cupy_found(), reason="CuPy is installed here")
 def test_cuda_without_cupy_is_refused_naming_it():
     with pytest.raises(DeviceUnavailable, match="CuPy"):

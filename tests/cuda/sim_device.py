@@ -167,9 +167,11 @@ def ops_kernel(
         st, pl, xe, ye, we = DEV.trace_one(
             x0, y0, sx, sy, w, slabs, n_out, masks, lat, lim, True, hr, hk, i
         )
-        vals = (ok, xa, ya, a, c2, x0, y0, sx, sy, w, st, pl, xe, ye, we)
-        for j in range(15):
-            res[i, j] = vals[j]
+        # one store each: a tuple of mixed types cannot be indexed by a loop variable in
+        # compiled code (the simulator, plain Python, accepted it; a GPU's compiler not)
+        res[i, 0], res[i, 1], res[i, 2], res[i, 3], res[i, 4] = ok, xa, ya, a, c2
+        res[i, 5], res[i, 6], res[i, 7], res[i, 8], res[i, 9] = x0, y0, sx, sy, w
+        res[i, 10], res[i, 11], res[i, 12], res[i, 13], res[i, 14] = st, pl, xe, ye, we
 
 
 def test_the_per_ray_functions_are_one_source_on_both_devices(wide):

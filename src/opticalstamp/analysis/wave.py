@@ -40,15 +40,17 @@ short sums of separable terms (:mod:`.wavefilter`); multiple reflections are lef
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from ..design import Design
 from ..raytrace.stack import lattice_of, output_pitch
 from ..validate import InputError
+from .arrays import backend
 from .wavebase import (
     Plane,
     WaveSampling,
@@ -288,6 +290,7 @@ class LSFSource:
     modes: np.ndarray = field(repr=False)  # (q, nb) coherent modes of LSF_x (x_modes)
     light: float = 0.0
     meta: dict = field(default_factory=dict)  # how the stack was traversed (2-D path)
+    arrays: str = "cpu"  # the object side's array backend (arrays.py): the 2-D path's
 
     def lsf_x(self, z_mm) -> tuple[np.ndarray, np.ndarray, float, dict]:
         """As :func:`wave_lsf_x` at the heights ``z_mm`` (each <= ``z_max_mm``)."""
@@ -296,8 +299,9 @@ class LSFSource:
             raise ValueError(
                 f"z_mm: {zs.max():g} mm lies beyond the grid's reach ({self.z_max_mm:g} mm)"
             )
+        bk = None if self.arrays == "cpu" else backend(self.arrays)
         with one_blas_thread():
-            lsf = lsf_x_from(self.side, self.modes, zs)
+            lsf = lsf_x_from(self.side, self.modes, zs, bk)
         meta = {"modes": self.modes.shape[0], "sequences": self.sequences}
         return self.side.grids[0], lsf, self.light, meta
 
@@ -332,8 +336,19 @@ def lsf_source(
 def one_blas_thread():
     """BLAS on one thread for the engine's call (restored on leaving): its products are
     small or thin, the FFTs carry the work, and OpenBLAS's spinning threads made them
-    5-10x slower on a loaded 2-core machine (as in :func:`~opticalstamp.studies.fit.fit`)."""
-    return threadpool_limits(limits=1, user_api="blas")
+    5-10x slower on a loaded 2-core machine (as in :func:`~opticalstamp.studies.fit.fit`).
+    Through one :class:`~threadpoolctl.ThreadpoolController` per process
+    (:func:`_blas_controller`): ``threadpool_limits`` scans the loaded libraries at every
+    call, 1.3 ms here and 15 ms on a GPU machine with PyTorch's libraries loaded, and the
+    engine enters this once per source and per call of :meth:`LSFSource.lsf_x`."""
+    return _blas_controller().limit(limits=1, user_api="blas")
+
+
+@functools.cache
+def _blas_controller() -> ThreadpoolController:
+    """The BLAS libraries loaded when the engine first runs (NumPy's and SciPy's, which
+    this module's imports load), scanned once."""
+    return ThreadpoolController()
 
 
 def _heights(z_mm) -> np.ndarray:

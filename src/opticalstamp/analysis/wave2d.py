@@ -178,12 +178,15 @@ def _stack(
     ky = np.flatnonzero(in_band(sfft.fftfreq(y.size, y[1] - y[0]), lam, b))
     kx = np.flatnonzero(in_band(sfft.fftfreq(x.size, x[1] - x[0]), lam, b))
     filt = angular_filters(design, x, y, lam, fresnel, (ky, kx))  # on the in-band bins
+    filt = [None if f is None else bk.put(f) for f in filt]
     first = None
     if propagator == "exact":
-        first = transfer(x, y, layers[0].slabs, lam, b, propagator, relative=True, bins=(ky, kx))
+        first = transfer(
+            x, y, layers[0].slabs, lam, b, propagator, relative=True, bins=(ky, kx), xp=bk.xp
+        )
     if filt[0] is not None:  # a filter commutes with free space: anywhere below mask 1
         first = filt[0] if first is None else first * filt[0]
-    first = None if first is None else bk.put(first.astype(cdt))
+    first = None if first is None else first.astype(cdt)
     masks = []
     for lay in layers:
         r_i = lay.reduced * b + smp.margin_um + max(max(h.hw, h.hh) for h in lay.holes)
@@ -195,10 +198,10 @@ def _stack(
         masks.append(mask_field_2d(x, y, near, b, lam, bk).astype(rdt))
     steps = []
     for i, lay in enumerate(layers[1:], start=1):
-        h = transfer(x, y, lay.slabs, lam, b, propagator, bins=(ky, kx))
-        steps.append(bk.put((h if filt[i] is None else h * filt[i]).astype(cdt)))
+        h = transfer(x, y, lay.slabs, lam, b, propagator, bins=(ky, kx), xp=bk.xp)
+        steps.append((h if filt[i] is None else h * filt[i]).astype(cdt))
     ux, uy = bk.put(fields[0].astype(cdt)), bk.put(fields[1].astype(cdt))
-    top = None if filt[-1] is None else bk.put(filt[-1].ravel())
+    top = None if filt[-1] is None else filt[-1].ravel()
     st = _Stack(x, y, ux, uy, first, masks, steps, bk.put(ky), bk.put(kx), bk, top, cdt)
     return st, layers
 
@@ -397,7 +400,7 @@ def wave_response_2d(
     etendue, cells = np.zeros(n_z), np.zeros(n_z)
     maps = np.zeros((n_z, edges.size - 1, edges.size - 1))
     slabs = [[(gap.thickness_um, design.index(gap.medium)), (z * 1e3, n_obj)] for z in zs]
-    hs = [bk.put(transfer(xf, yf, sl, lam, b, propagator)) for sl in slabs]
+    hs = [transfer(xf, yf, sl, lam, b, propagator, xp=bk.xp) for sl in slabs]
     inten = xp.zeros((n_z, yf.size, xf.size))
     u = xp.zeros((yf.size, xf.size), dtype=xp.complex128)
     for m in sm.modes:  # one mode at a time: the object grid can be large

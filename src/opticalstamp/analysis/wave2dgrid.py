@@ -95,15 +95,17 @@ def mask_field_2d(
         key = (h.shape, h.hw, h.hh, h.cy)
         rows[key] = rows[key] + ex if key in rows else ex
     rho = None
+    disks: dict[float, object] = {}  # a disk's transform by radius (both rows share it)
     for (shape, hw, hh, cy), ex in rows.items():  # each row: its shape's FT x sum of shifts
         ey = np.exp(-2j * np.pi * fy * (cy - y[0]))
         if shape == "circle":
-            if rho is None:
-                rho = bk.put(np.hypot(fy[:, None], fx[None, :]))
+            if rho is None:  # |f| on the backend (1e6 points: computed where they live)
+                rho = xp.hypot(bk.put(fy)[:, None], bk.put(fx)[None, :])
                 zero = rho == 0
                 safe = xp.where(zero, 1.0, rho)
-            disk = xp.where(zero, np.pi * hw * hw, hw * bk.j1(2 * np.pi * hw * rho) / safe)
-            a += disk * bk.put(ey)[:, None] * bk.put(ex)[None, :]
+            if hw not in disks:
+                disks[hw] = xp.where(zero, np.pi * hw * hw, hw * bk.j1(2 * np.pi * hw * rho) / safe)
+            a += disks[hw] * bk.put(ey)[:, None] * bk.put(ex)[None, :]
         else:
             sx = 2 * hw * np.sinc(2 * hw * fx) * ex
             sy = 2 * hh * np.sinc(2 * hh * fy) * ey
@@ -123,10 +125,12 @@ def transfer(
     *,
     relative: bool = False,
     bins: tuple | None = None,
-) -> np.ndarray:
+    xp=np,
+):
     """Transfer function through ``slabs`` ((t, n), ...) on the FFT frequencies of the
     grid, band |lambda f_x|, |lambda f_y| < band (0 outside): shape (y.size, x.size), or
-    on the FFT bins ``bins`` = (ky, kx) alone: shape (ky.size, kx.size).
+    on the FFT bins ``bins`` = (ky, kx) alone: shape (ky.size, kx.size); computed by the
+    array module ``xp`` (NumPy, or CuPy for an array on the GPU: the same arithmetic).
 
     exact: prod exp(2 pi i t (sqrt((n / lambda)^2 - f^2) - n / lambda)); paraxial:
     prod exp(-i pi lambda t f^2 / n). ``relative``: exact over paraxial (no band).
@@ -136,22 +140,22 @@ def transfer(
     fy = sfft.fftfreq(y.size, y[1] - y[0])
     if bins is not None:
         fy, fx = fy[bins[0]], fx[bins[1]]
-    fx, fy = fx[None, :], fy[:, None]
+    inside = in_band(fx[None, :], lam, band) & in_band(fy[:, None], lam, band)
+    fx, fy = xp.asarray(fx)[None, :], xp.asarray(fy)[:, None]
     f2 = fx * fx + fy * fy
-    phase = np.zeros_like(f2)
+    phase = xp.zeros_like(f2)
     for t, n in slabs:
         par = -np.pi * lam * t * f2 / n
         if propagator == "paraxial" and not relative:
             phase += par
             continue
         k = n / lam
-        ex = 2 * np.pi * t * (np.sqrt(np.maximum(k * k - f2, 0.0)) - k)
+        ex = 2 * np.pi * t * (xp.sqrt(xp.maximum(k * k - f2, 0.0)) - k)
         phase += ex - par if relative else ex
-    h = np.exp(1j * phase)
+    h = xp.exp(1j * phase)
     if relative:
         return h
-    inside = in_band(fx, lam, band) & in_band(fy, lam, band)
-    return np.where(inside, h, 0.0)
+    return xp.where(xp.asarray(inside), h, 0.0)
 
 
 def angular_filters(

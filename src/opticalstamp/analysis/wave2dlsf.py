@@ -28,7 +28,7 @@ from ..design import Design
 from .wave import LSFSource, one_blas_thread
 from .wave2d import RANGE_TOL, StackModes, stack_modes
 from .wavebase import WaveSampling, stack_axes, wave_sampling
-from .waveobject import object_side, x_modes
+from .waveobject import object_side
 
 __all__ = ["lsf_source_2d", "marginal_modes"]
 
@@ -97,8 +97,11 @@ def lsf_source_2d(
         side = object_side(
             [()], {(): (ux, uy)}, planes, [sm.stack.x, sm.stack.y], smp, float(z_max_mm)
         )
-        modes, _ = x_modes(side)
+        # ux are the x marginal's coherent modes already (orthogonal, all but mode_tol of
+        # its power): propagated as they are, where x_modes would compress them again
+        # (and drop up to mode_tol more); the one term's y weight is uy's power, 1
+        modes = side.spectra[0][0] * np.sqrt(side.gram(1)[0, 0].real)
     meta = {"path": "2d", "device": sm.bk.name} | sm.info
     if sm.note:
         meta["note"] = sm.note
-    return LSFSource(side, float(z_max_mm), ["2-D"], modes, light, meta)
+    return LSFSource(side, float(z_max_mm), ["2-D"], modes, light, meta, sm.bk.name)

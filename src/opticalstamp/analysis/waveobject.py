@@ -207,16 +207,45 @@ def x_modes(side: ObjectSide) -> tuple[np.ndarray, float]:
     return _modes(a, side.sampling.mode_tol), light
 
 
-def lsf_x_from(side: ObjectSide, modes: np.ndarray, zs: np.ndarray) -> np.ndarray:
-    """LSF_x (nz, nx) on the fine grid at each Z from the modes of :func:`x_modes`."""
+#: Bytes of the complex fields one batch of heights holds in :func:`lsf_x_from` on a
+#: backend (heights x modes x coarse grid).
+BATCH_BYTES = 1 << 28
+
+
+def lsf_x_from(side: ObjectSide, modes: np.ndarray, zs: np.ndarray, bk=None) -> np.ndarray:
+    """LSF_x (nz, nx) on the fine grid at each Z from the modes of :func:`x_modes`.
+
+    ``bk``: None, one height at a time on the host (NumPy); a
+    :class:`~.arrays.Backend` (the 2-D path's, a GPU's), the heights in batches of at
+    most :data:`BATCH_BYTES` of fields on it, one transform per batch: the same sums,
+    equal to rounding (tests/test_wave_circle.py)."""
     x, nc = side.coarse(0)
     n = side.grids[0].size
+    if bk is not None:
+        return _lsf_x_batched(side, modes, zs, nc, bk)
     out = np.zeros((zs.size, n))
     buf = np.zeros((modes.shape[0], nc), dtype=np.complex128)
     for iz, z in enumerate(zs):
         f = side.on_coarse(0, modes, float(z), nc, buf).view(np.float64)  # (q, 2 N')
         out[iz] = _to_fine(np.einsum("ij,ij->j", f, f).reshape(nc, 2).sum(axis=1), n)
     return out
+
+
+def _lsf_x_batched(side: ObjectSide, modes: np.ndarray, zs: np.ndarray, nc: int, bk):
+    """:func:`lsf_x_from` on the backend ``bk``, batches of heights at once."""
+    xp, n = bk.xp, side.grids[0].size
+    q = modes.shape[0]
+    m, idx = bk.put(modes), bk.put(side.bins[0] % nc)
+    tr = np.stack([side.transfer(0, float(z)) for z in zs]) * (nc / n)  # (nz, nb)
+    per = max(1, BATCH_BYTES // (16 * q * nc))
+    lsf_c = np.empty((zs.size, nc))
+    for i in range(0, zs.size, per):
+        t = bk.put(tr[i : i + per])
+        full = xp.zeros((t.shape[0], q, nc), dtype=np.complex128)
+        full[..., idx] = m[None, :, :] * t[:, None, :]
+        f = bk.ifft(full, axis=-1)
+        lsf_c[i : i + per] = bk.host((f.real * f.real + f.imag * f.imag).sum(axis=1))
+    return np.stack([_to_fine(c, n) for c in lsf_c]).reshape(zs.size, n)
 
 
 def _modes(a: np.ndarray, tol: float) -> np.ndarray:

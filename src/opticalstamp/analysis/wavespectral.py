@@ -20,7 +20,9 @@ R, G and B LEDs lit in turn ("rgb") are three channels, one responsivity each
 
 from __future__ import annotations
 
+import contextvars
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -28,6 +30,7 @@ from scipy import fft as sfft
 from scipy.signal import czt
 
 from ..design import Design
+from .arrays import wave_backend
 from .spectrum import Spectrum, channels, one_channel
 from .wave import WaveResponse, half_width, lsf_source, stack_reach, wave_response
 from .wave2dmaps import checked_heights
@@ -408,12 +411,26 @@ class SpectralLSFSource:
     ) -> SpectralLSFSource:
         spec = one_channel(design, spectrum)
         smps = spectral_samplings(design, spec, sampling)
-        sources = [
-            lsf_source(
+
+        def one(lam: float, s: WaveSampling):
+            return lsf_source(
                 at_wavelength(design, lam), z_max_mm, pixel=pixel, sampling=s, fresnel=fresnel
             )
-            for lam, s in zip(spec.wavelengths_um, smps, strict=True)
-        ]
+
+        jobs = list(zip(spec.wavelengths_um, smps, strict=True))
+        if len(jobs) > 1 and _on_gpu(design):
+            # the 2-D path on a GPU: each wavelength in a thread of its own on a stream
+            # of its own, so that one's host work (set-up, object side) overlaps
+            # another's transforms; every source is computed as alone (its own seed
+            # and arrays): the same figures as one after the other
+            with ThreadPoolExecutor(max_workers=len(jobs)) as pool:
+                runs = [  # each in a copy of this context: the run's device goes along
+                    pool.submit(contextvars.copy_context().run, _on_stream, one, *job)
+                    for job in jobs
+                ]
+                sources = [r.result() for r in runs]
+        else:
+            sources = [one(lam, s) for lam, s in jobs]
         cyc = [2 * s.band / s.wavelength_um for s in smps]
         return cls(sources, np.asarray(spec.weights, dtype=np.float64), cyc)
 
@@ -424,6 +441,21 @@ class SpectralLSFSource:
                                self.cycles)  # fmt: skip
         light = float(sum(w * r[2] for w, r in zip(self.weights, runs, strict=True)))
         return x, lsf, light
+
+
+def _on_gpu(design: Design) -> bool:
+    """Whether the design's sources take the 2-D path on a GPU (CuPy) in this run."""
+    return not rectangular(design) and wave_backend(None)[0].name == "cuda"
+
+
+def _on_stream(fn, *args):
+    """``fn(*args)`` with CuPy's work queued on a non-blocking stream of its own."""
+    import cupy
+
+    with cupy.cuda.Stream(non_blocking=True) as stream:
+        out = fn(*args)
+        stream.synchronize()
+    return out
 
 
 def mirror_twin(
