@@ -135,6 +135,63 @@ def test_every_cuda_kernel_compiles_for_a_gpu_without_fused_products(tmp_path, s
     assert got["importance_kernel"][1] == 0, got
 
 
+#: the simulator session's own kernel (sim_device.ops_kernel), compiled for an H100 with
+#: the argument types it is launched with
+COMPILE_OPS = """
+import sys
+
+import numba
+import numpy as np
+from numba import cuda
+from numba.cuda import dispatcher
+
+
+class Hopper:
+    compute_capability = (9, 0)
+
+
+dispatcher.get_current_device = lambda: Hopper()
+sys.path.insert(0, sys.argv[1])
+from opticalstamp.design import load_design
+from opticalstamp.raytrace.kernel import seed_key
+from opticalstamp.raytrace.launch import _kernel_args
+from opticalstamp.raytrace.pixel import pixel_source
+from opticalstamp.raytrace.sampling import hole_targets
+from opticalstamp.raytrace.stack import reverse_path
+from tests.cuda import sim_device
+
+d = load_design("paper2016")
+path = reverse_path(d)
+slabs, n_out, masks, lat, lim = _kernel_args(path)
+tg = hole_targets(path, pixel_source(d, 0, 0))
+n, nm = 64, masks.shape[0]
+args = (seed_key(9), np.zeros(8), np.zeros(8), slabs, n_out, masks, lat, lim, tg.n_pre,
+        tg.x, tg.y, tg.prob, tg.alias, tg.q_per_area, np.zeros((n, 15)),
+        np.full((n, nm), -1, np.int8), np.zeros((n, nm), np.int32))
+sig = tuple(numba.typeof(np.ascontiguousarray(a) if isinstance(a, np.ndarray) else a)
+            for a in args)
+cuda.compile_ptx(sim_device.ops_kernel.py_func, sig, cc=(9, 0))
+print("compiled")
+"""
+
+
+def test_the_simulator_sessions_own_kernel_compiles_for_a_gpu(tmp_path):
+    """The session's kernel of per-ray functions (tests/cuda/sim_device.py) compiles for a
+    GPU too, not only in the simulator (plain Python): a GPU's compiler refused its first
+    version, which indexed a tuple of mixed types with a loop variable (found on an
+    H100)."""
+    why = _compiler_missing()
+    if why:
+        pytest.skip(f"numba-cuda cannot compile for a GPU here: {why}")
+    script = tmp_path / "compile_ops.py"
+    script.write_text(COMPILE_OPS)
+    res = subprocess.run(
+        [sys.executable, str(script), str(ROOT)], capture_output=True, text=True, cwd=ROOT,
+        env=source_env(), timeout=600,
+    )  # fmt: skip
+    assert res.returncode == 0 and "compiled" in res.stdout, res.stderr[-3000:]
+
+
 def test_provenance_says_where_the_rays_were_traced():
     """A stamp's results say the device they were traced on (the CPU outside a run that
     chose one; cuda under the simulator: tests/cuda/sim_device.py); a rod-lens array's
