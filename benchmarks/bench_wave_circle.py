@@ -2,6 +2,7 @@
 design: <= 2 min, and on the GPU <= 2 s"); run on demand:
 
     python benchmarks/bench_wave_circle.py [--device cpu|cuda] [--band B] [--reps N]
+        [--lights mono,white] [--warmup 1|0]
 
 The prototype with circular holes (:func:`~opticalstamp.design.variants.with_hole_shape`):
 the RMTF table (rows A and B at 19 heights, 0-4.5 mm, folded onto the design's charts,
@@ -39,23 +40,26 @@ def _arg(name: str, default: str) -> str:
     return sys.argv[sys.argv.index(name) + 1] if name in sys.argv else default
 
 
-def timed(fn, reps: int, bk) -> tuple[float, list[float], object]:
-    """Median wall-clock seconds of ``reps`` runs after a warm-up, all the times, and the
-    last result."""
-    out = fn()
-    times = []
+def timed(fn, reps: int, bk, warmup: bool = True) -> tuple[float, list[float], object, list[float]]:
+    """Median wall-clock seconds of ``reps`` runs after a warm-up (``warmup``), all the
+    times, the last result and each run's CPU seconds (this process, every thread)."""
+    out = fn() if warmup else None
+    times, cpu = [], []
     for _ in range(reps):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         out = fn()
         bk.sync()
         times.append(time.perf_counter() - t)
-    return statistics.median(times), times, out
+        cpu.append(time.process_time() - c)
+    return statistics.median(times), times, out, cpu
 
 
 def main() -> None:
     device = _arg("--device", "cpu")
     reps = int(_arg("--reps", "3"))
     band = _arg("--band", "")
+    lights = _arg("--lights", "mono,white").split(",")
+    warmup = _arg("--warmup", "1") == "1"
     bk = backend(device)
     d = with_hole_shape(load_design("paper2016"), "circle")
     smp = wave_sampling(d, band=float(band) if band else None)
@@ -67,21 +71,23 @@ def main() -> None:
         src = lsf_source(d, max(Z19), sampling=smp)
         out["stack"] = {k: v for k, v in src.meta.items() if k != "note"}
         print(f"circles, {device}: stack {out['stack']}", flush=True)
-        for light in ("mono", "white"):
-            t, times, res = timed(
+        for light in lights:
+            t, times, res, cpu = timed(
                 lambda light=light: rmtf_from_lsf(
                     wave_folded_lsf(d, Z19, pers, sampling=smp, spectrum=light), d, dpi=dpis
                 ),
                 reps,
                 bk,
+                warmup,
             )
             print(
                 f"circles, {device}, {light}: RMTF table (19 Z, rows A and B, {len(pers)} "
-                f"charts) {t:.2f} s (runs {', '.join(f'{x:.2f}' for x in times)}); "
+                f"charts) {t:.2f} s (runs {', '.join(f'{x:.2f}' for x in times)}; CPU "
+                f"{', '.join(f'{x:.1f}' for x in cpu)} s); "
                 f"DOF {res.dof_mm} mm",
                 flush=True,
             )
-            out[light] = {"rmtf_table_s": t, "runs_s": times, "dof_mm": res.dof_mm}
+            out[light] = {"rmtf_table_s": t, "runs_s": times, "cpu_s": cpu, "dof_mm": res.dof_mm}
     out["load_average_after"] = os.getloadavg()
     path = Path(__file__).with_name("bench_wave_circle.json")
     old = json.loads(path.read_text()) if path.exists() else {}
