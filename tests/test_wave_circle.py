@@ -204,3 +204,35 @@ def test_cuda_backend_gives_the_cpu_figures():
     gpu = _lsfs(lsf_source_2d(d, max(ZS), sampling=smp, device="cuda", precision="double"))
     assert gpu[2] == pytest.approx(cpu[2], rel=1e-9)
     assert np.abs(gpu[1] - cpu[1]).max() < 1e-9 * cpu[1].max()
+
+
+def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypatch):
+    """Light of several wavelengths by the 2-D path where it runs on a GPU: the sources built
+    in threads (here on the CPU, each thread in a copy of the run's context) give the
+    sequential sources' LSFs and light exactly, and BLAS's thread limit is the process's
+    own again afterwards."""
+    from threadpoolctl import threadpool_info
+
+    from opticalstamp.analysis import wavespectral
+    from opticalstamp.analysis.spectrum import Spectrum
+    from opticalstamp.device import run_device, using_device
+
+    d = _stack((10.0, 10.0, 12.0), shape="circle")
+    smp = wavebase.wave_sampling(d, band=0.12)
+    light = Spectrum("two", (0.5, 0.6), (0.4, 0.6))
+    one = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
+    seen = []
+
+    def direct(fn, *args):  # the stream is CuPy's; the threads and contexts are tested
+        seen.append(run_device())
+        return fn(*args)
+
+    monkeypatch.setattr(wavespectral, "_on_gpu", lambda design: True)
+    monkeypatch.setattr(wavespectral, "_on_stream", direct)
+    before = [lib["num_threads"] for lib in threadpool_info()]
+    with using_device("cpu"):
+        side = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
+    assert seen == ["cpu"] * 2  # each thread ran in the run's context
+    assert [lib["num_threads"] for lib in threadpool_info()] == before
+    a, b = one.lsf_x(ZS), side.lsf_x(ZS)
+    assert np.array_equal(a[1], b[1]) and a[2] == b[2]

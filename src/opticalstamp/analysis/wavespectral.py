@@ -32,7 +32,14 @@ from scipy.signal import czt
 from ..design import Design
 from .arrays import wave_backend
 from .spectrum import Spectrum, channels, one_channel
-from .wave import WaveResponse, half_width, lsf_source, stack_reach, wave_response
+from .wave import (
+    WaveResponse,
+    half_width,
+    lsf_source,
+    one_blas_thread,
+    stack_reach,
+    wave_response,
+)
 from .wave2dmaps import checked_heights
 from .wavebase import (
     SOURCE_EXTRA,
@@ -423,7 +430,10 @@ class SpectralLSFSource:
             # of its own, so that one's host work (set-up, object side) overlaps
             # another's transforms; every source is computed as alone (its own seed
             # and arrays): the same figures as one after the other
-            with ThreadPoolExecutor(max_workers=len(jobs)) as pool:
+            # BLAS held at one thread around the pool: the sources' own limits, entered
+            # and left by the threads in any order, then restore 1, and this restores
+            # the process's own at the end (not whatever a thread saw on entering)
+            with one_blas_thread(), ThreadPoolExecutor(max_workers=len(jobs)) as pool:
                 runs = [  # each in a copy of this context: the run's device goes along
                     pool.submit(contextvars.copy_context().run, _on_stream, one, *job)
                     for job in jobs
