@@ -40,7 +40,17 @@ from scipy.linalg import blas, solve_triangular
 
 from .wavebase import Plane, WaveSampling, in_band, object_grid
 
-__all__ = ["ObjectSide", "lsf_x_at", "lsf_x_from", "object_side", "responses_at", "x_modes"]
+__all__ = [
+    "ObjectSide",
+    "axis_modes",
+    "lsf_from",
+    "lsf_x_at",
+    "lsf_x_from",
+    "marginals_at",
+    "object_side",
+    "responses_at",
+    "x_modes",
+]
 
 
 @dataclass(frozen=True)
@@ -199,12 +209,39 @@ def x_modes(side: ObjectSide) -> tuple[np.ndarray, float]:
     """The coherent modes of LSF_x's mutual intensity as in-band spectra (q, nb), all but
     ``mode_tol`` of the power, and the light (um^2 sr): the Z-independent part of the
     x-only path (:func:`lsf_x_from` propagates them)."""
-    gy = side.gram(1)
-    light = float(np.sum(side.gram(0) * gy).real)
-    p, v = _rotation(gy)
-    w = np.tensordot(v, side.spectra[0], axes=([0], [0]))  # (J, m, nb)
-    a = (w * np.sqrt(p)[:, None, None]).reshape(-1, w.shape[-1])  # (J m, nb)
-    return _modes(a, side.sampling.mode_tol), light
+    return axis_modes(side, 0)
+
+
+#: What :func:`marginals_at` leaves out of each axis's mutual intensity (a fraction of the
+#: light): a model of scans is differentiated by forward differences of 1e-3 assembly
+#: scales (the fit), and a mode that comes and goes as the design moves shifts the model
+#: by at most this (the prototype: 101 and 42 modes of 248 and 176 fields; at 1e-10, 69
+#: and 32, a fit's path along its valley changed and it stopped at its cap).
+MARGINAL_TOL = 1e-14
+
+
+def axis_modes(side: ObjectSide, a: int, tol: float | None = None) -> tuple[np.ndarray, float]:
+    """The coherent modes of axis ``a``'s line-spread function's mutual intensity as
+    in-band spectra (q, nb), all but ``mode_tol`` of the power, and the light (um^2 sr):
+    LSF_a = sum_jl T_jl sum_m u_jm conj(u_lm) with T the other axis's Gram (Z-independent),
+    rotated to T's eigenvectors and compressed to all but ``tol`` (default the
+    sampling's ``mode_tol``) of the power (:func:`_eig_modes`)."""
+    g_other = side.gram(1 - a)
+    light = float(np.sum(side.gram(a) * g_other).real)
+    p, v = _rotation(g_other)
+    w = np.tensordot(v, side.spectra[a], axes=([0], [0]))  # (J, m, nb)
+    rows = (w * np.sqrt(p)[:, None, None]).reshape(-1, w.shape[-1])  # (J m, nb)
+    return _eig_modes(rows, side.sampling.mode_tol if tol is None else tol), light
+
+
+def marginals_at(side: ObjectSide, zs: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Both line-spread functions at each Z, (nz, nx) and (nz, ny) on the fine grids, and
+    the light (um^2 sr): each axis by its own coherent modes (:func:`axis_modes`), without
+    the central-cell shares. :func:`responses_at`'s marginals to ``MARGINAL_TOL`` of the
+    light in L1, with a fraction of its transforms."""
+    mx, light = axis_modes(side, 0, MARGINAL_TOL)
+    my, _ = axis_modes(side, 1, MARGINAL_TOL)
+    return lsf_from(side, 0, mx, zs), lsf_from(side, 1, my, zs), light
 
 
 #: Bytes of the complex fields one batch of heights holds in :func:`lsf_x_from` on a
@@ -219,14 +256,20 @@ def lsf_x_from(side: ObjectSide, modes: np.ndarray, zs: np.ndarray, bk=None) -> 
     :class:`~.arrays.Backend` (the 2-D path's, a GPU's), the heights in batches of at
     most :data:`BATCH_BYTES` of fields on it, one transform per batch: the same sums,
     equal to rounding (tests/test_wave_circle.py)."""
-    x, nc = side.coarse(0)
-    n = side.grids[0].size
     if bk is not None:
-        return _lsf_x_batched(side, modes, zs, nc, bk)
+        return _lsf_x_batched(side, modes, zs, side.coarse(0)[1], bk)
+    return lsf_from(side, 0, modes, zs)
+
+
+def lsf_from(side: ObjectSide, a: int, modes: np.ndarray, zs: np.ndarray) -> np.ndarray:
+    """Axis ``a``'s line-spread function (nz, n) on its fine grid at each Z from its
+    coherent modes (:func:`axis_modes`), one height at a time on the host."""
+    x, nc = side.coarse(a)
+    n = side.grids[a].size
     out = np.zeros((zs.size, n))
     buf = np.zeros((modes.shape[0], nc), dtype=np.complex128)
     for iz, z in enumerate(zs):
-        f = side.on_coarse(0, modes, float(z), nc, buf).view(np.float64)  # (q, 2 N')
+        f = side.on_coarse(a, modes, float(z), nc, buf).view(np.float64)  # (q, 2 N')
         out[iz] = _to_fine(np.einsum("ij,ij->j", f, f).reshape(nc, 2).sum(axis=1), n)
     return out
 
@@ -276,6 +319,22 @@ def _modes(a: np.ndarray, tol: float) -> np.ndarray:
     sig, v = np.linalg.eigh(c.conj().T @ c)
     sig = np.clip(sig, 0.0, None)
     return (np.sqrt(sig)[:, None] * v.conj().T) @ a[piv]
+
+
+def _eig_modes(a: np.ndarray, tol: float) -> np.ndarray:
+    """The leading coherent modes (q, nb) of the mutual intensity sum_r a_r a_r^H, the
+    fewest whose left-out eigenvalues sum to at most ``tol`` of its trace: from the
+    eigen-decomposition of the rows' Gram a a^H = U diag(s) U^H, modes U_k^H a (power
+    s_k). What is left out is a positive semi-definite part, so a line-spread function
+    from the modes lies below the exact one everywhere, by ``tol`` of the light in L1 at
+    most (the pivoted Cholesky of :func:`_modes` projects the rows instead, whose
+    cross terms with the left-out part move the LSF by ~sqrt(``tol``) pointwise)."""
+    s, u = np.linalg.eigh(_gram_rows(a))
+    s = np.clip(s, 0.0, None)
+    left = np.cumsum(s)  # ascending: left[k] = the sum of the k + 1 smallest
+    q = s.size - int(np.searchsorted(left, tol * left[-1], side="right"))
+    q = max(q, 1)
+    return u[:, s.size - q :].conj().T @ a
 
 
 def _gram_rows(a: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:

@@ -38,6 +38,7 @@ from .wave import (
     lsf_source,
     one_blas_thread,
     stack_reach,
+    wave_marginals,
     wave_response,
 )
 from .wave2dmaps import checked_heights
@@ -57,6 +58,7 @@ __all__ = [
     "mirror_twin",
     "response_at",
     "spectral_lsf_x",
+    "spectral_marginals",
     "spectral_samplings",
     "wave_response_channels",
     "wave_response_spectral",
@@ -358,6 +360,35 @@ def wave_response_spectral(
         {"path": first.meta["path"], "propagator": first.meta["propagator"]}
         | {"cell_um": first.meta["cell_um"]},
     )
+
+
+def spectral_marginals(
+    design: Design,
+    z_mm,
+    *,
+    spectrum: str | Spectrum | None = None,
+    pixel: tuple[int, int] = (0, 0),
+    sampling: WaveSampling | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """:func:`wave_response_spectral`'s marginals and light alone, (x_um, lsf_x, y_um,
+    lsf_y, light um^2 sr): for rectangular holes by :func:`~.wave.wave_marginals` at each
+    wavelength (no central-cell shares, no budget: the fit's forward model), other holes
+    by the whole response."""
+    if not rectangular(design):
+        r = wave_response_spectral(design, z_mm, spectrum=spectrum, pixel=pixel, sampling=sampling)
+        return r.x_um, r.lsf_x, r.y_um, r.lsf_y, float(r.etendue_um2sr[0])
+    spec = one_channel(design, spectrum)
+    smps = spectral_samplings(design, spec, sampling)
+    zs = checked_heights(z_mm)
+    parts = [
+        wave_marginals(at_wavelength(design, lam), zs, pixel=pixel, sampling=s)
+        for lam, s in zip(spec.wavelengths_um, smps, strict=True)
+    ]
+    w = spec.weights
+    cyc = [2 * s.band / s.wavelength_um for s in smps]
+    x, lx = _weighted_sum([p[0] for p in parts], [p[1] for p in parts], w, cyc)
+    y, ly = _weighted_sum([p[2] for p in parts], [p[3] for p in parts], w, cyc)
+    return x, lx, y, ly, float(sum(wi * p[4] for wi, p in zip(w, parts, strict=True)))
 
 
 def wave_response_channels(

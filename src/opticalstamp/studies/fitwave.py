@@ -3,12 +3,14 @@
 Where the other commands take wave optics for a design (``--optics auto``:
 :func:`~opticalstamp.analysis.responsivity.resolve_optics`), the fit's spread of a pixel
 at each height is the wave engine's (:func:`~opticalstamp.analysis.wavespectral.
-wave_response_spectral`, the design's light, at the nominal design's sampling for every
+spectral_marginals`, the design's light, at the nominal design's sampling for every
 perturbed design, so that the grids and the band do not jump as the parameters move):
 the light in its band, the own path with its diffraction and the near crosstalk, as the
-x and y marginals (the y one smeared by the document's motion, as the fast model's).
+x and y marginals (the y one smeared by the document's motion, as the fast model's), and
+nothing else: no budget, no central-cell shares, each axis's line-spread function from
+the leading coherent modes of its mutual intensity, to 1e-14 of the light.
 
-One wave run (every height at once) costs about 0.4 s on the prototype, a hundred times
+One wave run (every height at once) costs about 0.3 s on the prototype, a hundred times
 the fast model's; a multi-start search evaluates its model thousands of times. So the
 search (starts and holds, :mod:`.fit`) runs on the fast model (:func:`~.fitmodel.spread`,
 the paraxial own path) plus the wave model's difference from it about the nominal design,
@@ -119,14 +121,12 @@ class WaveModel:
     reach_um: dict = field(default_factory=dict)
 
     def __call__(self, design: Design, zs, smear_um: float, phys=None) -> dict[float, Spread]:
-        from ..analysis.wavespectral import wave_response_spectral
+        from ..analysis.wavespectral import spectral_marginals
 
         zs = [float(z) for z in zs]
-        r = wave_response_spectral(design, zs, sampling=self.sampling)
+        x, lx, y, ly, _ = spectral_marginals(design, zs, sampling=self.sampling)
         return {
-            z: wave_spread(
-                r.x_um, r.lsf_x[i], r.y_um, r.lsf_y[i], smear_um, self.reach_um.get(z, 0.0)
-            )
+            z: wave_spread(x, lx[i], y, ly[i], smear_um, self.reach_um.get(z, 0.0))
             for i, z in enumerate(zs)
         }
 
