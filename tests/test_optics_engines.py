@@ -188,15 +188,14 @@ def test_wave_scan_kernels_are_the_joined_responsivity(paper):
     assert kr[0][0].own_etendue < 0.95 * kw[0][0].own_etendue
 
 
-def test_wave_kernels_refused_where_the_engine_does_not_apply(paper):
-    """A colour scanner's three channels are refused by the wave kernels, naming them;
-    circular holes are not (asked for, they take the 2-D path's maps:
-    tests/test_wave_circle_maps.py)."""
-    from opticalstamp.imaging.kernels import kernel_source, scan_kernels
+def test_wave_kernels_take_every_design_the_engine_does(paper):
+    """A colour scanner's wave kernels are its grey light's (its three LEDs lit together:
+    tests/test_grey_light.py), not refused; circular holes are not refused either (asked
+    for, they take the 2-D path's maps: tests/test_wave_circle_maps.py)."""
+    from opticalstamp.imaging.kernels import kernel_source
 
     rgb = paper.electronics.model_copy(update={"illumination": "rgb"})
-    with pytest.raises(ValueError, match="rgb"):
-        scan_kernels(paper.model_copy(update={"electronics": rgb}), [0.0], source="wave")
+    assert kernel_source(paper.model_copy(update={"electronics": rgb}), "wave") == "wave"
     assert kernel_source(with_unstated(paper, hole_shape="circle"), "wave") == "wave"
 
 

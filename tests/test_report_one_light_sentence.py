@@ -48,3 +48,10 @@ def test_the_sentence_names_each_analysis_by_its_engine():
         dict.fromkeys(NAMES, "ray"), {"engine": "ray", "reason": "ray optics: rgb <lit>"}
     )
     assert rgb.endswith("and so are the spots, scans and restoration here (rgb &lt;lit&gt;).")
+    lit = {"engine": "ray", "reason": "ray optics: rgb"}
+    colour = one_light_sentence(dict.fromkeys(NAMES, "wave"), lit)
+    assert colour == (
+        "Ghosts and PSFs are ray optics; the spots are by wave optics, channel by channel "
+        "(the widest shown); the scans and restoration are by wave optics, grey scans under "
+        "the three LEDs lit together at the luminance weights."
+    )

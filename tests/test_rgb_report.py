@@ -113,10 +113,11 @@ def test_the_light_section_has_each_channel_and_the_weakest_as_headline(report):
 
 
 def test_the_one_light_analyses_say_their_optics(report):
-    """The scans and restoration take one light: ray optics for a colour scanner, saying
-    so; the spots take the channels one by one by wave optics (each LED's light in the
-    band, the widest channel the headline); the ray-vs-wave section compares the engines
-    at the red channel."""
+    """The scans and restoration are grey scans by wave optics under the three LEDs lit
+    together (grey_light), the spots take the channels one by one by wave optics (each
+    LED's light in the band, the widest channel the headline); the background studies
+    take one light: ray optics for a colour scanner, saying so (optics_one_light); the
+    ray-vs-wave section compares the engines at the red channel."""
     _, out, data = report
     one = data["optics_one_light"]
     assert one["engine"] == "ray" and "rgb" in one["reason"]
@@ -126,7 +127,7 @@ def test_the_one_light_analyses_say_their_optics(report):
     assert data["summary"]["optics"].startswith("(the red channel")
     # each section recorded its optics, and the verdict box says so, with the reason
     assert data["summary"]["one_light_engines"] == {
-        "spots": "wave", "scans": "ray", "restoration": "ray"
+        "spots": "wave", "scans": "wave", "restoration": "wave"
     }  # fmt: skip
     sp = data["spots"]
     chans, head = sp["meta"]["channels"], sp["meta"]["headline"]
@@ -136,7 +137,7 @@ def test_the_one_light_analyses_say_their_optics(report):
     assert sp["center_cell_fraction"] == chans[head["channel"]]["center_cell_fraction"]
     assert len(set(share.values())) == 3  # each channel its own light
     page = (out / "index.html").read_text()
-    assert "and so are the scans and restoration here" in page
+    assert "the scans and restoration are by wave optics, grey scans under the three" in page
     assert "the spots are by wave optics, channel by channel" in page
     assert f"figure are the {head['channel']} channel's, the widest" in page
 

@@ -49,7 +49,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from ..design import Design
-from ..design.electronics import ILLUMINATIONS
+from ..design.electronics import ILLUMINATIONS, LUMA
 from ..design.materials import WAVELENGTH_RANGE_UM
 from ..validate import InputError
 
@@ -57,6 +57,7 @@ __all__ = [
     "LEDS",
     "Spectrum",
     "channels",
+    "grey_light",
     "led_power",
     "mono",
     "silicon_qe",
@@ -253,6 +254,27 @@ def channels(
     if name == "mono":
         return {"mono": mono(design.wavelength_um)}
     return {ch: spectrum_of(ch, n) for ch in CHANNELS[name]}
+
+
+def grey_light(design: Design, per_led: int | None = None) -> Spectrum:
+    """The light of ``design``'s grey scans: its one channel (as :func:`channels` gives
+    it), or for a colour scanner ("rgb") its three LEDs lit together at the luminance
+    weights ``LUMA`` of their channels' spectra (each normalised, at ``per_led``
+    wavelengths, default each LED's :data:`DEFAULT_POINTS`), so that a grey scan's responsivity is
+    sum_c LUMA_c R_c: the grey value that a colour scan of a grey document would give
+    (its channels at equal white, mixed as :func:`~opticalstamp.imaging.scan.simulate_scan`
+    mixes a colour document), in one exposure."""
+    if design.electronics.illumination != "rgb":
+        return one_channel(design)
+    ch = channels(design, None, per_led)
+    if set(ch) != {"red", "green", "blue"}:
+        raise InputError(f"spectrum: no grey light for the channels {', '.join(ch)}")
+    lam, w = [], []
+    for name, luma in zip(("red", "green", "blue"), LUMA, strict=True):
+        lam.extend(ch[name].wavelengths_um)
+        w.extend(luma * v for v in ch[name].weights)
+    total = sum(w)  # 1 to rounding: LUMA and each channel's weights sum to 1
+    return Spectrum("rgb-grey", tuple(lam), tuple(v / total for v in w))
 
 
 def one_channel(design: Design, spectrum: str | Spectrum | None = None) -> Spectrum:

@@ -50,6 +50,11 @@ Whole = Annotated[int, BeforeValidator(_whole)]
 #: design's ``wavelength_um``; the others are typical LED spectra times a silicon QE curve.
 ILLUMINATIONS = ("mono", "white", "red", "green", "blue", "rgb")
 Illumination = Literal["mono", "white", "red", "green", "blue", "rgb"]
+#: How a grey value is made of linear red, green and blue (Rec. 709 luminance weights):
+#: colour images read as grey, grey scans of a colour document, and the light of a colour
+#: scanner's grey scan (its three LEDs lit together in these proportions,
+#: :func:`~opticalstamp.analysis.spectrum.grey_light`).
+LUMA = (0.2126, 0.7152, 0.0722)
 
 
 class Electronics(BaseModel):

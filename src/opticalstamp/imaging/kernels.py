@@ -177,6 +177,12 @@ WAVE_BIN_UM = 4.0
 #: +0.006 and a fit of scans made so put the layers' y shifts 15 errors off (docs/fit.md),
 #: rank 2 (1e-4) +0.119, +0.187, +0.254, rank 3 (this) +0.106, +0.166, +0.227
 WAVE_RANK_TOL = 3e-5
+#: wavelengths per LED of a colour scanner's grey light in the wave kernels
+#: (:func:`~opticalstamp.analysis.spectrum.grey_light`): its LEDs' bands are 18-32 nm
+#: wide; at 3 per LED (the RMTF's channels) the prototype's LSFs at 0.5-3.5 mm move by
+#: 3e-4 of the light in L1, its light by 1.5e-5 and the centre cell's share by 1e-5, at
+#: 2.5 times the cost (the rgb quick report's scans 27 s)
+GREY_POINTS = 1
 
 
 def wave_near_kernels(
@@ -185,21 +191,30 @@ def wave_near_kernels(
     """One row's near-field kernels by wave optics at each height, the stack traversed
     once: the wave engine's map of the light in its band (own path, its diffraction,
     near crosstalk; :func:`~opticalstamp.analysis.wavespectral.wave_response_spectral`,
-    the design's light) on ``WAVE_BIN_UM`` bins, SVD-separated (partial SVD, terms down
-    to ``WAVE_RANK_TOL`` of the first).
+    under the light of the design's grey scans,
+    :func:`~opticalstamp.analysis.spectrum.grey_light`: a colour scanner's three LEDs lit
+    together at the luminance weights) on ``WAVE_BIN_UM`` bins, SVD-separated (partial
+    SVD, terms down to ``WAVE_RANK_TOL`` of the first).
     :func:`stamp_kernel_sets` adds the traced ghost map of the light beyond the band
     (traced with ``outside_band``): the join of :mod:`~opticalstamp.analysis.responsivity`.
     ``fresnel``: the wave engine's Fresnel losses (:mod:`~opticalstamp.analysis.wavefilter`),
     as the traced part has them. Holes that are not rectangles take the 2-D path's maps
     (minutes a height on a CPU; ``progress``: its bar and expected cost)."""
     from ..analysis.responsivity import resolve_optics
+    from ..analysis.spectrum import grey_light
     from ..analysis.wave import one_blas_thread
     from ..analysis.wavespectral import wave_response_spectral
 
-    opt = resolve_optics(design, "wave")
+    opt = resolve_optics(design, "wave", channels=True)  # a colour scanner's: mixed
     zs = np.asarray(z_mm, dtype=np.float64)
     r = wave_response_spectral(
-        design, zs, pixel=(row, 0), sampling=opt.sampling, fresnel=fresnel, progress=progress
+        design,
+        zs,
+        spectrum=grey_light(design, GREY_POINTS),
+        pixel=(row, 0),
+        sampling=opt.sampling,
+        fresnel=fresnel,
+        progress=progress,
     )
     out = []
     with one_blas_thread():  # thin products: BLAS's threads only spin (the engine's rule)
@@ -308,10 +323,11 @@ def stamp_kernel_sets(
     band, twins, wave_rows = None, [], {}
     if source == "wave":  # the tracer keeps the light beyond the wave engine's band
         from ..analysis.responsivity import resolve_optics
+        from ..analysis.spectrum import grey_light
         from ..analysis.wavespectral import mirror_rows
 
-        opt = resolve_optics(design, "wave")
-        band, twins = opt.band, mirror_rows(design, opt.sampling)
+        opt = resolve_optics(design, "wave", channels=True)  # the grey light's band
+        band, twins = opt.band, mirror_rows(design, opt.sampling, grey_light(design, GREY_POINTS))
     out = [[] for _ in z_sets]
     for row in range(design.sensor.rows):
         maps = [None] * len(z_sets)

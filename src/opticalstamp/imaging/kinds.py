@@ -69,7 +69,8 @@ class Stamp:
         if source == "wave":
             from ..analysis.responsivity import wave_unavailable
 
-            why = wave_unavailable(design, maps=False)  # asked for: circles' maps too
+            # asked for: circles' maps too; a colour scanner's by its grey light
+            why = wave_unavailable(design, maps=False, channels=True)
             if why is not None:
                 raise ValueError(f"wave kernels: {why}")
         if source == "paraxial" and not rect:

@@ -32,6 +32,7 @@ from scipy import ndimage, signal
 
 from ..defaults import RAYS_MAP
 from ..design import AnyDesign, Design
+from ..design.electronics import LUMA
 from ..raytrace.launch import progress_bar
 from ..raytrace.pixel import PixelTracer
 from ..units import dpi_of_pitch, pitch_of_dpi
@@ -331,10 +332,17 @@ def simulate_scan(
         raise ValueError(f"document must be [y, x] or [y, x, 3] (got shape {doc.shape})")
     if not 10 <= doc_dpi <= 20_000:
         raise ValueError(f"document dpi must lie in [10, 20000] (got {doc_dpi})")
+    light = getattr(getattr(design, "electronics", None), "illumination", "mono")
+    if color and st.kernel == "wave" and light == "rgb":
+        raise ValueError(
+            "--color with --kernel wave: a colour scanner's channels through the wave engine "
+            "need a kernel set per LED, which scans do not build yet; its grey scan (the three "
+            "LEDs lit together, no --color) takes wave kernels, a colour scan --kernel trace"
+        )
     if color and doc.shape[2] == 1:
         doc = np.repeat(doc, 3, axis=2)
     if not color and doc.shape[2] == 3:
-        doc = (doc @ np.array([0.2126, 0.7152, 0.0722], np.float32))[..., None]
+        doc = (doc @ np.array(LUMA, np.float32))[..., None]
     check_heights(None if height_map is not None else z_mm, height_map)
     p = pitch_of_dpi(doc_dpi)
     h_um, w_um = doc.shape[0] * p, doc.shape[1] * p

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..design.electronics import LUMA
 from ..validate import InputError
 from .atomic import replace_folder, verify_set, write_atomic, write_set  # noqa: F401
 
@@ -318,7 +319,7 @@ def read_image(
     else:
         arr = arr.astype(np.float64)
     if arr.ndim == 3:  # grey (+ alpha): the first channel; colour: luminance
-        arr = arr[..., 0] if arr.shape[2] < 3 else arr[..., :3] @ [0.2126, 0.7152, 0.0722]
+        arr = arr[..., 0] if arr.shape[2] < 3 else arr[..., :3] @ list(LUMA)
     if arr.ndim != 2 or min(arr.shape) < min_px:
         raise ImageError(f"image {path}: expected a 2-D image (got shape {arr.shape})")
     if linear:

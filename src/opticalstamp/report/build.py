@@ -207,12 +207,12 @@ def build_report(
             tracer=tracer,
             rmtf_section=rm,
             chart_dpi=dpi,
-            optics=one,
+            optics=opt,  # a colour scanner's grey scans: its LEDs lit together (grey_light)
             also_z_mm=restoration_heights(work),  # one build of the kernels for both
         )
         clock.lap("scans")
         restoration = run(
-            restoration_section, design, work, **traced, tracer=tracer, dof_dpi=dpi, optics=one,
+            restoration_section, design, work, **traced, tracer=tracer, dof_dpi=dpi, optics=opt,
             kernels=getattr(measured(scans), "kernels", None),
         )  # fmt: skip
         clock.lap("restoration")

@@ -142,12 +142,20 @@ def scan_section(
         if not own_lsf.ghosts and not own_lsf.fresnel:  # as the rmtf() call below
             periods = [period_of_dpi(d) for d in ref_dpi]
             sub = folded_subset(own_lsf, (0.5, 3.5), periods)
-    if wave:  # the wave engine's light in its band (own path and near crosstalk)
+    if wave:  # the wave engine's light in its band (own path and near crosstalk), under
+        # the light of the kernels (a colour scanner's grey light: its LEDs lit together)
         from ..analysis.responsivity import folded_lsf
+        from ..analysis.spectrum import grey_light
+        from ..analysis.wavecompare import WaveFolds
+        from ..imaging.kernels import GREY_POINTS
 
+        folds = WaveFolds(
+            design, 3.5, sampling=optics.sampling, spectrum=grey_light(design, GREY_POINTS),
+            fresnel=optics.fresnel,
+        )  # fmt: skip
         near = folded_lsf(
             design, z_mm=(0.5, 3.5), periods_um=[period_of_dpi(chart_dpi)], optics=optics,
-            ghosts=False,
+            ghosts=False, wave=folds,
         )  # fmt: skip
         ref = rmtf_from_lsf(near, design, dpi=ref_dpi, optics=optics, **ref_args)
     elif sub is not None:

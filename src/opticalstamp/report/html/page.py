@@ -212,7 +212,9 @@ def one_light_sentence(engines: dict | None, one: dict | None = None) -> str:
     are ray optics; the spots, scans and restoration by the engine each ran by
     (``engines``, the summary's ``one_light_engines``; None: a report.json written before
     they were recorded, all ray optics then); ``one``: a colour scanner's optics of one
-    light (ray optics, and why)."""
+    light (ray optics, and why): its spots by wave optics are each channel's, its scans
+    and restoration by wave optics are grey scans under its three LEDs lit together
+    (:func:`~opticalstamp.analysis.spectrum.grey_light`)."""
     engines = engines if engines is not None else dict.fromkeys(_ONE_LIGHT, "ray")
     ray = [_ONE_LIGHT[k] for k, e in engines.items() if e != "wave"]
     wave = [_ONE_LIGHT[k] for k, e in engines.items() if e == "wave"]
@@ -221,8 +223,14 @@ def one_light_sentence(engines: dict | None, one: dict | None = None) -> str:
         text = "Ghosts and PSFs are ray optics"
         if ray:
             text += f", and so are the {_and(ray)} here ({why})"
-        if wave:
-            text += f"; the {_and(wave)} are by wave optics, channel by channel (the widest shown)"
+        if "spots" in wave:
+            text += "; the spots are by wave optics, channel by channel (the widest shown)"
+        grey = [n for n in wave if n != "spots"]
+        if grey:
+            text += (
+                f"; the {_and(grey)} are by wave optics, grey scans under the three LEDs lit "
+                "together at the luminance weights"
+            )
         return text + "."
     text = "G" + f"{_and(['ghosts'] + ray + ['PSFs'])} are ray optics"[1:]
     if wave:
