@@ -319,6 +319,9 @@ def simulate_scan(
     doc_dpi : the document's sampling (dpi)
     z_mm : constant float height (mm above the reference plane), or None with height_map
     height_map : [y, x] heights (mm) covering the page (any resolution, page aspect)
+    color : the three LEDs lit in turn (sequential R, G, B lines); with wave kernels a
+        colour scanner's (``illumination = "rgb"``) channels each take their LED's own
+        kernels (:func:`led_designs`), any other design one kernel set for all three
     kernels : kernels built beforehand for this scan's levels and settings
         (:func:`prepare_kernels`); None builds them here. Either way the result is the
         same; a cache that does not fit raises ValueError.
@@ -332,13 +335,6 @@ def simulate_scan(
         raise ValueError(f"document must be [y, x] or [y, x, 3] (got shape {doc.shape})")
     if not 10 <= doc_dpi <= 20_000:
         raise ValueError(f"document dpi must lie in [10, 20000] (got {doc_dpi})")
-    light = getattr(getattr(design, "electronics", None), "illumination", "mono")
-    if color and st.kernel == "wave" and light == "rgb":
-        raise ValueError(
-            "--color with --kernel wave: a colour scanner's channels through the wave engine "
-            "need a kernel set per LED, which scans do not build yet; its grey scan (the three "
-            "LEDs lit together, no --color) takes wave kernels, a colour scan --kernel trace"
-        )
     if color and doc.shape[2] == 1:
         doc = np.repeat(doc, 3, axis=2)
     if not color and doc.shape[2] == 3:
@@ -361,10 +357,14 @@ def simulate_scan(
     )
     y_line = np.cumsum(step) - step / 2
     levels = scan_levels(z_mm, height_map, st.z_step_mm)
-    kern = kernels_for(
-        design, levels, st, seed=seed, ghosts=ghosts, kernels=kernels, progress=progress
-    )
-    kern = [kern[g.kernel] for g in groups]
+    # a colour scanner's colour scan through wave kernels: each LED's own (led_designs)
+    leds = led_designs(design) if color and st.kernel == "wave" else None
+    by_ch = [
+        kernels_for(d, levels, st, seed=seed, ghosts=ghosts, kernels=kernels, progress=progress)
+        for d in (leds or [design])
+    ]
+    by_ch = [[k[g.kernel] for g in groups] for k in by_ch]
+    kern = by_ch[0]
     n_rows = len(groups)
     n_ch = doc.shape[2]
     duty = st.sensor.exposure_duty
@@ -388,7 +388,7 @@ def simulate_scan(
             )
         sig = np.zeros((n_l, x_pix.size))
         for il, zl in enumerate(levels):
-            kr = kern[r][il]
+            kr = by_ch[ch if leds else 0][r][il]
             if z_loc is None:
                 sel, wts = np.arange(n_l), None
             else:
@@ -405,7 +405,8 @@ def simulate_scan(
                 s += _ghost_signal(blocks[ch], kr, centers[sel], x_pix, st.surround)
             sig[sel] += s if wts is None else s * wts[sel]
         gain = e_per * _illumination(st, x_pix) * (st.sensor.channel_response[ch] if color else 1.0)
-        s_white = st.white_reference * (kern[r][0].own_etendue + kern[r][0].ghost_etendue)
+        k0 = by_ch[ch if leds else 0][r][0]
+        s_white = st.white_reference * (k0.own_etendue + k0.ghost_etendue)
         by_row[r][ch] = (sig * gain, s_white * gain)
         if ch == 0:
             pix_x.append(x_pix)
@@ -465,6 +466,21 @@ def simulate_scan(
             ),
         },
     )
+
+
+def led_designs(design: AnyDesign) -> list[Design] | None:
+    """A colour scanner's design as each LED lights it, red, green, blue (the order of a
+    colour document's channels), for its colour scans through wave kernels: the design
+    with that LED as its illumination, at the LED's mean wavelength where its media
+    disperse (:func:`~opticalstamp.analysis.colour.channel_designs`: the light beyond the
+    wave band traced there); None for any other design (one light for every channel)."""
+    if getattr(getattr(design, "electronics", None), "illumination", None) != "rgb":
+        return None
+    from ..analysis.colour import channel_designs
+    from ..design.variants import replace as vary
+
+    per = channel_designs(design)
+    return [vary(per[c], {"electronics.illumination": c}) for c in ("red", "green", "blue")]
 
 
 def merge_rows(
