@@ -216,6 +216,21 @@ class _Slice:
         return self.cum[i] + (u - k[i]) * (rk[i] + _profile_at(self.ax, self.lev, u)) / 2
 
 
+class OwnPath:
+    """The paraxial own path of one design, both axes read from it once: its profile's
+    :class:`_Slice` (support, exact cumulative) at any Z, as :func:`paraxial_support` and
+    :func:`paraxial_cumulative` give them (the same arithmetic), for a caller that asks
+    for many heights or both of a slice's figures (the fit's spreads)."""
+
+    def __init__(self, design: Design) -> None:
+        self.axes = (_Axis.of(design, 0), _Axis.of(design, 1))
+
+    def at(self, z_mm: float, axis: int) -> _Slice:
+        """The profile of ``axis`` at ``z_mm``: ``.support`` (lo, hi) and
+        ``.cumulative(u)``."""
+        return _Slice(self.axes[axis], z_mm)
+
+
 def paraxial_etendue_1d(design: Design, axis: int = 0) -> float:
     """G along one axis (um): the integral of :func:`paraxial_profile`, Z-independent."""
     return float(paraxial_cumulative(design, 0.0, np.array([np.inf]), axis)[0])

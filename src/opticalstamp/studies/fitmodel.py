@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from ..analysis.paraxial import paraxial_cumulative, paraxial_support
+from ..analysis.paraxial import OwnPath
 from ..design import Design
 from ..design.model import MIN_LENGTH_UM
 from ..design.variants import replace
@@ -142,25 +142,29 @@ class Spread:
         return mid, w / w.sum()
 
 
-def spread(design: Design, z_mm: float, smear_um: float, reach_um: float = 0.0) -> Spread:
+def spread(
+    design: Design, z_mm: float, smear_um: float, reach_um: float = 0.0, own: OwnPath | None = None
+) -> Spread:
     """The own path's spread of ``design`` at ``z_mm`` above its reference plane, tabulated
     on the fixed grid k ``TABLE_UM`` out to its support or ``reach_um``, whichever is
-    wider."""
+    wider. ``own``: ``design``'s :class:`~opticalstamp.analysis.paraxial.OwnPath`, read
+    once for several heights (the same values)."""
+    own = OwnPath(design) if own is None else own
+    sx, sy = own.at(z_mm, 0), own.at(z_mm, 1)
     half = 0.0
-    for axis in (0, 1):
-        lo, hi = paraxial_support(design, z_mm, axis)
+    for lo, hi in (sx.support, sy.support):
         half = max(half, abs(lo), abs(hi))
     half = half + smear_um / 2 + 2 * TABLE_UM
     m = int(np.ceil(half / TABLE_UM))  # the support's table ...
     n = max(m, int(np.ceil(reach_um / TABLE_UM)))  # ... and the one asked for
     u = np.arange(-m, m + 1) * TABLE_UM  # on a fixed grid: no jump as the support moves
-    cx = paraxial_cumulative(design, z_mm, u, 0)
+    cx = sx.cumulative(u)
     subs = ((np.arange(SMEAR_SUBS) + 0.5) / SMEAR_SUBS - 0.5) * smear_um
     # P(Y - sub <= v) = mean over sub of C_y(v + sub); C_y is exact on the table's grid
     # and linear between its points (0.25 um apart)
     pad = int(np.ceil(smear_um / 2 / TABLE_UM)) + 1
     uy = np.arange(-m - pad, m + pad + 1) * TABLE_UM
-    cy_grid = paraxial_cumulative(design, z_mm, uy, 1)
+    cy_grid = sy.cumulative(uy)
     cy = np.mean([np.interp(u + s, uy, cy_grid) for s in subs], axis=0)
     gx, gy = cx[-1], cy[-1]
     if not (gx > 0 and gy > 0):
@@ -172,7 +176,8 @@ def spread(design: Design, z_mm: float, smear_um: float, reach_um: float = 0.0) 
 def spreads(design: Design, zs, smear_um: float, phys=None) -> dict[float, Spread]:
     """The fast model (:func:`spread`, the paraxial own path) at each height: {Z: spread}
     (``phys``, the physical values that made ``design``, is not needed here)."""
-    return {float(z): spread(design, float(z), smear_um) for z in zs}
+    own = OwnPath(design)
+    return {float(z): spread(design, float(z), smear_um, own=own) for z in zs}
 
 
 def smear_of(design: Design) -> float:

@@ -35,9 +35,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..analysis.paraxial import OwnPath
 from ..analysis.wavebase import WaveSampling, grid_points
 from ..design import Design
-from .fitmodel import SMEAR_SUBS, TABLE_UM, Param, Spread, spread, with_params
+from .fitmodel import SMEAR_SUBS, TABLE_UM, Param, Spread, spread, spreads, with_params
 
 #: Light left beyond a wave spread's table on each side of each marginal: the table stops
 #: where the cumulative reaches it, and is renormalised to 0..1 on its grid.
@@ -171,7 +172,7 @@ class WaveModel:
         for v in points:
             d = with_params(design, params, v)
             waves.append(self(d, zs, smear_um) if wave_at is None else wave_at(v))
-            fasts.append({z: spread(d, z, smear_um) for z in zs})
+            fasts.append(spreads(d, zs, smear_um))
         table = {}
         for z in zs:
             n = max((x[z].u.size - 1) // 2 for x in waves + fasts)
@@ -203,10 +204,11 @@ class Corrected:
     def __call__(self, design: Design, zs, smear_um: float, phys=None) -> dict[float, Spread]:
         dv = np.zeros(len(self.free)) if phys is None else (phys - self.at)[list(self.free)]
         out = {}
+        own = OwnPath(design)
         for z in zs:
             (dcx, dcy), slopes = self.table[float(z)]
             n = (dcx.size - 1) // 2
-            f = spread(design, float(z), smear_um, reach_um=n * TABLE_UM)
+            f = spread(design, float(z), smear_um, reach_um=n * TABLE_UM, own=own)
             dx, dy = dcx + dv @ slopes[0], dcy + dv @ slopes[1]
             o = (f.u.size - 1) // 2 - n  # the fast grid may reach further: 0 there
             cx, cy = f.cx.copy(), f.cy.copy()
