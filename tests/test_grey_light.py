@@ -46,18 +46,28 @@ def test_grey_light_is_the_channels_at_the_luminance_weights(rgb):
 
 def test_wave_kernels_of_a_colour_scanner_hold_its_grey_light(rgb):
     """The wave kernels take the grey light: the engine under it gives the luminance-
-    weighted sum of the channels' light (1e-9), and the kernel (its map binned and
-    SVD-separated, one wavelength per LED: GREY_POINTS) holds that light to 2e-4; not
-    the green channel's, which differs by 0.3 %."""
+    weighted sum of the channels' responses (each channel run on its own: light 1e-9,
+    x LSF in L1 to 1e-4 against the channels' LSFs carried to the grey grid by linear
+    interpolation), and the kernel (its map binned and SVD-separated, one wavelength per
+    LED: GREY_POINTS) holds that light to 2e-4; not the green channel's, 0.3 % away."""
     z = 1.0
     smp = resolve_optics(rgb, "wave", channels=True).sampling
-    lights = {
-        n: float(wave_response_spectral(rgb, [z], spectrum=s, sampling=smp).etendue_um2sr[0])
+    each = {
+        n: wave_response_spectral(rgb, [z], spectrum=s, sampling=smp)
         for n, s in channels(rgb, None, GREY_POINTS).items()
     }
+    lights = {n: float(r.etendue_um2sr[0]) for n, r in each.items()}
     mix = sum(luma * lights[n] for n, luma in zip(RGB, LUMA, strict=True))
     grey = wave_response_spectral(rgb, [z], spectrum=grey_light(rgb, GREY_POINTS), sampling=smp)
     assert float(grey.etendue_um2sr[0]) == pytest.approx(mix, rel=1e-9)
+    lsf = sum(
+        luma * np.interp(grey.x_um, each[n].x_um, each[n].lsf_x[0], left=0, right=0)
+        for n, luma in zip(RGB, LUMA, strict=True)
+    )
+    l1 = np.abs(lsf - grey.lsf_x[0]).sum() / grey.lsf_x[0].sum()
+    assert l1 < 1e-4
+    green = np.interp(grey.x_um, each["green"].x_um, each["green"].lsf_x[0], left=0, right=0)
+    assert np.abs(green - grey.lsf_x[0]).sum() / grey.lsf_x[0].sum() > 10 * l1
     (k,) = wave_near_kernels(rgb, [z], 0)
     assert k.own_etendue == pytest.approx(mix, rel=2e-4)
     assert abs(lights["green"] / mix - 1) > 1e-3  # the test tells the lights apart

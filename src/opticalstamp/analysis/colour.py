@@ -326,11 +326,12 @@ def light_channel_lines(optics: dict) -> list[str]:
 
 
 def one_light_optics(design: Design, optics: Optics) -> Optics:
-    """The optics of the analyses that take one light (the spots, the scan kernels and
-    what builds on them), where ``optics`` was resolved for a colour scanner's channels
+    """The optics of the analyses that take one light (the report's background search
+    and tolerance study), where ``optics`` was resolved for a colour scanner's channels
     taken one by one (``resolve_optics(..., channels=True)``: the RMTF, the depth of
-    field and the light): ``optics`` itself, or ray optics, saying why, where the wave
-    engine would need a single channel (``electronics.illumination`` "rgb")."""
+    field, the light, the spots; the scan kernels mix them into the grey light,
+    :func:`~.spectrum.grey_light`): ``optics`` itself, or ray optics, saying why, where
+    the wave engine would need a single channel (``electronics.illumination`` "rgb")."""
     if optics.engine != "wave":
         return optics
     why = wave_unavailable(design, maps=False)

@@ -93,12 +93,14 @@ def wave_unavailable(
 ) -> str | None:
     """Why the wave engine cannot give this design's responsivity yet, or None: an
     illumination of several channels where the caller does not take them one by one
-    (``channels`` False: the spots, the scan kernels and what builds on them; the RMTF,
-    the depth of field and the light do, :func:`~.colour.folded_lsf_channels`,
-    :func:`pixel_light_channels`), or (with ``maps``: what ``auto`` asks) holes that are
-    not rectangular where the 2-D path's maps would run on the CPU (:data:`CIRCLE_MAPS`:
-    minutes a height; ``--optics wave`` computes them, and ``auto`` follows the validity
-    rule where the run's device is a GPU with CuPy, :func:`~.wave2dmaps.maps_on_gpu`).
+    (``channels`` False: the background search and tolerance study; the RMTF, the depth
+    of field and the light take them one by one, :func:`~.colour.folded_lsf_channels`,
+    :func:`pixel_light_channels`, the spots too, and the scan kernels mix them into the
+    grey light, :func:`~.spectrum.grey_light`), or (with ``maps``: what ``auto`` asks)
+    holes that are not rectangular where the 2-D path's maps would run on the CPU
+    (:data:`CIRCLE_MAPS`: minutes a height; ``--optics wave`` computes them, and ``auto``
+    follows the validity rule where the run's device is a GPU with CuPy,
+    :func:`~.wave2dmaps.maps_on_gpu`).
     (The pixel's acceptance cone and Fresnel losses are filters on its angular
     spectrum, :mod:`.wavefilter`.)"""
     if maps and not rectangular(design):

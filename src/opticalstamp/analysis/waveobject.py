@@ -208,15 +208,22 @@ def lsf_x_at(side: ObjectSide, zs: np.ndarray) -> tuple[np.ndarray, float, int]:
 def x_modes(side: ObjectSide) -> tuple[np.ndarray, float]:
     """The coherent modes of LSF_x's mutual intensity as in-band spectra (q, nb), all but
     ``mode_tol`` of the power, and the light (um^2 sr): the Z-independent part of the
-    x-only path (:func:`lsf_x_from` propagates them)."""
-    return axis_modes(side, 0)
+    x-only path (:func:`lsf_x_from` propagates them), by the pivoted Cholesky
+    (:func:`_modes`), as the RMTF path has taken them since it was written."""
+    gy = side.gram(1)
+    light = float(np.sum(side.gram(0) * gy).real)
+    p, v = _rotation(gy)
+    w = np.tensordot(v, side.spectra[0], axes=([0], [0]))  # (J, m, nb)
+    a = (w * np.sqrt(p)[:, None, None]).reshape(-1, w.shape[-1])  # (J m, nb)
+    return _modes(a, side.sampling.mode_tol), light
 
 
 #: What :func:`marginals_at` leaves out of each axis's mutual intensity (a fraction of the
-#: light): a model of scans is differentiated by forward differences of 1e-3 assembly
-#: scales (the fit), and a mode that comes and goes as the design moves shifts the model
-#: by at most this (the prototype: 101 and 42 modes of 248 and 176 fields; at 1e-10, 69
-#: and 32, a fit's path along its valley changed and it stopped at its cap).
+#: light, to eigh's rounding, about the rows' count x eps): a model of scans is
+#: differentiated by forward differences of 1e-3 assembly scales (the fit), and a mode that
+#: comes and goes as the design moves shifts the model by at most this (the prototype: 101
+#: and 42 modes of 248 and 176 fields; at 1e-10 69 and 32, and the benchmark's fit took
+#: yet another path along its valley: docs/fit.md).
 MARGINAL_TOL = 1e-14
 
 
@@ -327,8 +334,10 @@ def _eig_modes(a: np.ndarray, tol: float) -> np.ndarray:
     eigen-decomposition of the rows' Gram a a^H = U diag(s) U^H, modes U_k^H a (power
     s_k). What is left out is a positive semi-definite part, so a line-spread function
     from the modes lies below the exact one everywhere, by ``tol`` of the light in L1 at
-    most (the pivoted Cholesky of :func:`_modes` projects the rows instead, whose
-    cross terms with the left-out part move the LSF by ~sqrt(``tol``) pointwise)."""
+    most, plus the eigenvalues' rounding (about the rows' count x eps of the trace; the
+    pivoted Cholesky of :func:`_modes` projects the rows instead, whose cross terms with
+    the left-out part move the LSF by ~sqrt(``tol``) pointwise: the RMTF path's, at its
+    ``mode_tol``)."""
     s, u = np.linalg.eigh(_gram_rows(a))
     s = np.clip(s, 0.0, None)
     left = np.cumsum(s)  # ascending: left[k] = the sum of the k + 1 smallest

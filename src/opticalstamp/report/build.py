@@ -133,8 +133,10 @@ def build_report(
         :func:`~opticalstamp.analysis.responsivity.resolve_optics`; a colour scanner,
         ``electronics.illumination`` "rgb": one RMTF, depth of field and light per
         channel, the headline the worst channel's depth of field and the weakest
-        channel's light, :mod:`~opticalstamp.analysis.colour`); the spots, scans and
-        restoration take it where they can (not a colour scanner's channels: ray optics
+        channel's light, :mod:`~opticalstamp.analysis.colour`); the spots take it (a
+        colour scanner's channels one by one), the scans and restoration too (a colour
+        scanner's grey light, its LEDs lit together), the background search and
+        tolerance study where they can (not a colour scanner's channels: ray optics
         there, report.json's ``optics_one_light`` says so); the ghosts and PSFs are ray
         optics; the "ray vs wave" section shows both
     fit : a fit's JSON (:func:`~opticalstamp.report.fitsection.load_fit`): the section

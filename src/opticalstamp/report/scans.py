@@ -155,7 +155,7 @@ def scan_section(
         )  # fmt: skip
         near = folded_lsf(
             design, z_mm=(0.5, 3.5), periods_um=[period_of_dpi(chart_dpi)], optics=optics,
-            ghosts=False, wave=folds,
+            ghosts=False, fresnel=optics.fresnel, wave=folds,
         )  # fmt: skip
         ref = rmtf_from_lsf(near, design, dpi=ref_dpi, optics=optics, **ref_args)
     elif sub is not None:

@@ -318,9 +318,8 @@ def text_scans(
     has its design's electronics and is exposed so that white fills WHITE_FILL of the full
     well (a rod-lens array collects about 100 times a stamp's light: at one exposure one
     of them would clip or starve). ``engines``: per design, "wave" to scan through the
-    wave engine's kernels (the engine of its row) where they take the design's light
-    (not a colour scanner's three channels: its scans stay ray, as the report's), else
-    the default kernels."""
+    wave engine's kernels (the engine of its row; a colour scanner's under its grey
+    light, its three LEDs lit together, as the report's), else the default kernels."""
     from ..analysis.responsivity import wave_unavailable
     from ..imaging.charts import text_chart
     from ..imaging.scan import ScanSettings, prepare_kernels, simulate_scan
@@ -330,7 +329,7 @@ def text_scans(
     doc = doc[: doc.shape[0] // 2, : doc.shape[1] // 2]  # two half lines of 8-pt text
     panels = []
     for d, engine in zip(designs, engines or [None] * len(designs), strict=True):
-        wave = engine == "wave" and wave_unavailable(d, maps=False) is None  # not rgb's
+        wave = engine == "wave" and wave_unavailable(d, maps=False, channels=True) is None
         base = ScanSettings(fresnel=fresnel, kernel="wave" if wave else "auto")
         kern = prepare_kernels(d, z_mm=heights_mm, settings=base, seed=seed)
         groups = kern.lookup(
