@@ -267,10 +267,8 @@ def grey_light(design: Design, per_led: int | None = None) -> Spectrum:
     if design.electronics.illumination != "rgb":
         return one_channel(design)
     ch = channels(design, None, per_led)
-    if set(ch) != {"red", "green", "blue"}:
-        raise InputError(f"spectrum: no grey light for the channels {', '.join(ch)}")
     lam, w = [], []
-    for name, luma in zip(("red", "green", "blue"), LUMA, strict=True):
+    for name, luma in zip(CHANNELS["rgb"], LUMA, strict=True):  # red, green, blue
         lam.extend(ch[name].wavelengths_um)
         w.extend(luma * v for v in ch[name].weights)
     total = sum(w)  # 1 to rounding: LUMA and each channel's weights sum to 1

@@ -284,10 +284,7 @@ def wave_marginals(
     smp = wave_sampling(design) if sampling is None else sampling
     zs = _heights(z_mm)
     with one_blas_thread():
-        terms, axes, _, filters = _stack(design, pixel, smp, fresnel, budget=False)
-        terms = _leave(terms, axes, smp, filters)
-        keys = list(terms)
-        side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, zs.max())
+        side, _ = _leaving(design, pixel, smp, fresnel, zs.max())
         lsf_x, lsf_y, light = marginals_at(side, zs)
     return side.grids[0], lsf_x, side.grids[1], lsf_y, light
 
@@ -361,12 +358,18 @@ def lsf_source(
         return lsf_source_2d(design, z_max_mm, pixel=pixel, sampling=sampling, fresnel=fresnel)
     smp = wave_sampling(design) if sampling is None else sampling
     with one_blas_thread():
-        terms, axes, _, filters = _stack(design, pixel, smp, fresnel, budget=False)
-        terms = _leave(terms, axes, smp, filters)
-        keys = list(terms)
-        side = object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, z_max_mm)
+        side, keys = _leaving(design, pixel, smp, fresnel, z_max_mm)
         modes, light = x_modes(side)
     return LSFSource(side, float(z_max_mm), _names(keys), modes, light)
+
+
+def _leaving(design: Design, pixel, smp: WaveSampling, fresnel: bool, z_max_mm: float):
+    """The stack traversed without its budget and the in-band light leaving it, as an
+    :class:`~.waveobject.ObjectSide` reaching ``z_max_mm``, and the terms' keys."""
+    terms, axes, _, filters = _stack(design, pixel, smp, fresnel, budget=False)
+    terms = _leave(terms, axes, smp, filters)
+    keys = list(terms)
+    return object_side(keys, terms, _planes(axes), [ax.x for ax in axes], smp, z_max_mm), keys
 
 
 def one_blas_thread():

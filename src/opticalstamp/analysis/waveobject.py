@@ -210,12 +210,20 @@ def x_modes(side: ObjectSide) -> tuple[np.ndarray, float]:
     ``mode_tol`` of the power, and the light (um^2 sr): the Z-independent part of the
     x-only path (:func:`lsf_x_from` propagates them), by the pivoted Cholesky
     (:func:`_modes`), as the RMTF path has taken them since it was written."""
-    gy = side.gram(1)
-    light = float(np.sum(side.gram(0) * gy).real)
-    p, v = _rotation(gy)
-    w = np.tensordot(v, side.spectra[0], axes=([0], [0]))  # (J, m, nb)
-    a = (w * np.sqrt(p)[:, None, None]).reshape(-1, w.shape[-1])  # (J m, nb)
-    return _modes(a, side.sampling.mode_tol), light
+    rows, light = _axis_rows(side, 0)
+    return _modes(rows, side.sampling.mode_tol), light
+
+
+def _axis_rows(side: ObjectSide, a: int) -> tuple[np.ndarray, float]:
+    """Rows (J m, nb) whose mutual intensity is axis ``a``'s line-spread function's,
+    LSF_a = sum_jl T_jl sum_m u_jm conj(u_lm) with T the other axis's Gram (Z-independent),
+    rotated to T's eigenvectors (T = V diag(p) V^H, rows sqrt(p_k) w_km with w_k = sum_j
+    V_jk u_j), and the light (um^2 sr)."""
+    g_other = side.gram(1 - a)
+    light = float(np.sum(side.gram(a) * g_other).real)
+    p, v = _rotation(g_other)
+    w = np.tensordot(v, side.spectra[a], axes=([0], [0]))  # (J, m, nb)
+    return (w * np.sqrt(p)[:, None, None]).reshape(-1, w.shape[-1]), light
 
 
 #: What :func:`marginals_at` leaves out of each axis's mutual intensity (a fraction of the
@@ -229,15 +237,10 @@ MARGINAL_TOL = 1e-14
 
 def axis_modes(side: ObjectSide, a: int, tol: float | None = None) -> tuple[np.ndarray, float]:
     """The coherent modes of axis ``a``'s line-spread function's mutual intensity as
-    in-band spectra (q, nb), all but ``mode_tol`` of the power, and the light (um^2 sr):
-    LSF_a = sum_jl T_jl sum_m u_jm conj(u_lm) with T the other axis's Gram (Z-independent),
-    rotated to T's eigenvectors and compressed to all but ``tol`` (default the
-    sampling's ``mode_tol``) of the power (:func:`_eig_modes`)."""
-    g_other = side.gram(1 - a)
-    light = float(np.sum(side.gram(a) * g_other).real)
-    p, v = _rotation(g_other)
-    w = np.tensordot(v, side.spectra[a], axes=([0], [0]))  # (J, m, nb)
-    rows = (w * np.sqrt(p)[:, None, None]).reshape(-1, w.shape[-1])  # (J m, nb)
+    in-band spectra (q, nb) (:func:`_axis_rows`), compressed to all but ``tol`` (default
+    the sampling's ``mode_tol``) of the power (:func:`_eig_modes`), and the light
+    (um^2 sr)."""
+    rows, light = _axis_rows(side, a)
     return _eig_modes(rows, side.sampling.mode_tol if tol is None else tol), light
 
 

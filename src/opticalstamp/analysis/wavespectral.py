@@ -152,6 +152,16 @@ def _weighted_sum(xs: list[np.ndarray], ys: list[np.ndarray], w, cycles: list[fl
     return x_out, out
 
 
+def _weighted_marginals(parts: list[tuple], w, smps: list[WaveSampling]):
+    """The wavelengths' marginals ``parts`` [(x_um, lsf_x, y_um, lsf_y)] weighted by ``w``
+    and summed on one grid per axis (:func:`_weighted_sum`, each band-limited below
+    2 B / lambda of its sampling): (x_um, lsf_x, y_um, lsf_y)."""
+    cyc = [2 * s.band / s.wavelength_um for s in smps]
+    x, lx = _weighted_sum([p[0] for p in parts], [p[1] for p in parts], w, cyc)
+    y, ly = _weighted_sum([p[2] for p in parts], [p[3] for p in parts], w, cyc)
+    return x, lx, y, ly
+
+
 @dataclass(frozen=True)
 class SpectralWaveResponse:
     """A pixel's responsivity under a light, the weighted sum of the wave engine's
@@ -335,9 +345,7 @@ def wave_response_spectral(
         if bar is not None:
             bar.close()
     w = spec.weights
-    cyc = [2 * s.band / s.wavelength_um for s in smps]
-    x, lx = _weighted_sum([p.x_um for p in parts], [p.lsf_x for p in parts], w, cyc)
-    y, ly = _weighted_sum([p.y_um for p in parts], [p.lsf_y for p in parts], w, cyc)
+    x, lx, y, ly = _weighted_marginals([(p.x_um, p.lsf_x, p.y_um, p.lsf_y) for p in parts], w, smps)
     e = [p.etendue_um2sr for p in parts]
     light = sum(wi * ei for wi, ei in zip(w, e, strict=True))
     inside = sum(wi * ei * p.center_cell_fraction for wi, ei, p in zip(w, e, parts, strict=True))
@@ -385,9 +393,7 @@ def spectral_marginals(
         for lam, s in zip(spec.wavelengths_um, smps, strict=True)
     ]
     w = spec.weights
-    cyc = [2 * s.band / s.wavelength_um for s in smps]
-    x, lx = _weighted_sum([p[0] for p in parts], [p[1] for p in parts], w, cyc)
-    y, ly = _weighted_sum([p[2] for p in parts], [p[3] for p in parts], w, cyc)
+    x, lx, y, ly = _weighted_marginals([p[:4] for p in parts], w, smps)
     return x, lx, y, ly, float(sum(wi * p[4] for wi, p in zip(w, parts, strict=True)))
 
 

@@ -387,8 +387,9 @@ def simulate_scan(
                 np.asarray(height_map), h_um / 1000, w_um / 1000, centers + row_y, x_pix
             )
         sig = np.zeros((n_l, x_pix.size))
+        k_row = by_ch[ch if leds else 0][r]  # this channel's LED's (one light: the same)
         for il, zl in enumerate(levels):
-            kr = by_ch[ch if leds else 0][r][il]
+            kr = k_row[il]
             if z_loc is None:
                 sel, wts = np.arange(n_l), None
             else:
@@ -405,8 +406,7 @@ def simulate_scan(
                 s += _ghost_signal(blocks[ch], kr, centers[sel], x_pix, st.surround)
             sig[sel] += s if wts is None else s * wts[sel]
         gain = e_per * _illumination(st, x_pix) * (st.sensor.channel_response[ch] if color else 1.0)
-        k0 = by_ch[ch if leds else 0][r][0]
-        s_white = st.white_reference * (k0.own_etendue + k0.ghost_etendue)
+        s_white = st.white_reference * (k_row[0].own_etendue + k_row[0].ghost_etendue)
         by_row[r][ch] = (sig * gain, s_white * gain)
         if ch == 0:
             pix_x.append(x_pix)
@@ -477,10 +477,11 @@ def led_designs(design: AnyDesign) -> list[Design] | None:
     if getattr(getattr(design, "electronics", None), "illumination", None) != "rgb":
         return None
     from ..analysis.colour import channel_designs
+    from ..analysis.spectrum import CHANNELS
     from ..design.variants import replace as vary
 
     per = channel_designs(design)
-    return [vary(per[c], {"electronics.illumination": c}) for c in ("red", "green", "blue")]
+    return [vary(per[c], {"electronics.illumination": c}) for c in CHANNELS["rgb"]]
 
 
 def merge_rows(
