@@ -109,3 +109,80 @@ def test_broyden_updates_reach_the_same_minima():
     assert np.allclose(b.x, plain.x, rtol=1e-3, atol=1e-3)
     assert b.njev < plain.njev and len(calls) == b.njev
     assert np.array_equal(calls[-1], b.x)  # the last word was a full Jacobian's, at the end
+
+
+def test_an_updated_jacobian_is_kept_when_only_the_acceleration_refuses_its_step():
+    """A full Jacobian follows a step that the updated one let raise the sum of squares,
+    not a step refused because its acceleration was not trusted (that is the valley's
+    bend, and the damping answers it): on Rosenbrock's valley with Broyden's updates no
+    Jacobian comes right after the two acceleration probes (three did when any refusal
+    on an updated Jacobian called for a full one), and the minimum is the same."""
+    events, probes = [], []
+
+    def fun(x):
+        events.append(("f", any(np.array_equal(x, p) for p in probes)))
+        return _rosen(x)
+
+    def jac(x):
+        events.append(("J", None))
+        return _rosen_jac(x)
+
+    inf = np.full(2, np.inf)
+    r = geodesic_lm(
+        fun, np.array([-1.2, 1.0]), jac, (-inf, inf), chi2_tol=1e-14, broyden=3,
+        max_nfev=500, max_njev=100, ahead=lambda pts: probes.extend(p.copy() for p in pts),
+    )  # fmt: skip
+    assert r.status > 0 and np.allclose(r.x, [1.0, 1.0], atol=1e-5), r.message
+    assert probes and sum(e[0] == "J" for e in events) == r.njev > 1
+    after_probe = [a for a, b in zip(events, events[1:], strict=False) if b[0] == "J"]
+    assert ("f", True) not in after_probe
+
+
+def test_a_parameter_the_residuals_barely_see_does_not_stall_the_others(monkeypatch):
+    """A parameter whose column is 1e-12 of the other's (its residuals flat here, a wall
+    at |x1| = 2): damped as one at D_FLOOR of the stiffest, it moves no further than the
+    others and the fit reaches the valley's floor; without the floor its step is
+    unbounded, every probe lands on the wall and the damping grows until the fit stops
+    where it started."""
+    import opticalstamp.studies.fitlm as fitlm
+
+    s = 1e-12
+
+    def fun(x):
+        return np.array([x[0] - 1 + s * x[1], 1e3 * max(abs(x[1]) - 2.0, 0.0)])
+
+    def jac(x):
+        wall = 1e3 * np.sign(x[1]) if abs(x[1]) > 2 else 0.0
+        return np.array([[1.0, s], [0.0, wall]])
+
+    bounds = (np.array([-10.0, -50.0]), np.array([10.0, 50.0]))
+    x0 = np.array([3.0, 0.0])
+    r = geodesic_lm(fun, x0, jac, bounds, max_nfev=200, max_njev=50, chi2_tol=1e-8)
+    assert r.status == 1 and 2 * r.cost < 1e-8 and abs(r.x[1]) < 2, (r.x, r.message)
+    assert r.nfev < 20
+    monkeypatch.setattr(fitlm, "D_FLOOR", 0.0)
+    stalled = geodesic_lm(fun, x0, jac, bounds, max_nfev=200, max_njev=50, chi2_tol=1e-8)
+    assert 2 * stalled.cost > 3.9  # where it started (chi2 4): the floor is what moves it
+
+
+def test_a_parameter_on_its_bound_is_held_there():
+    """The minimum with x1 on its lower bound (the descent pushes it out, a curved
+    coupling with x0): the step and its acceleration among the free parameters reach
+    (1, 0) in a few evaluations, converged by the decrement of the free ones; probes
+    clipped on one side only (the bound held by clipping alone) had read the residuals'
+    slope as a bend and kept refusing, out of evaluations at x0 = 1.75."""
+    seen = []
+
+    def fun(x):
+        seen.append(x.copy())
+        return np.array([x[0] - 1 + 0.5 * x[1] ** 2, 10 * (x[1] + 1), 3 * x[0] * x[1]])
+
+    def jac(x):
+        return np.array([[1.0, x[1]], [0.0, 10.0], [3 * x[1], 3 * x[0]]])
+
+    lo, hi = np.array([-10.0, 0.0]), np.array([10.0, 5.0])
+    r = geodesic_lm(fun, np.array([3.0, 0.0]), jac, (lo, hi), max_nfev=200, chi2_tol=1e-10)
+    assert r.status == 1, r.message
+    assert np.allclose(r.x, [1.0, 0.0], atol=1e-5) and abs(2 * r.cost - 100.0) < 1e-5
+    assert r.nfev < 20
+    assert all(np.all(x >= lo) and np.all(x <= hi) for x in seen)
