@@ -90,6 +90,33 @@ def test_bar_fraction_is_the_convolution_of_the_spread():
         assert fi == pytest.approx(float(lsf[white].sum()), abs=2e-3)
 
 
+def test_edge_sum_is_the_interpolated_cumulative_summed_bit_for_bit():
+    """The edge model's loop (slopes once, bracket by a product) gives sum_i w_i C(d_j -
+    cross_i) with C ``np.interp(x, u, c, left=0, right=1)``, exactly the bits of the
+    formula it replaced (``_cum`` at every node): points on the knots, outside the table
+    and between."""
+    from opticalstamp.studies.fitmodel import _cum, _edge_sum
+
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        n = int(rng.integers(3, 600))
+        u = (np.arange(n) - n // 2) * 0.25
+        c = np.sort(rng.random(n))
+        c[0], c[-1] = 0.0, 1.0
+        d = rng.uniform(u[0] - 10, u[-1] + 10, int(rng.integers(5, 60)))
+        d[:5] = u[rng.integers(0, n, 5)]
+        cross = np.sort(rng.normal(0.0, 5.0, int(rng.integers(1, 60))))
+        cross[0] = 0.0
+        w = rng.random(cross.size)
+        w /= w.sum()
+        got = _edge_sum(u, c, d, cross, w)
+        pairs = list(zip(cross, w, strict=True))
+        want = np.array([sum(wi * _cum(u, c, dj - ci) for ci, wi in pairs) for dj in d])
+        assert np.array_equal(got, want)
+        interp = np.array([w @ np.interp(dj - cross, u, c, left=0.0, right=1.0) for dj in d])
+        assert np.allclose(got, interp, rtol=0, atol=1e-13)
+
+
 @functools.cache
 def _truth_fit():
     """The three perturbed parameters fitted to 5 bar and 3 edge scans (seed 2; seeds 1
