@@ -44,6 +44,9 @@ class LMResult:
 #: the damping stopped the fit, where with it each fit reached chi2 3441-3596, the
 #: minima scipy's trf finds.
 D_FLOOR = 1e-10
+#: Where the acceleration's two probes go, in steps h v: central (1, -1) where both lie
+#: within the bounds, else one-sided, forward (1, 2) or backward (-1, -2)
+PROBES = ((1.0, -1.0), (1.0, 2.0), (-1.0, -2.0))
 
 
 def _solve(m: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -75,7 +78,8 @@ def geodesic_lm(
     directional derivative of the residuals along it, central (r(x + h v) - 2 r(x) +
     r(x - h v)) / h^2 (two evaluations, which ``ahead`` may run side by side: it is
     given both points first; a forward difference against J v would carry the
-    Jacobian's own difference error, which dominates as the steps shrink); the
+    Jacobian's own difference error, which dominates as the steps shrink), one-sided
+    (x + h v and x + 2 h v, or backwards) where a bound would cut a central probe; the
     acceleration a from it as v from r; the step v + a/2, tried only if 2|a|/|v| <=
     ``alpha`` (D-norm). D is the largest diagonal of J^T J met so far (Marquardt's
     scaling, invariant to the parameters' units), at least :data:`D_FLOOR` of its
@@ -140,11 +144,10 @@ def geodesic_lm(
         d = np.where(dmax > 0, dmax, 1.0)
         # a column (nearly) flat here is damped as one at D_FLOOR of the stiffest: without
         # a floor its step is unbounded, lands on a bound and the probes there say nothing
-        d = np.maximum(d, D_FLOOR * d.max())
+        d = np.maximum(d, D_FLOOR * dmax.max())
         # a parameter on a bound that the descent pushes out of it stays there: the
-        # decrement, the step and its acceleration among the others (so that both probes
-        # and the step move every coordinate they change as the linear model says: a
-        # probe clipped on one side only puts a first difference into the second)
+        # decrement, the step and its acceleration among the others, so that the step
+        # moves every coordinate it changes as the linear model says
         free = ~(((x <= lo_in) & (g > 0)) | ((x >= hi_in) & (g < 0)))
         s = 1 / np.sqrt(d[free])
         gs = g[free] * s
@@ -173,13 +176,24 @@ def geodesic_lm(
             status = 2
             message = f"the damped step's predicted fall {pred:.3g} < {chi2_tol:g}"
             break
-        pts = [clip(x + h * v), clip(x - h * v)]
+        # the probes at t1 h v and t2 h v: central where both lie inside the bounds, else
+        # one-sided (a probe clipped on one side only puts a first difference into the
+        # second: a parameter on a bound that the step moves inward)
+        inside = [
+            t for t in PROBES if all(np.array_equal(clip(x + k * h * v), x + k * h * v) for k in t)
+        ]
+        t1, t2 = inside[0] if inside else PROBES[0]
+        pts = [clip(x + t1 * h * v), clip(x + t2 * h * v)]
         if ahead is not None:
             ahead(pts)
-        rp, rm = fun(pts[0]), fun(pts[1])
+        r1, r2 = fun(pts[0]), fun(pts[1])
         nfev += 2
+        if (t1, t2) == PROBES[0]:
+            d2 = (r1 - 2 * r + r2) / h**2
+        else:  # the second difference of the parabola through (0, r), (t1, r1), (t2, r2)
+            d2 = 2 * ((r1 - r) / t1 - (r2 - r) / t2) / (t1 - t2) / h**2
         acc = np.zeros_like(v)
-        acc[free] = -_solve(m[np.ix_(free, free)], (jj.T @ ((rp - 2 * r + rm) / h**2))[free])
+        acc[free] = -_solve(m[np.ix_(free, free)], (jj.T @ d2)[free])
         tried = 2 * np.sqrt(acc @ (d * acc)) <= alpha * np.sqrt(v @ (d * v))
         if tried:
             xn = clip(x + v + acc / 2)
@@ -202,6 +216,9 @@ def geodesic_lm(
             continue
         lam *= 2
         if lam > lam_max:
+            if updated:  # only a full Jacobian's word says no step lowers it
+                refresh = True
+                continue
             status, message = -1, "no step lowers the sum of squares"
             break
     return LMResult(x, c / 2, nfev, njev, status, message)
