@@ -179,10 +179,11 @@ def geodesic_lm(
         # the probes at t1 h v and t2 h v: central where both lie inside the bounds, else
         # one-sided (a probe clipped on one side only puts a first difference into the
         # second: a parameter on a bound that the step moves inward)
-        inside = [
-            t for t in PROBES if all(np.array_equal(clip(x + k * h * v), x + k * h * v) for k in t)
-        ]
-        t1, t2 = inside[0] if inside else PROBES[0]
+        for t1, t2 in PROBES:  # the first pair within the bounds
+            if all(np.array_equal(clip(x + k * h * v), x + k * h * v) for k in (t1, t2)):
+                break
+        else:
+            t1, t2 = PROBES[0]
         pts = [clip(x + t1 * h * v), clip(x + t2 * h * v)]
         if ahead is not None:
             ahead(pts)
