@@ -2,7 +2,7 @@
 design: <= 2 min, and on the GPU <= 2 s"); run on demand:
 
     python benchmarks/bench_wave_circle.py [--device cpu|cuda] [--band B] [--reps N]
-        [--lights mono,white] [--warmup 1|0]
+        [--white-reps N] [--lights mono,white] [--warmup 1|0]
 
 The prototype with circular holes (:func:`~opticalstamp.design.variants.with_hole_shape`):
 the RMTF table (rows A and B at 19 heights, 0-4.5 mm, folded onto the design's charts,
@@ -57,6 +57,7 @@ def timed(fn, reps: int, bk, warmup: bool = True) -> tuple[float, list[float], o
 def main() -> None:
     device = _arg("--device", "cpu")
     reps = int(_arg("--reps", "3"))
+    white_reps = int(_arg("--white-reps", str(reps)))
     band = _arg("--band", "")
     lights = _arg("--lights", "mono,white").split(",")
     warmup = _arg("--warmup", "1") == "1"
@@ -76,7 +77,7 @@ def main() -> None:
                 lambda light=light: rmtf_from_lsf(
                     wave_folded_lsf(d, Z19, pers, sampling=smp, spectrum=light), d, dpi=dpis
                 ),
-                reps,
+                white_reps if light == "white" else reps,
                 bk,
                 warmup,
             )

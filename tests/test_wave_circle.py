@@ -207,21 +207,33 @@ def test_cuda_backend_gives_the_cpu_figures():
 
 
 def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypatch):
-    """Light of several wavelengths by the 2-D path where it runs on a GPU: the sources built
-    in threads (here on the CPU, each thread in a copy of the run's context) give the
-    sequential sources' LSFs and light exactly, and BLAS's thread limit is the process's
-    own again afterwards."""
+    """Light of several wavelengths by the 2-D path: the sources built in threads, on a
+    GPU one per wavelength (here on the CPU, each thread in a copy of the run's context),
+    on the CPU two at a time with their FFTs on one thread each, give the sequential
+    sources' LSFs and light exactly, and BLAS's thread limit is the process's own again
+    afterwards."""
     from threadpoolctl import threadpool_info
 
-    from opticalstamp.analysis import wavespectral
+    from opticalstamp.analysis import arrays, wavespectral
     from opticalstamp.analysis.spectrum import Spectrum
     from opticalstamp.device import run_device, using_device
 
     d = _stack((10.0, 10.0, 12.0), shape="circle")
     smp = wavebase.wave_sampling(d, band=0.12)
     light = Spectrum("two", (0.5, 0.6), (0.4, 0.6))
+    monkeypatch.setattr(wavespectral, "CPU_SIDE_BY_SIDE", 1)
     one = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
-    seen = []
+    monkeypatch.setattr(wavespectral, "CPU_SIDE_BY_SIDE", 2)
+    monkeypatch.setattr(wavespectral, "_cores", lambda: 2)
+    threads, seen = [], []
+    fft_alone = wavespectral._one_fft_thread
+
+    def counted(fn, *args):  # the FFTs' threads inside each side-by-side source
+        return fft_alone(lambda *a: (threads.append(arrays._FFT_THREADS.get()), fn(*a))[1], *args)
+
+    monkeypatch.setattr(wavespectral, "_one_fft_thread", counted)
+    two = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
+    assert threads == [1, 1] and arrays._FFT_THREADS.get() == -1
 
     def direct(fn, *args):  # the stream is CuPy's; the threads and contexts are tested
         seen.append(run_device())
@@ -234,5 +246,7 @@ def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypat
         side = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
     assert seen == ["cpu"] * 2  # each thread ran in the run's context
     assert [lib["num_threads"] for lib in threadpool_info()] == before
+    a, c = one.lsf_x(ZS), two.lsf_x(ZS)
+    assert np.array_equal(a[1], c[1]) and a[2] == c[2]
     a, b = one.lsf_x(ZS), side.lsf_x(ZS)
     assert np.array_equal(a[1], b[1]) and a[2] == b[2]

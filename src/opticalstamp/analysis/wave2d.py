@@ -36,6 +36,7 @@ from ..raytrace.stack import lattice_of, output_pitch
 from ..validate import InputError
 from .arrays import CPU, Backend, wave_backend
 from .wave2dgrid import Layer, angular_filters, layers_of, mask_field_2d, transfer
+from .wave2dop import StackOperator, operator_grid
 from .wavebase import (
     WaveSampling,
     band_integral,
@@ -55,95 +56,6 @@ RANGE_TOL = 1e-6
 BLOCK = 16
 
 
-@dataclass
-class _Stack:
-    """What the operator A needs: grids, source fields, transfer functions, masks, on the
-    backend ``bk`` (:mod:`.arrays`: NumPy or CuPy arrays).
-
-    A maps source amplitudes (k, n0y, n0x) to the in-band spectrum of the field after
-    the object-side mask, (k, nb) over the in-band bins (``ky`` x ``kx``, row-major),
-    scaled so that its squared norm is the field's in-band power over dx dy (Parseval).
-    Every field between two masks is band-limited (its transfer function is 0 outside
-    the band), so the transforms are pruned: a spectrum is only ever needed, or only
-    ever non-zero, on the in-band rows and columns (1/3 of each axis at the default
-    oversampling), and each FFT pair costs 2/3 of a full 2-D pair."""
-
-    x: np.ndarray
-    y: np.ndarray
-    ux: object  # (nx, n0x) source fields at the first mask, x
-    uy: object  # (ny, n0y)
-    first: object | None  # exact-over-paraxial factor below the first mask (in band)
-    masks: list
-    steps: list  # transfer to mask i from mask i - 1 (i >= 1), on the in-band bins
-    ky: object  # in-band FFT bins of y and of x
-    kx: object
-    bk: Backend = CPU
-    top: object | None = None  # amplitude filter above the top mask on the in-band bins
-    dtype: object = np.complex128  # of the operator's fields (complex64: "single")
-
-    def _spec(self, f, norm: str | None = None):
-        """Fields (k, ny, nx) -> their spectra on the in-band bins (k, ny_in, nx_in)."""
-        a = self.bk.fft(f, axis=-1, norm=norm)[..., self.kx]
-        return self.bk.fft(a, axis=-2, norm=norm)[..., self.ky, :]
-
-    def _field(self, s, norm: str | None = None):
-        """In-band spectra (k, ny_in, nx_in) -> the fields (k, ny, nx)."""
-        xp = self.bk.xp
-        a = xp.zeros(s.shape[:-2] + (self.y.size, s.shape[-1]), dtype=s.dtype)
-        a[..., self.ky, :] = s
-        a = self.bk.ifft(a, axis=-2, norm=norm)
-        b = xp.zeros(s.shape[:-2] + (self.y.size, self.x.size), dtype=s.dtype)
-        b[..., self.kx] = a
-        return self.bk.ifft(b, axis=-1, norm=norm)
-
-    def _top(self, w):
-        """Source amplitudes w (k, n0y, n0x) -> the fields just below the top mask."""
-        xp = self.bk.xp
-        w = w.astype(self.dtype, copy=False)
-        f = xp.einsum("ya,kab,xb->kyx", self.uy, w, self.ux, optimize=True)
-        if self.first is not None:
-            f = self._field(self._spec(f) * self.first)
-        for m, h in zip(self.masks[:-1], self.steps, strict=True):
-            f *= m
-            f = self._field(self._spec(f) * h)
-        return f
-
-    def forward(self, w, *, with_power: bool = False):
-        """Source amplitudes w (k, n0y, n0x) -> in-band spectra after the top mask;
-        ``with_power``: also the power each field sends beyond the band there (k,), over
-        dx dy: the power through the mask by the midpoint rule with its cells'
-        transmission (sum |u|^2 M, as the separable path's budget counts it: |M|^2 = M
-        for a sharp mask) less the in-band power."""
-        f = self._top(w)
-        through = (abs(f) ** 2 * self.masks[-1]).sum(axis=(1, 2)) if with_power else None
-        out = self._spec(f * self.masks[-1], norm="ortho").reshape(f.shape[0], -1)
-        out = out.astype(np.complex128)
-        lost = through - (abs(out) ** 2).sum(axis=1) if with_power else None
-        if self.top is not None:
-            out = out * self.top
-        return (out, lost) if with_power else out
-
-    def adjoint(self, o):
-        """In-band spectra (k, nb) -> source amplitudes (k, n0y, n0x)."""
-        xp = self.bk.xp
-        o = o if self.top is None else o * self.top.conj()
-        o = o.astype(self.dtype, copy=False)
-        g = self._field(o.reshape(o.shape[0], self.ky.size, self.kx.size), norm="ortho")
-        g *= self.masks[-1]
-        for m, h in zip(self.masks[-2::-1], self.steps[::-1], strict=True):
-            g = self._field(self._spec(g) * h.conj())
-            g *= m
-        if self.first is not None:
-            g = self._field(self._spec(g) * self.first.conj())
-        b = xp.einsum("ya,kyx,xb->kab", self.uy.conj(), g, self.ux.conj(), optimize=True)
-        return b.astype(np.complex128)
-
-    def field(self, o):
-        """The band-limited field (ny, nx) on the stack grid of an in-band spectrum."""
-        o = o.astype(np.complex128).reshape(1, self.ky.size, self.kx.size)
-        return self._field(o, norm="ortho")[0]
-
-
 #: The operator's floating point: "single" (complex64 FFTs, 3x faster on a 2-core CPU;
 #: relative error ~2e-7 of the fields, measured) or "double".
 PRECISIONS = MappingProxyType(
@@ -159,7 +71,7 @@ def _stack(
     bk: Backend = CPU,
     fresnel: bool = False,
     precision: str = "single",
-) -> tuple[_Stack, list[Layer]]:
+) -> tuple[StackOperator, list[Layer]]:
     if precision not in PRECISIONS:
         raise InputError(f"precision: one of {', '.join(PRECISIONS)} (got {precision!r})")
     cdt, rdt = PRECISIONS[precision]
@@ -171,18 +83,22 @@ def _stack(
     src.append((-s.sensitive_height_um / 2, s.sensitive_height_um / 2))
     top = layers[-1].reduced
     x, y = stack_grid(src[0], top, smp), stack_grid(src[1], top, smp)
-    fields = []
-    for g, (lo, hi), npts in zip((x, y), src, smp.source_points, strict=True):
+    gx, gy = operator_grid(x, lam, b), operator_grid(y, lam, b)
+    fields = []  # on the sampling's grids (their in-band spectra) and the operator's
+    for g, (lo, hi), npts in zip((x, y, gx, gy), src * 2, smp.source_points * 2, strict=True):
         x0, w = gauss_legendre(lo, hi, npts)
         fields.append(point_sources(g, x0, lam * w, lam, layers[0].reduced, b))
-    ky = np.flatnonzero(in_band(sfft.fftfreq(y.size, y[1] - y[0]), lam, b))
-    kx = np.flatnonzero(in_band(sfft.fftfreq(x.size, x[1] - x[0]), lam, b))
-    filt = angular_filters(design, x, y, lam, fresnel, (ky, kx))  # on the in-band bins
+
+    def bins(g):
+        return np.flatnonzero(in_band(sfft.fftfreq(g.size, g[1] - g[0]), lam, b))
+
+    ky, kx, gky, gkx = bins(y), bins(x), bins(gy), bins(gx)
+    filt = angular_filters(design, gx, gy, lam, fresnel, (gky, gkx))  # on the in-band bins
     filt = [None if f is None else bk.put(f) for f in filt]
     first = None
     if propagator == "exact":
         first = transfer(
-            x, y, layers[0].slabs, lam, b, propagator, relative=True, bins=(ky, kx), xp=bk.xp
+            gx, gy, layers[0].slabs, lam, b, propagator, relative=True, bins=(gky, gkx), xp=bk.xp
         )
     if filt[0] is not None:  # a filter commutes with free space: anywhere below mask 1
         first = filt[0] if first is None else first * filt[0]
@@ -195,23 +111,29 @@ def _stack(
             for h in lay.holes
             if src[0][0] - r_i < h.cx < src[0][1] + r_i and src[1][0] - r_i < h.cy < src[1][1] + r_i
         ]
-        masks.append(mask_field_2d(x, y, near, b, lam, bk).astype(rdt))
+        masks.append(mask_field_2d(gx, gy, near, b, lam, bk).astype(rdt))
     steps = []
     for i, lay in enumerate(layers[1:], start=1):
-        h = transfer(x, y, lay.slabs, lam, b, propagator, bins=(ky, kx), xp=bk.xp)
+        h = transfer(gx, gy, lay.slabs, lam, b, propagator, bins=(gky, gkx), xp=bk.xp)
         steps.append((h if filt[i] is None else h * filt[i]).astype(cdt))
-    ux, uy = bk.put(fields[0].astype(cdt)), bk.put(fields[1].astype(cdt))
+    ux, uy = bk.put(fields[2].astype(cdt)), bk.put(fields[3].astype(cdt))
     top = None if filt[-1] is None else filt[-1].ravel()
-    st = _Stack(x, y, ux, uy, first, masks, steps, bk.put(ky), bk.put(kx), bk, top, cdt)
+    st = StackOperator(x, y, ux, uy, first, masks, steps, bk.put(ky), bk.put(kx), bk, top, cdt)
+    st.gx, st.gy, st.gkx, st.gky = gx, gy, bk.put(gkx), bk.put(gky)
+    if first is not None:  # the sampling grid's spectra at the operator grid's scale
+        sx = sfft.fft(fields[0], axis=0)[kx] * (gx.size / x.size)
+        sy = sfft.fft(fields[1], axis=0)[ky] * (gy.size / y.size)
+        st.sx, st.sy = bk.put(sx.astype(cdt)), bk.put(sy.astype(cdt))
     return st, layers
 
 
 def coherent_modes(
-    st: _Stack, *, tol: float = RANGE_TOL, block: int = BLOCK, seed: int = 0, max_modes=4096
+    st: StackOperator, *, tol: float = RANGE_TOL, block: int = BLOCK, seed: int = 0, max_modes=4096
 ) -> tuple[object, dict]:
     """Coherent modes of the in-band light after the top mask: (r, nb) in-band spectra
-    (:class:`_Stack`, on its backend) whose fields' intensities add up to the pixel's
-    responsivity (um^2 sr per um^2), and what the range finder did.
+    on the sampling's grid (:class:`~.wave2dop.StackOperator`, on its backend) whose
+    fields' intensities add up to the pixel's responsivity (um^2 sr per um^2), and what
+    the range finder did.
 
     Blocks of complex Gaussian source vectors are pushed through A until a fresh block
     finds, on average, less than ``tol`` of the mean power of A w outside the range kept
@@ -224,30 +146,31 @@ def coherent_modes(
     bk, xp = st.bk, st.bk.xp
     rng = np.random.default_rng(seed)
     n0y, n0x = st.uy.shape[1], st.ux.shape[1]
-    q = xp.zeros((0, st.ky.size * st.kx.size), dtype=xp.complex128)  # orthonormal rows
-    total, missing, tries = 0.0, np.inf, 0
+    qs: list = []  # orthonormal rows, block by block
+    total, missing, tries, rank = 0.0, np.inf, 0, 0
     lost: list[np.ndarray] = []
-    step2 = float((st.x[1] - st.x[0]) * (st.y[1] - st.y[0]))
-    while missing > tol * total and q.shape[0] < max_modes:
+    step2 = st.cell
+    while missing > tol * total and rank < max_modes:
         w = rng.standard_normal((block, n0y, n0x)) + 1j * rng.standard_normal((block, n0y, n0x))
         y, out = st.forward(bk.put(w / np.sqrt(2)), with_power=True)
         lost.append(bk.host(out))
         tries += 1
         total += (float(xp.vdot(y, y).real) / block - total) / tries  # running mean |A w|^2
-        for _ in range(2):  # project out the range found (twice: stable)
-            y = y - (y @ q.conj().T) @ q
+        y = _project_out(xp, y, qs)
         missing = float(xp.vdot(y, y).real) / block
         p, v = xp.linalg.eigh(y @ y.conj().T)  # orthonormalise the block (Gram)
         good = p > 1e-24 * max(float(p.max()) if p.size else 0.0, 1e-300)
-        q = xp.concatenate([q, (v[:, good] / xp.sqrt(p[good])).conj().T @ y])
-    b = xp.concatenate([st.adjoint(q[i : i + block]) for i in range(0, q.shape[0], block)])
+        qs.append((v[:, good] / xp.sqrt(p[good])).conj().T @ y)
+        rank += qs[-1].shape[0]
+    b = xp.concatenate([st.adjoint(qb) for qb in qs])
+    q = xp.concatenate(qs)
     bm = b.reshape(q.shape[0], -1).conj()  # B = E^H A, (r, n_src)
     p, v = xp.linalg.eigh(bm @ bm.conj().T)
     p, v = xp.clip(p[::-1], 0, None), v[:, ::-1]
     ph = bk.host(p)
     keep = int(np.searchsorted(np.cumsum(ph), (1 - tol) * ph.sum())) + 1
     keep = max(1, min(keep, ph.size))
-    modes = (v[:, :keep] * xp.sqrt(p[:keep])).T @ q
+    modes = (v[:, :keep] * xp.sqrt(p[:keep] * st.scale**2)).T @ q  # the sampling grid's
     out = np.concatenate(lost) * step2  # um^2 sr per random vector
     info = {
         "range": int(q.shape[0]),
@@ -259,6 +182,32 @@ def coherent_modes(
         "in_band": float(ph[:keep].sum()) * step2,
     }
     return modes, info
+
+
+#: A second Gram-Schmidt pass where a vector keeps less than this of its norm (one
+#: pass leaves it orthogonal to the range found to ~eps / this; the range finder's
+#: vectors keep ~sqrt(tol) = 1e-3 of theirs).
+REORTH = 1e-5
+
+
+def _project_out(xp, y, qs: list):
+    """The rows of ``y`` less their parts in the span of the orthonormal rows of the
+    blocks ``qs`` (block classical Gram-Schmidt; y q^H as conj(conj(y) q^T), so that no
+    conjugate copy of q is made); a second pass where a row kept less than
+    :data:`REORTH` of its norm."""
+    if not qs:
+        return y
+    before = xp.linalg.norm(y, axis=1)
+    y = y.copy()
+    for _ in range(2):
+        yc = y.conj()
+        for qb in qs:
+            y -= (yc @ qb.T).conj() @ qb
+        kept = xp.linalg.norm(y, axis=1)
+        if float((kept - REORTH * before).min()) >= 0:
+            break
+        before = kept
+    return y
 
 
 @dataclass(frozen=True)
@@ -291,9 +240,9 @@ class StackModes:
     """A pixel's in-band light just above the object-side mask, as coherent modes
     (:func:`coherent_modes`) on the stack grid of the backend that computed them."""
 
-    stack: _Stack
+    stack: StackOperator
     layers: list[Layer]
-    modes: object  # (r, nb) in-band spectra (Parseval-scaled, see _Stack)
+    modes: object  # (r, nb) in-band spectra (Parseval-scaled, the sampling grid's)
     info: dict
     sampling: WaveSampling
     propagator: str

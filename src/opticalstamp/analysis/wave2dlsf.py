@@ -42,7 +42,7 @@ def marginal_modes(sm: StackModes, axis: int, tol: float):
     g = sm.modes.reshape(-1, ny_in, nx_in)
     a = g.reshape(-1, nx_in) if axis == 0 else xp.swapaxes(g, 1, 2).reshape(-1, ny_in)
     # mutual intensity of the incoherent 1-D spectra (rows): J = a^T conj(a) = sum p v v^H
-    p, v = xp.linalg.eigh(a.T @ a.conj())
+    p, v = xp.linalg.eigh(bk.gram_t(a))
     p, v = bk.host(p)[::-1].clip(0.0, None), bk.host(v)[:, ::-1]
     keep = max(1, min(int(np.searchsorted(np.cumsum(p), (1 - tol) * p.sum())) + 1, p.size))
     grid = st.x if axis == 0 else st.y

@@ -46,7 +46,7 @@ from ..raytrace.stack import output_pitch
 from ..validate import InputError
 from .arrays import cupy_found
 from .wave import half_width, one_blas_thread
-from .wave2d import PRECISIONS, RANGE_TOL, StackModes, binned_map, stack_modes
+from .wave2d import PRECISIONS, RANGE_TOL, StackModes, binned_map, operator_grid, stack_modes
 from .wave2dlsf import marginal_modes
 from .wavebase import (
     WaveSampling,
@@ -73,11 +73,12 @@ MAP_TAIL = 1e-6
 
 #: CPU-seconds of the circular-hole prototype (paper2016 with circles, its default band,
 #: one wavelength, 86 modes, object grid 6750^2 for 4.5 mm) on the shared 2-core
-#: development machine, by what they scale with: the stack (range finder, 212 CPU-s at
-#: load 4) per stack-grid point, and a height of maps (about 90 CPU-s: 486 CPU-s for the
-#: stack, the forward transforms and two heights at load 10-15) per mode and object-grid
-#: point (docs/wave.md; :func:`expected_seconds`).
-CPU_S_PER_STACK_POINT = 212.0 / 1650**2
+#: development machine, by what they scale with: the stack (range finder, 37 CPU-s at
+#: load 1 on 2026-11-27, on its operator grid of 1120^2 points,
+#: :func:`~.wave2d.operator_grid`) per operator-grid point, and a height of maps (about
+#: 90 CPU-s: 486 CPU-s for the stack, the forward transforms and two heights at load
+#: 10-15) per mode and object-grid point (docs/wave.md; :func:`expected_seconds`).
+CPU_S_PER_STACK_POINT = 37.0 / 1120**2
 CPU_S_PER_MODE_POINT = 90.0 / (86 * 6750**2)
 PROTOTYPE_MODES = 86
 PROTOTYPE_POINTS = 39  # its Gauss-Legendre source points per axis
@@ -178,7 +179,7 @@ def expected_seconds(design: Design, sampling: WaveSampling, z_max_mm: float, n_
     """What a CPU run of :func:`wave_maps_2d` will take at one wavelength, from the grids
     alone: {"stack_s", "height_s", "total_s"} (CPU-seconds), scaled from the circular
     prototype's measured figures (:data:`CPU_S_PER_STACK_POINT`,
-    :data:`CPU_S_PER_MODE_POINT`) by the stack grid's and the object grid's points and
+    :data:`CPU_S_PER_MODE_POINT`) by the operator grid's and the object grid's points and
     by the number of modes, which the range finder finds as it goes: estimated as the
     prototype's 86 times sqrt(source points / 39^2) (measured: 86 modes at 39 x 39
     points, 29 at 13 x 13, 35 at 14 x 14)."""
@@ -187,7 +188,9 @@ def expected_seconds(design: Design, sampling: WaveSampling, z_max_mm: float, n_
     xs, ys = stack_grid(px.source, top, sampling), stack_grid(py.source, top, sampling)
     d_max = px.reduced(float(z_max_mm)) - top
     nx, ny = object_grid(xs, d_max, sampling)[0].size, object_grid(ys, d_max, sampling)[0].size
-    stack = CPU_S_PER_STACK_POINT * xs.size * ys.size
+    lam, band = sampling.wavelength_um, sampling.band
+    gx, gy = operator_grid(xs, lam, band), operator_grid(ys, lam, band)
+    stack = CPU_S_PER_STACK_POINT * gx.size * gy.size
     modes = PROTOTYPE_MODES * math.sqrt(math.prod(sampling.source_points)) / PROTOTYPE_POINTS
     height = CPU_S_PER_MODE_POINT * modes * nx * ny
     return {"stack_s": stack, "height_s": height, "total_s": stack + (n_heights + 1) * height}
