@@ -5,6 +5,7 @@ the marginal's Gram product (:mod:`opticalstamp.analysis.wave2d`,
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
@@ -42,12 +43,16 @@ def test_operator_grid_gives_the_sampling_grids_figures(circles, monkeypatch, pr
     assert st.gx.size < 0.75 * st.x.size and st.gy.size < 0.75 * st.y.size
     assert st.gx.size * (st.gx[1] - st.gx[0]) == pytest.approx(st.x.size * (st.x[1] - st.x[0]))
     kw = {"sampling": smp, "propagator": propagator, "fresnel": True, "precision": "double"}
-    coarse = _lsfs(lsf_source_2d(d, max(ZS), **kw))
+    coarse_src = lsf_source_2d(d, max(ZS), **kw)
+    coarse = _lsfs(coarse_src)
     monkeypatch.setattr(wave2d, "operator_grid", lambda x, lam, band: x)
-    fine = _lsfs(lsf_source_2d(d, max(ZS), **kw))
+    fine_src = lsf_source_2d(d, max(ZS), **kw)
+    fine = _lsfs(fine_src)
     tol = 1e-11 if propagator == "exact" else 1e-7
     assert np.abs(coarse[0] - fine[0]).max() < tol * fine[0].max()
     assert coarse[1] == pytest.approx(fine[1], rel=tol)
+    for key in ("in_band", "lost_to_band"):  # the power sums on the coarser grid too
+        assert coarse_src.meta[key] == pytest.approx(fine_src.meta[key], rel=tol), key
     # a grid well short of the rule (2m + M / 2: the mask's upper half of frequencies
     # folds into the band) aliases the in-band part: the comparison can fail (at the
     # rule's edge itself the aliased terms are the band edge's weakest, too weak to show)
@@ -86,27 +91,43 @@ def test_operator_grid_rule():
     assert wave2d.operator_grid(few, lam, b) is few
 
 
-def test_batches_give_the_whole_blocks_operator(circles):
+@pytest.mark.parametrize("propagator,fresnel", [("exact", False), ("paraxial", True)])
+def test_batches_give_the_whole_blocks_operator(circles, propagator, fresnel):
     """The operator pushed through in the CPU's batches (work arrays reused) gives what
-    one batch of the whole block gives, forward (with the power beyond the band) and
-    adjoint, to the last bits of double precision."""
+    one batch of the whole block gives (no work arrays), forward (with the power beyond
+    the band) and adjoint, to the last bits of double precision; threads sharing the
+    operator get the same (their work arrays are their own); and the adjoint is the
+    forward's, with the exact and the paraxial first step, with and without the filter
+    above the top mask."""
     d, smp = circles
     rng = np.random.default_rng(1)
-    st, _ = wave2d._stack(d, (0, 0), smp, "exact", precision="double")
+    st, _ = wave2d._stack(d, (0, 0), smp, propagator, fresnel=fresnel, precision="double")
+    assert (st.top is not None) == fresnel and (st.first is not None) == (propagator == "exact")
     w = rng.standard_normal((5,) + (st.uy.shape[1], st.ux.shape[1])) + 0j
     assert 1 < st.bk.batch < 5  # 5 fields: whole batches and a part
     one, lost1 = st.forward(w, with_power=True)
     back1 = st.adjoint(one)
+    with ThreadPoolExecutor(4) as pool:
+        side = list(pool.map(lambda i: st.forward(w, with_power=True)[0], range(8)))
+    assert all(np.array_equal(a, one) for a in side)
     st.bk = replace(st.bk, batch=0)
     two, lost2 = st.forward(w, with_power=True)
     back2 = st.adjoint(two)
     assert np.abs(one - two).max() <= 1e-12 * np.abs(two).max()
     assert np.abs(lost1 - lost2).max() <= 1e-12 * np.abs(lost2).max()
     assert np.abs(back1 - back2).max() <= 1e-12 * np.abs(back2).max()
-    # and the adjoint is the forward's: <A w, v> = <w, A^H v>
+    # <A w, v> = <w, A^H v>
     v = rng.standard_normal(one.shape) + 1j * rng.standard_normal(one.shape)
     lhs, rhs = np.vdot(v, st.forward(w)), np.vdot(st.adjoint(v), w)
     assert lhs == pytest.approx(rhs, rel=1e-10)
+
+
+def test_in_band_runs_refuse_other_bins():
+    """The in-band bins as their two runs, and a refusal where they are not."""
+    assert wave2d.in_band_runs(np.array([0, 1, 2, 9, 10]), 11) == (3, 2)
+    assert wave2d.in_band_runs(np.arange(4), 10) == (4, 0)
+    with pytest.raises(ValueError, match="runs"):
+        wave2d.in_band_runs(np.array([0, 1, 2, 8, 9]), 11)
 
 
 def test_project_out_orthogonalises_in_one_or_two_passes():

@@ -229,11 +229,15 @@ def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypat
     fft_alone = wavespectral._one_fft_thread
 
     def counted(fn, *args):  # the FFTs' threads inside each side-by-side source
-        return fft_alone(lambda *a: (threads.append(arrays._FFT_THREADS.get()), fn(*a))[1], *args)
+        def seen_by_backend(*a):
+            threads.append((arrays.fft_workers(), arrays.CPU._kw()["workers"]))
+            return fn(*a)
+
+        return fft_alone(seen_by_backend, *args)
 
     monkeypatch.setattr(wavespectral, "_one_fft_thread", counted)
     two = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
-    assert threads == [1, 1] and arrays._FFT_THREADS.get() == -1
+    assert threads == [(1, 1), (1, 1)]
 
     def direct(fn, *args):  # the stream is CuPy's; the threads and contexts are tested
         seen.append(run_device())

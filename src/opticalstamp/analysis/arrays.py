@@ -23,12 +23,17 @@ from scipy import fft as sfft
 
 from ..device import DeviceUnavailable, run_device
 
-__all__ = ["Backend", "backend", "fft_threads", "wave_backend"]
+__all__ = ["Backend", "backend", "fft_threads", "fft_workers", "wave_backend"]
 
 #: Threads of the CPU's FFTs in the work in progress (-1: every core). A context
 #: variable, local to a thread and undone on leaving :func:`fft_threads`: work run side
 #: by side in threads gives each its one.
 _FFT_THREADS: ContextVar[int] = ContextVar("opticalstamp_fft_threads", default=-1)
+
+
+def fft_workers() -> int:
+    """The CPU's FFT threads (SciPy's ``workers``) in the work in progress."""
+    return _FFT_THREADS.get()
 
 
 @contextmanager
@@ -55,7 +60,7 @@ class Backend:
     batch: int = 0
 
     def _kw(self) -> dict:
-        return {"workers": _FFT_THREADS.get()} if self.name == "cpu" else {}
+        return {"workers": fft_workers()} if self.name == "cpu" else {}
 
     def fft(self, a, axis: int = -1, norm: str | None = None, overwrite: bool = False):
         """The FFT along ``axis``; ``overwrite``: ``a`` may hold the result (in place)."""

@@ -36,7 +36,7 @@ from ..raytrace.stack import lattice_of, output_pitch
 from ..validate import InputError
 from .arrays import CPU, Backend, wave_backend
 from .wave2dgrid import Layer, angular_filters, layers_of, mask_field_2d, transfer
-from .wave2dop import StackOperator, operator_grid
+from .wave2dop import StackOperator, in_band_runs, operator_grid
 from .wavebase import (
     WaveSampling,
     band_integral,
@@ -118,8 +118,13 @@ def _stack(
         steps.append((h if filt[i] is None else h * filt[i]).astype(cdt))
     ux, uy = bk.put(fields[2].astype(cdt)), bk.put(fields[3].astype(cdt))
     top = None if filt[-1] is None else filt[-1].ravel()
-    st = StackOperator(x, y, ux, uy, first, masks, steps, bk.put(ky), bk.put(kx), bk, top, cdt)
-    st.gx, st.gy, st.gkx, st.gky = gx, gy, bk.put(gkx), bk.put(gky)
+    for a, b_, n, gn in ((ky, gky, y.size, gy.size), (kx, gkx, x.size, gx.size)):
+        if in_band_runs(a, n) != in_band_runs(b_, gn):  # the same frequencies on both grids
+            raise ValueError("in-band bins: the operator's grid and the sampling's differ")
+    st = StackOperator(
+        x, y, ux, uy, first, masks, steps, bk.put(ky), bk.put(kx), bk, top, cdt,
+        gx=gx, gy=gy, gkx=bk.put(gkx), gky=bk.put(gky),
+    )  # fmt: skip
     if first is not None:  # the sampling grid's spectra at the operator grid's scale
         sx = sfft.fft(fields[0], axis=0)[kx] * (gx.size / x.size)
         sy = sfft.fft(fields[1], axis=0)[ky] * (gy.size / y.size)
@@ -160,9 +165,11 @@ def coherent_modes(
         missing = float(xp.vdot(y, y).real) / block
         p, v = xp.linalg.eigh(y @ y.conj().T)  # orthonormalise the block (Gram)
         good = p > 1e-24 * max(float(p.max()) if p.size else 0.0, 1e-300)
-        qs.append((v[:, good] / xp.sqrt(p[good])).conj().T @ y)
-        rank += qs[-1].shape[0]
+        if bool(good.any()):  # (a block wholly in the range found adds nothing)
+            qs.append((v[:, good] / xp.sqrt(p[good])).conj().T @ y)
+            rank += qs[-1].shape[0]
     b = xp.concatenate([st.adjoint(qb) for qb in qs])
+    st.bufs.clear()  # the work arrays: not needed by what uses the modes
     q = xp.concatenate(qs)
     bm = b.reshape(q.shape[0], -1).conj()  # B = E^H A, (r, n_src)
     p, v = xp.linalg.eigh(bm @ bm.conj().T)
@@ -184,17 +191,17 @@ def coherent_modes(
     return modes, info
 
 
-#: A second Gram-Schmidt pass where a vector keeps less than this of its norm (one
-#: pass leaves it orthogonal to the range found to ~eps / this; the range finder's
-#: vectors keep ~sqrt(tol) = 1e-3 of theirs).
+#: A second Gram-Schmidt pass over a block where one of its vectors keeps less than this
+#: of its norm (one pass leaves it orthogonal to the range found to ~eps / this; the
+#: range finder's vectors keep ~sqrt(tol) = 1e-3 of theirs).
 REORTH = 1e-5
 
 
 def _project_out(xp, y, qs: list):
     """The rows of ``y`` less their parts in the span of the orthonormal rows of the
     blocks ``qs`` (block classical Gram-Schmidt; y q^H as conj(conj(y) q^T), so that no
-    conjugate copy of q is made); a second pass where a row kept less than
-    :data:`REORTH` of its norm."""
+    conjugate copy of q is made); a second pass over the block where one of its rows
+    kept less than :data:`REORTH` of its norm."""
     if not qs:
         return y
     before = xp.linalg.norm(y, axis=1)

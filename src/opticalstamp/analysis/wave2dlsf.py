@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..design import Design
+from .arrays import fft_workers
 from .wave import LSFSource, one_blas_thread
 from .wave2d import RANGE_TOL, StackModes, stack_modes
 from .wavebase import WaveSampling, stack_axes, wave_sampling
@@ -52,7 +53,7 @@ def marginal_modes(sm: StackModes, axis: int, tol: float):
     full[:, bins] = (v[:, :keep] * np.sqrt(p[:keep] * step)).T
     from scipy import fft as sfft
 
-    u = sfft.ifft(full, axis=-1, norm="ortho", workers=-1).T  # (n, q)
+    u = sfft.ifft(full, axis=-1, norm="ortho", workers=fft_workers()).T  # (n, q)
     return np.ascontiguousarray(u), float(p.sum()) * step * step
 
 

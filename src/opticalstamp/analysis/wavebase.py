@@ -17,6 +17,7 @@ from scipy import special
 from ..design import Design
 from ..raytrace.stack import lattice_of
 from ..validate import InputError
+from .arrays import fft_workers
 
 #: Diffraction orders lambda / w of the smallest hole added to the own path's slopes to
 #: make the default band (see :func:`wave_sampling`).
@@ -327,7 +328,7 @@ def mask_field(x_um: np.ndarray, holes: np.ndarray, band: float, wavelength_um: 
         c = 0.5 * (h[:, 1] + h[:, 0]) - x_um[0]
         nk = nu[keep][:, None]
         a[keep] = (w * np.sinc(w * nk) * np.exp(-2j * np.pi * nk * c)).sum(axis=1)
-    return sfft.ifft(a, workers=-1).real / dx
+    return sfft.ifft(a, workers=fft_workers()).real / dx
 
 
 def in_band(f: np.ndarray, wavelength_um: float, band: float) -> np.ndarray:
@@ -348,7 +349,7 @@ def kernel(n: int, step_um: float, wavelength_um: float, d_um: float, band: floa
 def propagate(u: np.ndarray, h: np.ndarray) -> np.ndarray:
     """Field(s) ``u`` (n, ...) through the transfer function ``h`` (n,) (axis 0)."""
     hh = h.reshape((-1,) + (1,) * (u.ndim - 1))
-    return sfft.ifft(sfft.fft(u, axis=0, workers=-1) * hh, axis=0, workers=-1)
+    return sfft.ifft(sfft.fft(u, axis=0, workers=fft_workers()) * hh, axis=0, workers=fft_workers())
 
 
 def point_sources(
@@ -440,7 +441,7 @@ def band_integral(x: np.ndarray, g: np.ndarray, a: float, b: float) -> np.ndarra
     uniform grid ``x`` (the intensity's band 2B is below the grid's Nyquist rate 3B)."""
     n = x.size
     nu = sfft.fftfreq(n, x[1] - x[0])
-    c = sfft.fft(g, axis=-1, workers=-1) / n
+    c = sfft.fft(g, axis=-1, workers=fft_workers()) / n
     with np.errstate(divide="ignore", invalid="ignore"):
         k = np.exp(2j * np.pi * nu * (b - x[0])) - np.exp(2j * np.pi * nu * (a - x[0]))
         k = np.where(nu == 0, b - a, k / (2j * np.pi * nu))

@@ -38,6 +38,7 @@ import numpy as np
 from scipy import fft as sfft
 from scipy.linalg import blas, solve_triangular
 
+from .arrays import fft_workers
 from .wavebase import Plane, WaveSampling, in_band, object_grid
 
 __all__ = [
@@ -88,7 +89,7 @@ class ObjectSide:
         for a, (g, spec, k) in enumerate(zip(self.grids, self.spectra, self.bins, strict=True)):
             full = np.zeros(spec.shape[:2] + (g.size,), dtype=np.complex128)
             full[..., k % g.size] = spec * self.transfer(a, z_mm)
-            out.append(sfft.ifft(full, axis=-1, workers=-1).transpose(0, 2, 1))
+            out.append(sfft.ifft(full, axis=-1, workers=fft_workers()).transpose(0, 2, 1))
         return out
 
     def terms(self, z_mm: float) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -119,7 +120,7 @@ class ObjectSide:
         n = self.grids[a].size
         full = np.zeros(spec.shape[:-1] + (nc,), dtype=np.complex128) if buf is None else buf
         full[..., self.bins[a] % nc] = spec * (self.transfer(a, z_mm) * (nc / n))
-        return sfft.ifft(full, axis=-1, workers=-1)
+        return sfft.ifft(full, axis=-1, workers=fft_workers())
 
 
 def object_side(
@@ -139,7 +140,7 @@ def object_side(
             u[j, :, off : off + xs.size] = terms[k][a].T
         f = sfft.fftfreq(n, smp.step_um)
         k_in = np.flatnonzero(in_band(f, smp.wavelength_um, smp.band))
-        spec = sfft.fft(u, axis=-1, workers=-1)[..., k_in]
+        spec = sfft.fft(u, axis=-1, workers=fft_workers())[..., k_in]
         grids.append(xf)
         spectra.append(np.ascontiguousarray(spec))
         bins.append(np.where(k_in > n // 2, k_in - n, k_in))
@@ -152,12 +153,12 @@ def _to_fine(lsf_c: np.ndarray, n: int) -> np.ndarray:
     nc = lsf_c.size
     if nc == n:
         return lsf_c
-    c = sfft.rfft(lsf_c, workers=-1)
+    c = sfft.rfft(lsf_c, workers=fft_workers())
     out = np.zeros(n // 2 + 1, dtype=np.complex128)
     out[: c.size] = c
     if nc % 2 == 0:
         out[nc // 2] = 0.0  # the intensities' band ends below the coarse Nyquist bin
-    return sfft.irfft(out, n=n, workers=-1) * (n / nc)
+    return sfft.irfft(out, n=n, workers=fft_workers()) * (n / nc)
 
 
 def _rotation(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -368,7 +369,7 @@ def cell_weights(x: np.ndarray, cell: float) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         k = (np.exp(2j * np.pi * nu * b) - np.exp(2j * np.pi * nu * a)) / (2j * np.pi * nu)
     k = np.where(nu == 0, b - a, k)
-    return (sfft.fft(k, workers=-1) / n).real  # sum_k ghat_k K_k = sum_n g_n w_n
+    return (sfft.fft(k, workers=fft_workers()) / n).real  # sum_k ghat_k K_k = sum_n g_n w_n
 
 
 def _crop(x: np.ndarray, u: np.ndarray, tail: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:

@@ -31,7 +31,7 @@ from scipy import fft as sfft
 from scipy.signal import czt
 
 from ..design import Design
-from .arrays import fft_threads, wave_backend
+from .arrays import fft_threads, fft_workers, wave_backend
 from .spectrum import Spectrum, channels, one_channel
 from .wave import (
     WaveResponse,
@@ -126,7 +126,7 @@ def resample(x: np.ndarray, y: np.ndarray, x_out: np.ndarray, cycles_per_um: flo
     n, dx = x.size, x[1] - x[0]
     period = n * dx
     q = min(n // 2 - 1, int(np.ceil(cycles_per_um * period)) + 1)
-    c = sfft.fft(y, axis=-1, workers=-1) / n
+    c = sfft.fft(y, axis=-1, workers=fft_workers()) / n
     coef = np.concatenate([c[..., n - q :], c[..., : q + 1]], axis=-1)  # k = -q .. q
     s, shift = x_out[1] - x_out[0], x_out[0] - x[0]
     a = np.exp(-2j * np.pi * shift / period)
