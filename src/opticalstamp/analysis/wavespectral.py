@@ -472,7 +472,8 @@ class SpectralLSFSource:
             # thread, so that one's BLAS and copies overlap another's transforms (the
             # circular prototype's 7 sources: 238 s one after the other, 182 s two at a
             # time, 2026-11-27); every source is computed as alone (its own seed and
-            # arrays): the same figures as one after the other.
+            # arrays): the same figures as one after the other (on the CPU to the last
+            # bits that FFTs on one thread and on several may differ in).
             # BLAS held at one thread around the pool: the sources' own limits, entered
             # and left by the threads in any order, then restore 1, and this restores
             # the process's own at the end (not whatever a thread saw on entering)
