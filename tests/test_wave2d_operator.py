@@ -103,7 +103,7 @@ def test_batches_give_the_whole_blocks_operator(circles, propagator, fresnel):
     rng = np.random.default_rng(1)
     st, _ = wave2d._stack(d, (0, 0), smp, propagator, fresnel=fresnel, precision="double")
     assert (st.top is not None) == fresnel and (st.first is not None) == (propagator == "exact")
-    w = rng.standard_normal((5,) + (st.uy.shape[1], st.ux.shape[1])) + 0j
+    w = rng.standard_normal((5, *st.sources)) + 0j
     assert 1 < st.bk.batch < 5  # 5 fields: whole batches and a part
     one, lost1 = st.forward(w, with_power=True)
     back1 = st.adjoint(one)

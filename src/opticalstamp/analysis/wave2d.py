@@ -34,7 +34,7 @@ from scipy import fft as sfft
 from ..design import Design
 from ..raytrace.stack import lattice_of, output_pitch
 from ..validate import InputError
-from .arrays import CPU, Backend, wave_backend
+from .arrays import CPU, Backend, fft_workers, wave_backend
 from .wave2dgrid import Layer, angular_filters, layers_of, mask_field_2d, transfer
 from .wave2dop import StackOperator, in_band_runs, operator_grid
 from .wavebase import (
@@ -84,10 +84,6 @@ def _stack(
     top = layers[-1].reduced
     x, y = stack_grid(src[0], top, smp), stack_grid(src[1], top, smp)
     gx, gy = operator_grid(x, lam, b), operator_grid(y, lam, b)
-    fields = []  # on the sampling's grids (their in-band spectra) and the operator's
-    for g, (lo, hi), npts in zip((x, y, gx, gy), src * 2, smp.source_points * 2, strict=True):
-        x0, w = gauss_legendre(lo, hi, npts)
-        fields.append(point_sources(g, x0, lam * w, lam, layers[0].reduced, b))
 
     def bins(g):
         return np.flatnonzero(in_band(sfft.fftfreq(g.size, g[1] - g[0]), lam, b))
@@ -103,6 +99,15 @@ def _stack(
     if filt[0] is not None:  # a filter commutes with free space: anywhere below mask 1
         first = filt[0] if first is None else first * filt[0]
     first = None if first is None else first.astype(cdt)
+    # the sources: where ``first`` projects them into the band, their in-band spectra on
+    # the sampling's grid (so the operator's grid changes nothing); else their fields
+    # on the operator's grid
+    fields = []
+    for g, (lo, hi), npts in zip(
+        (gx, gy) if first is None else (x, y), src, smp.source_points, strict=True
+    ):
+        x0, w = gauss_legendre(lo, hi, npts)
+        fields.append(point_sources(g, x0, lam * w, lam, layers[0].reduced, b))
     masks = []
     for lay in layers:
         r_i = lay.reduced * b + smp.margin_um + max(max(h.hw, h.hh) for h in lay.holes)
@@ -116,7 +121,7 @@ def _stack(
     for i, lay in enumerate(layers[1:], start=1):
         h = transfer(gx, gy, lay.slabs, lam, b, propagator, bins=(gky, gkx), xp=bk.xp)
         steps.append((h if filt[i] is None else h * filt[i]).astype(cdt))
-    ux, uy = bk.put(fields[2].astype(cdt)), bk.put(fields[3].astype(cdt))
+    ux, uy = (None, None) if first is not None else (bk.put(f.astype(cdt)) for f in fields)
     top = None if filt[-1] is None else filt[-1].ravel()
     for a, b_, n, gn in ((ky, gky, y.size, gy.size), (kx, gkx, x.size, gx.size)):
         if in_band_runs(a, n) != in_band_runs(b_, gn):  # the same frequencies on both grids
@@ -126,8 +131,8 @@ def _stack(
         gx=gx, gy=gy, gkx=bk.put(gkx), gky=bk.put(gky),
     )  # fmt: skip
     if first is not None:  # the sampling grid's spectra at the operator grid's scale
-        sx = sfft.fft(fields[0], axis=0)[kx] * (gx.size / x.size)
-        sy = sfft.fft(fields[1], axis=0)[ky] * (gy.size / y.size)
+        sx = sfft.fft(fields[0], axis=0, workers=fft_workers())[kx] * (gx.size / x.size)
+        sy = sfft.fft(fields[1], axis=0, workers=fft_workers())[ky] * (gy.size / y.size)
         st.sx, st.sy = bk.put(sx.astype(cdt)), bk.put(sy.astype(cdt))
     return st, layers
 
@@ -150,7 +155,7 @@ def coherent_modes(
     """
     bk, xp = st.bk, st.bk.xp
     rng = np.random.default_rng(seed)
-    n0y, n0x = st.uy.shape[1], st.ux.shape[1]
+    n0y, n0x = st.sources
     qs: list = []  # orthonormal rows, block by block
     total, missing, tries, rank = 0.0, np.inf, 0, 0
     lost: list[np.ndarray] = []

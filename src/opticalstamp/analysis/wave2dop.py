@@ -43,7 +43,7 @@ class StackOperator:
     x: np.ndarray
     y: np.ndarray
     ux: object  # (ngx, n0x) source fields at the first mask, x, on the operator grid
-    uy: object  # (ngy, n0y)
+    uy: object  # (ngy, n0y) (both None where ``first`` is given: ``sx``, ``sy`` instead)
     first: object | None  # exact-over-paraxial factor below the first mask (in band)
     masks: list
     steps: list  # transfer to mask i from mask i - 1 (i >= 1), on the in-band bins
@@ -71,6 +71,12 @@ class StackOperator:
             grid = {"kx": self.x, "ky": self.y, "gkx": self.gx, "gky": self.gy}[name]
             self.runs[name] = in_band_runs(self.bk.host(getattr(self, name)), grid.size)
         return self.runs[name]
+
+    @property
+    def sources(self) -> tuple[int, int]:
+        """The source points along y and x, (n0y, n0x)."""
+        a, b = (self.uy, self.ux) if self.first is None else (self.sy, self.sx)
+        return a.shape[1], b.shape[1]
 
     @property
     def scale(self) -> float:
