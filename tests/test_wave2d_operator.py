@@ -154,3 +154,33 @@ def test_gram_t_is_the_product():
     g = arrays.CPU.gram_t(a)
     assert np.abs(g - a.T @ a.conj()).max() < 1e-12 * np.abs(g).max()
     assert np.allclose(g, g.conj().T)
+
+
+def test_add_abs2_on_a_window_of_a_transformed_array():
+    """acc += |u|^2 in one pass (the maps' accumulation), on a strided window of a
+    complex64 array as the maps take it: the sum of the squares in float32 to the bit."""
+    rng = np.random.default_rng(4)
+    w = (rng.standard_normal((7, 40)) + 1j * rng.standard_normal((7, 40))).astype(np.complex64)
+    u = w[:, 5:31]
+    acc = rng.standard_normal(u.shape).astype(np.float32)
+    want = acc + (np.square(u.real) + np.square(u.imag))
+    arrays.CPU.add_abs2(acc, u)
+    assert acc.dtype == np.float32 and np.array_equal(acc, want)
+
+
+def test_column_runs_in_either_order():
+    """The maps' in-band columns as two runs whatever their order (FFT order or centred),
+    and a refusal where a run is broken."""
+    from opticalstamp.analysis.wave2dmaps import _column_runs
+
+    n = 12
+    fft_order = np.array([0, 1, 2, 10, 11])
+    centred = np.array([10, 11, 0, 1, 2])
+    for k in (fft_order, centred):
+        a, b, mid = _column_runs(k, n)
+        src = np.arange(k.size) + 100
+        dst = np.zeros(n, dtype=int)
+        dst[a[1]], dst[b[1]] = src[a[0]], src[b[0]]
+        assert np.array_equal(dst[k], src) and mid == slice(3, 10)
+    with pytest.raises(ValueError, match="runs"):
+        _column_runs(np.array([0, 2, 1, 10, 11]), n)

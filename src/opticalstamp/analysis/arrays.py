@@ -18,6 +18,7 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 from types import ModuleType
 
+import numba as nb
 import numpy as np
 from scipy import fft as sfft
 
@@ -86,6 +87,14 @@ class Backend:
         c = blas.zherk(1.0, np.asarray(a, dtype=np.complex128).T, trans=0, lower=0)
         return np.triu(c) + np.triu(c, 1).conj().T
 
+    def add_abs2(self, acc, u) -> None:
+        """acc += |u|^2 in place (``acc`` real, ``u`` complex, the same shape): on the CPU
+        in one pass without temporaries (a kernel), on a GPU by CuPy."""
+        if self.name == "cuda":
+            acc += u.real * u.real + u.imag * u.imag
+        else:
+            _add_abs2(acc, u)
+
     def j1(self, a):
         """The Bessel function J1 on this backend's arrays."""
         if self.name == "cuda":
@@ -108,6 +117,14 @@ class Backend:
         """Wait for the device's queued work (for timings)."""
         if self.name == "cuda":
             self.xp.cuda.Device().synchronize()
+
+
+@nb.njit(cache=True, nogil=True)
+def _add_abs2(acc, u):  # pragma: no cover - compiled
+    for i in range(u.shape[0]):
+        for j in range(u.shape[1]):
+            v = u[i, j]
+            acc[i, j] += v.real * v.real + v.imag * v.imag
 
 
 CPU = Backend("cpu", np, sfft, batch=4)

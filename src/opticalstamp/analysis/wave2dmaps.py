@@ -46,7 +46,15 @@ from ..raytrace.stack import output_pitch
 from ..validate import InputError
 from .arrays import cupy_found
 from .wave import half_width, one_blas_thread
-from .wave2d import PRECISIONS, RANGE_TOL, StackModes, binned_map, operator_grid, stack_modes
+from .wave2d import (
+    PRECISIONS,
+    RANGE_TOL,
+    StackModes,
+    binned_map,
+    in_band_runs,
+    operator_grid,
+    stack_modes,
+)
 from .wave2dlsf import marginal_modes
 from .wavebase import (
     WaveSampling,
@@ -76,10 +84,11 @@ MAP_TAIL = 1e-6
 #: development machine, by what they scale with: the stack (range finder, 37 CPU-s at
 #: load 1 on 2026-11-27, on its operator grid of 1120^2 points,
 #: :func:`~.wave2d.operator_grid`) per operator-grid point, and a height of maps (about
-#: 90 CPU-s: 486 CPU-s for the stack, the forward transforms and two heights at load
-#: 10-15) per mode and object-grid point (docs/wave.md; :func:`expected_seconds`).
+#: 28 CPU-s: one run at Z = 0 and 4.5 mm took 127 CPU-s, less the stack's 37 and the
+#: marginals' 5, for the forward transforms and two heights, 2026-11-27) per mode and
+#: object-grid point (docs/wave.md; :func:`expected_seconds`).
 CPU_S_PER_STACK_POINT = 37.0 / 1120**2
-CPU_S_PER_MODE_POINT = 90.0 / (86 * 6750**2)
+CPU_S_PER_MODE_POINT = 28.0 / (86 * 6750**2)
 PROTOTYPE_MODES = 86
 PROTOTYPE_POINTS = 39  # its Gauss-Legendre source points per axis
 
@@ -307,12 +316,31 @@ def wave_maps_2d(
     )
 
 
+def _column_runs(k: np.ndarray, n: int):
+    """The in-band bins ``k`` (in their order, each in [0, n)) as two runs: for the bins
+    0..p-1 and n-q..n-1, (slice of their positions in ``k``, slice of the bins), and the
+    slice of the bins between them (0 there)."""
+    p, q = in_band_runs(np.sort(k), n)
+    out = []
+    for lo, hi in ((0, p), (n - q, n)):
+        pos = np.flatnonzero((k >= lo) & (k < hi))
+        together = not pos.size or pos[-1] - pos[0] + 1 == pos.size
+        if not together or not np.array_equal(k[pos], np.arange(lo, hi)):
+            raise ValueError("in-band bins: not two runs in order")
+        start = int(pos[0]) if pos.size else 0
+        out.append((slice(start, start + pos.size), slice(lo, hi)))
+    return out[0], out[1], slice(p, n - q)
+
+
 def _intensities(sm: StackModes, side, zs: np.ndarray, wins, precision: str, bar) -> list:
     """sum_m |u_m(X, Y; Z)|^2 on each height's window (host arrays, um^2 sr per um^2, in
     the precision's real type: float32 sums of 86 modes are good to ~1e-7):
     each mode's spectrum on the object grid once (pruned transforms), then at each Z the
     paraxial transfer function, back along y on the in-band columns and along x on the
-    window's rows."""
+    window's rows. The transforms run in place in work arrays made once (a fresh array
+    of the largest window, up to 290 MB at 4.5 mm, was page-faulted in anew for each
+    mode and height: 0.7 s against 0.1 s for its transform), and |u|^2 is added in one
+    pass (:meth:`~.arrays.Backend.add_abs2`)."""
     st, bk, xp = sm.stack, sm.bk, sm.bk.xp
     cdt, rdt = PRECISIONS[precision]
     smp = sm.sampling
@@ -320,24 +348,37 @@ def _intensities(sm: StackModes, side, zs: np.ndarray, wins, precision: str, bar
     ox = int(round((st.x[0] - xf[0]) / step))
     oy = int(round((st.y[0] - yf[0]) / step))
     kx, ky = side.bins[0] % xf.size, side.bins[1] % yf.size  # in-band bins
+    runs = _column_runs(kx, xf.size)  # where each run of in-band bins lies among them
     hx = [bk.put(side.transfer(0, float(z)).astype(cdt)) for z in zs]
     hy = [bk.put(side.transfer(1, float(z)).astype(cdt)) for z in zs]
-    kx_d, ky_d = bk.put(kx), bk.put(ky)
+    ky_d = bk.put(ky)
     rows = xp.zeros((st.y.size, xf.size), dtype=cdt)  # the stack's rows on the object grid
     cols = xp.zeros((yf.size, kx.size), dtype=cdt)  # in-band columns: the stack's rows
     back = xp.zeros((yf.size, kx.size), dtype=cdt)  # in-band columns: the in-band rows
-    outs = [xp.zeros((wy.stop - wy.start, xf.size), dtype=cdt) for _, wy in wins]
+    n_wy = max(wy.stop - wy.start for _, wy in wins)
+    work = xp.empty((n_wy, xf.size), dtype=cdt)  # a window's rows, transformed in place
+    tall = xp.empty((yf.size, kx.size), dtype=cdt)  # back, transformed in place
     acc = [xp.zeros((wy.stop - wy.start, wx.stop - wx.start), dtype=rdt) for wx, wy in wins]
     n_modes = sm.modes.shape[0]
     for m in sm.modes:
+        rows[:, :ox] = 0  # (the transform in place wrote there)
         rows[:, ox : ox + st.x.size] = st.field(m)
-        cols[oy : oy + st.y.size] = bk.fft(rows, axis=-1)[:, kx_d]
-        spec = bk.fft(cols, axis=0)[ky_d]  # (ny_in, nx_in)
+        rows[:, ox + st.x.size :] = 0
+        r = bk.fft(rows, axis=-1, overwrite=True)
+        c = cols[oy : oy + st.y.size]
+        c[:, runs[0][0]] = r[:, runs[0][1]]
+        c[:, runs[1][0]] = r[:, runs[1][1]]
+        tall[...] = cols
+        spec = bk.fft(tall, axis=0, overwrite=True)[ky_d]  # (ny_in, nx_in)
         for i, (wx, wy) in enumerate(wins):
             back[ky_d] = spec * hy[i][:, None] * hx[i][None, :]
-            outs[i][:, kx_d] = bk.ifft(back, axis=0)[wy]
-            u = bk.ifft(outs[i], axis=-1)[:, wx]
-            acc[i] += xp.square(u.real) + xp.square(u.imag)
+            tall[...] = back
+            b = bk.ifft(tall, axis=0, overwrite=True)[wy]  # the window's rows, in band
+            w = work[: wy.stop - wy.start]
+            w[:, runs[0][1]] = b[:, runs[0][0]]
+            w[:, runs[1][1]] = b[:, runs[1][0]]
+            w[:, runs[2]] = 0
+            bk.add_abs2(acc[i], bk.ifft(w, axis=-1, overwrite=True)[:, wx])
         if bar is not None:
             bar.update(zs.size / n_modes)
     return [bk.host(a) for a in acc]
