@@ -168,19 +168,23 @@ def test_add_abs2_on_a_window_of_a_transformed_array():
     assert acc.dtype == np.float32 and np.array_equal(acc, want)
 
 
-def test_column_runs_in_either_order():
-    """The maps' in-band columns as two runs whatever their order (FFT order or centred),
-    and a refusal where a run is broken."""
-    from opticalstamp.analysis.wave2dmaps import _column_runs
+def test_gather_and_scatter_move_the_in_band_bins_as_their_runs():
+    """The in-band bins taken out of an axis and put back (the operator's and the maps'
+    pruned transforms) as the fancy indexing by the bins does it, 0 between the runs,
+    into work arrays given or new ones."""
+    from opticalstamp.analysis.wave2dop import gather_bins, scatter_bins
 
-    n = 12
-    fft_order = np.array([0, 1, 2, 10, 11])
-    centred = np.array([10, 11, 0, 1, 2])
-    for k in (fft_order, centred):
-        a, b, mid = _column_runs(k, n)
-        src = np.arange(k.size) + 100
-        dst = np.zeros(n, dtype=int)
-        dst[a[1]], dst[b[1]] = src[a[0]], src[b[0]]
-        assert np.array_equal(dst[k], src) and mid == slice(3, 10)
-    with pytest.raises(ValueError, match="runs"):
-        _column_runs(np.array([0, 2, 1, 10, 11]), n)
+    rng = np.random.default_rng(5)
+    n, k = 12, np.array([0, 1, 2, 10, 11])
+    runs = wave2d.in_band_runs(k, n)
+    a = rng.standard_normal((3, n, 4)) + 1j * rng.standard_normal((3, n, 4))
+    got = gather_bins(np, a, runs, -2)
+    assert np.array_equal(got, a[:, k, :])
+    out = np.full((3, k.size, 4), np.nan + 0j)
+    assert gather_bins(np, a, runs, -2, out=out) is out and np.array_equal(out, got)
+    want = np.zeros_like(a)
+    want[:, k, :] = got
+    work = np.full_like(a, np.nan)
+    assert np.array_equal(scatter_bins(np, got, runs, n, -2), want)
+    assert scatter_bins(np, got, runs, n, -2, out=work) is work
+    assert np.array_equal(work, want)

@@ -123,12 +123,15 @@ def _stack(
         steps.append((h if filt[i] is None else h * filt[i]).astype(cdt))
     ux, uy = (None, None) if first is not None else (bk.put(f.astype(cdt)) for f in fields)
     top = None if filt[-1] is None else filt[-1].ravel()
-    for a, b_, n, gn in ((ky, gky, y.size, gy.size), (kx, gkx, x.size, gx.size)):
-        if in_band_runs(a, n) != in_band_runs(b_, gn):  # the same frequencies on both grids
-            raise ValueError("in-band bins: the operator's grid and the sampling's differ")
+    runs = {
+        name: in_band_runs(k, g.size)
+        for name, k, g in (("kx", kx, x), ("ky", ky, y), ("gkx", gkx, gx), ("gky", gky, gy))
+    }
+    if runs["kx"] != runs["gkx"] or runs["ky"] != runs["gky"]:  # the same frequencies
+        raise ValueError("in-band bins: the operator's grid and the sampling's differ")
     st = StackOperator(
         x, y, ux, uy, first, masks, steps, bk.put(ky), bk.put(kx), bk, top, cdt,
-        gx=gx, gy=gy, gkx=bk.put(gkx), gky=bk.put(gky),
+        gx=gx, gy=gy, gkx=bk.put(gkx), gky=bk.put(gky), runs=runs,
     )  # fmt: skip
     if first is not None:  # the sampling grid's spectra at the operator grid's scale
         sx = sfft.fft(fields[0], axis=0, workers=fft_workers())[kx] * (gx.size / x.size)

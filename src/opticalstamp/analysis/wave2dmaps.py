@@ -51,11 +51,11 @@ from .wave2d import (
     RANGE_TOL,
     StackModes,
     binned_map,
-    in_band_runs,
     operator_grid,
     stack_modes,
 )
 from .wave2dlsf import marginal_modes
+from .wave2dop import gather_bins, in_band_runs, scatter_bins
 from .wavebase import (
     WaveSampling,
     object_grid,
@@ -316,22 +316,6 @@ def wave_maps_2d(
     )
 
 
-def _column_runs(k: np.ndarray, n: int):
-    """The in-band bins ``k`` (in their order, each in [0, n)) as two runs: for the bins
-    0..p-1 and n-q..n-1, (slice of their positions in ``k``, slice of the bins), and the
-    slice of the bins between them (0 there)."""
-    p, q = in_band_runs(np.sort(k), n)
-    out = []
-    for lo, hi in ((0, p), (n - q, n)):
-        pos = np.flatnonzero((k >= lo) & (k < hi))
-        together = not pos.size or pos[-1] - pos[0] + 1 == pos.size
-        if not together or not np.array_equal(k[pos], np.arange(lo, hi)):
-            raise ValueError("in-band bins: not two runs in order")
-        start = int(pos[0]) if pos.size else 0
-        out.append((slice(start, start + pos.size), slice(lo, hi)))
-    return out[0], out[1], slice(p, n - q)
-
-
 def _intensities(sm: StackModes, side, zs: np.ndarray, wins, precision: str, bar) -> list:
     """sum_m |u_m(X, Y; Z)|^2 on each height's window (host arrays, um^2 sr per um^2, in
     the precision's real type: float32 sums of 86 modes are good to ~1e-7):
@@ -348,7 +332,7 @@ def _intensities(sm: StackModes, side, zs: np.ndarray, wins, precision: str, bar
     ox = int(round((st.x[0] - xf[0]) / step))
     oy = int(round((st.y[0] - yf[0]) / step))
     kx, ky = side.bins[0] % xf.size, side.bins[1] % yf.size  # in-band bins
-    runs = _column_runs(kx, xf.size)  # where each run of in-band bins lies among them
+    runs = in_band_runs(kx, xf.size)  # the in-band columns (FFT order) as two runs
     hx = [bk.put(side.transfer(0, float(z)).astype(cdt)) for z in zs]
     hy = [bk.put(side.transfer(1, float(z)).astype(cdt)) for z in zs]
     ky_d = bk.put(ky)
@@ -365,19 +349,14 @@ def _intensities(sm: StackModes, side, zs: np.ndarray, wins, precision: str, bar
         rows[:, ox : ox + st.x.size] = st.field(m)
         rows[:, ox + st.x.size :] = 0
         r = bk.fft(rows, axis=-1, overwrite=True)
-        c = cols[oy : oy + st.y.size]
-        c[:, runs[0][0]] = r[:, runs[0][1]]
-        c[:, runs[1][0]] = r[:, runs[1][1]]
+        gather_bins(xp, r, runs, -1, out=cols[oy : oy + st.y.size])
         tall[...] = cols
         spec = bk.fft(tall, axis=0, overwrite=True)[ky_d]  # (ny_in, nx_in)
         for i, (wx, wy) in enumerate(wins):
             back[ky_d] = spec * hy[i][:, None] * hx[i][None, :]
             tall[...] = back
             b = bk.ifft(tall, axis=0, overwrite=True)[wy]  # the window's rows, in band
-            w = work[: wy.stop - wy.start]
-            w[:, runs[0][1]] = b[:, runs[0][0]]
-            w[:, runs[1][1]] = b[:, runs[1][0]]
-            w[:, runs[2]] = 0
+            w = scatter_bins(xp, b, runs, xf.size, -1, out=work[: wy.stop - wy.start])
             bk.add_abs2(acc[i], bk.ifft(w, axis=-1, overwrite=True)[:, wx])
         if bar is not None:
             bar.update(zs.size / n_modes)

@@ -14,7 +14,7 @@ from scipy import fft as sfft
 from .arrays import CPU, Backend
 from .wavebase import in_band
 
-__all__ = ["StackOperator", "in_band_runs", "operator_grid"]
+__all__ = ["StackOperator", "gather_bins", "in_band_runs", "operator_grid", "scatter_bins"]
 
 
 @dataclass
@@ -109,8 +109,8 @@ class StackOperator:
         xp, bk = self.bk.xp, self.bk
         half = self._buf("half", f.shape[0], (self.gy.size, self.gkx.size))
         a = bk.fft(f, axis=-1, norm=norm, overwrite=True)
-        a = _gather(xp, a, self._run("gkx"), -1, out=half)
-        return _gather(xp, bk.fft(a, axis=-2, norm=norm, overwrite=True), self._run("gky"), -2)
+        a = gather_bins(xp, a, self._run("gkx"), -1, out=half)
+        return gather_bins(xp, bk.fft(a, axis=-2, norm=norm, overwrite=True), self._run("gky"), -2)
 
     def _field(self, s, norm: str | None = None, fine: bool = False):
         """In-band spectra (k, ny_in, nx_in) -> the fields (k, ngy, ngx) on the operator
@@ -120,10 +120,10 @@ class StackOperator:
         x, y, kx, ky = ("x", "y", "kx", "ky") if fine else ("gx", "gy", "gkx", "gky")
         nx, ny, k = getattr(self, x).size, getattr(self, y).size, s.shape[0]
         half = None if fine else self._buf("half", k, (ny, s.shape[-1]))
-        a = _scatter(xp, s, self._run(ky), ny, -2, out=half)
+        a = scatter_bins(xp, s, self._run(ky), ny, -2, out=half)
         a = bk.ifft(a, axis=-2, norm=norm, overwrite=True)
         full = None if fine else self._buf("full", k, (ny, nx))
-        a = _scatter(xp, a, self._run(kx), nx, -1, out=full)
+        a = scatter_bins(xp, a, self._run(kx), nx, -1, out=full)
         return bk.ifft(a, axis=-1, norm=norm, overwrite=True)
 
     def _batches(self, fn, a):
@@ -213,7 +213,7 @@ def in_band_runs(k, n: int) -> tuple[int, int]:
     return p, q
 
 
-def _gather(xp, a, runs: tuple[int, int], axis: int, out=None):
+def gather_bins(xp, a, runs: tuple[int, int], axis: int, out=None):
     """``a`` on the in-band bins along ``axis`` (their two ``runs``, copied; into
     ``out`` where given)."""
     p, q = runs
@@ -227,7 +227,7 @@ def _gather(xp, a, runs: tuple[int, int], axis: int, out=None):
     return out
 
 
-def _scatter(xp, s, runs: tuple[int, int], n: int, axis: int, out=None):
+def scatter_bins(xp, s, runs: tuple[int, int], n: int, axis: int, out=None):
     """In-band values ``s`` (bins of ``runs`` along ``axis``) on all ``n`` bins, 0
     elsewhere (into ``out`` where given)."""
     p, q = runs
