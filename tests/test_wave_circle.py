@@ -4,6 +4,7 @@ array backend (:mod:`opticalstamp.analysis.arrays`)."""
 
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 
 import numpy as np
@@ -241,7 +242,10 @@ def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypat
 
     def direct(fn, *args):  # the stream is CuPy's; the threads and contexts are tested
         seen.append(run_device())
+        ran_on.append(threading.current_thread())
         return fn(*args)
+
+    ran_on = []
 
     monkeypatch.setattr(wavespectral, "_on_gpu", lambda design: True)
     monkeypatch.setattr(wavespectral, "_on_stream", direct)
@@ -249,6 +253,10 @@ def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypat
     with using_device("cpu"):
         side = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
     assert seen == ["cpu"] * 2  # each thread ran in the run's context
+    # on a GPU the threads are the process's kept pool, alive after the call (their
+    # CuPy FFT plans kept for the next)
+    kept = wavespectral._gpu_threads(2)
+    assert all(t in kept._threads and t.is_alive() for t in ran_on)
     assert [lib["num_threads"] for lib in threadpool_info()] == before
     a, c = one.lsf_x(ZS), two.lsf_x(ZS)
     assert np.array_equal(a[1], c[1]) and a[2] == c[2]
