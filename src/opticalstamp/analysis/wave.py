@@ -45,6 +45,7 @@ import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from scipy.linalg import blas
 from threadpoolctl import ThreadpoolController
 
 from ..design import Design
@@ -70,6 +71,7 @@ from .wavebase import (
 from .wavefilter import separable_filter
 from .waveobject import (
     ObjectSide,
+    hermitian,
     lsf_x_from,
     marginals_at,
     object_side,
@@ -122,7 +124,7 @@ def _compress(fields: list[np.ndarray], tol: float) -> list[np.ndarray]:
     if not fields:
         return fields
     a = np.concatenate(fields, axis=0)  # (J n, m)
-    g = a.conj().T @ a
+    g = hermitian(blas.zherk(1.0, a.T).conj())  # a^T conj(a) = conj(a^H a), upper: zherk
     p, v = np.linalg.eigh(g)
     p, v = p[::-1], v[:, ::-1]
     p = np.clip(p, 0.0, None)
@@ -459,7 +461,7 @@ def _stack(design: Design, pixel, smp: WaveSampling, fresnel: bool = False, budg
     fields = []
     for ax, npts in zip(axes, smp.source_points, strict=True):
         x0, w = gauss_legendre(*ax.plane.source, npts)
-        fields.append(point_sources(ax.x, x0, lam * w, lam, ax.plane.heights[0], b))
+        fields.append(_sources(ax.x, x0, lam * w, lam, float(ax.plane.heights[0]), b))
     terms = {(): (fields[0], fields[1])}
     if filters[0] is not None:  # the acceptance cone and the interfaces below mask 0
         terms = _step_terms(terms, axes, smp, 0.0, filters[0], 0)
@@ -490,6 +492,22 @@ def _stack(design: Design, pixel, smp: WaveSampling, fresnel: bool = False, budg
         rec["modes"] = (int(cx[0].shape[1]), int(cy[0].shape[1])) if keys else (0, 0)
         budget.append(rec)
     return terms, axes, budget, filters
+
+
+def _sources(x, x0, w, lam: float, d: float, band: float) -> np.ndarray:
+    """:func:`~.wavebase.point_sources`, read-only, the last few kept: the designs of a
+    fit's Jacobian or a tolerance study that leave the grid, the sensitive area and the
+    first gap as they are (most of them) reuse the Fresnel integrals (a tenth of a run)."""
+    args = (np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(x0, dtype=np.float64))
+    args += (np.ascontiguousarray(w, dtype=np.float64),)
+    return _sources_of(*(a.tobytes() for a in args), float(lam), float(d), float(band))
+
+
+@functools.lru_cache(maxsize=8)
+def _sources_of(x: bytes, x0: bytes, w: bytes, lam: float, d: float, band: float):
+    u = point_sources(*(np.frombuffer(v) for v in (x, x0, w)), lam, d, band)
+    u.flags.writeable = False
+    return u
 
 
 def _step_terms(

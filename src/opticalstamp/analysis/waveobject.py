@@ -352,10 +352,19 @@ def _eig_modes(a: np.ndarray, tol: float) -> np.ndarray:
 
 def _gram_rows(a: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
     """G[j, l] = sum_n a[j, n] conj(a[l, n]) (times weight[n]) for a (J, n), in one BLAS
-    call."""
+    call: unweighted by ``zherk`` (half the products; G Hermitian to the last bit)."""
     b = a.T  # (n, J), Fortran-ordered view
-    c = b if weight is None else (a * weight[None, :]).T
-    return blas.zgemm(1.0, b, c, trans_a=2).T  # (b^H c)[l, j] = G[j, l]
+    if weight is None:
+        return hermitian(blas.zherk(1.0, b, trans=2).conj())  # b^H b = conj(G), upper
+    return blas.zgemm(1.0, b, (a * weight[None, :]).T, trans_a=2).T  # (b^H c)[l, j]
+
+
+def hermitian(upper: np.ndarray) -> np.ndarray:
+    """The Hermitian matrix whose upper triangle (diagonal included) is ``upper``'s (in
+    place)."""
+    lower = np.tril_indices(upper.shape[0], -1)
+    upper[lower] = upper.T[lower].conj()
+    return upper
 
 
 def cell_weights(x: np.ndarray, cell: float) -> np.ndarray:
