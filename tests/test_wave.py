@@ -368,3 +368,35 @@ def test_wave_command(tmp_path):
     assert len(data["wave"]["rmtf"]) == len(data["ray"]["fwhm_x_um"]) == 2
     assert [round(f["fresnel_number"], 2) for f in data["fresnel"]] == [1.62, 2.76, 1.59, 1.05]
     assert png.stat().st_size > 0
+
+
+def test_kept_point_sources_are_the_closed_forms_own_and_follow_their_inputs():
+    """The separable stack's point sources, kept between runs (wave._sources): equal to
+    wavebase.point_sources for the same inputs, read-only, and computed anew for another
+    first gap or sensitive area (not a stale entry)."""
+    x = np.linspace(-40.0, 40.0, 801)
+    x0, w = wavebase.gauss_legendre(-4.0, 4.0, 9)
+    for d, lo in ((120.0, -4.0), (121.0, -4.0), (120.0, -3.0)):
+        x0, w = wavebase.gauss_legendre(lo, 4.0, 9)
+        kept = wave._sources(x, x0, 0.5 * w, 0.5, d, 0.2)
+        assert not kept.flags.writeable
+        assert np.array_equal(kept, wavebase.point_sources(x, x0, 0.5 * w, 0.5, d, 0.2))
+        assert wave._sources(x, x0, 0.5 * w, 0.5, d, 0.2) is kept  # kept: the same array
+
+
+def test_hermitian_grams_equal_the_matrix_products():
+    """The Gram matrices by zherk (waveobject._gram_rows, the stack's mode compression)
+    equal a a^H and a^H a to rounding and are Hermitian to the last bit."""
+    from opticalstamp.analysis.waveobject import _gram_rows
+
+    rng = np.random.default_rng(5)
+    a = rng.standard_normal((7, 300)) + 1j * rng.standard_normal((7, 300))
+    g = _gram_rows(a)
+    np.testing.assert_allclose(g, a @ a.conj().T, rtol=1e-13, atol=1e-12)
+    assert np.array_equal(g, g.conj().T)
+    fields = [a[:, :40].T.copy(), a[:, 40:90].T.copy()]  # (n_j, m) with m = 7 modes
+    c = wave._compress(fields, 0.0)  # every mode kept: the same Gram matrices
+    assert c[0].shape[1] == 7
+    for i, u in enumerate(fields):
+        for j, v in enumerate(fields):
+            np.testing.assert_allclose(c[i] @ c[j].conj().T, u @ v.conj().T, atol=1e-11)

@@ -495,15 +495,15 @@ def _stack(design: Design, pixel, smp: WaveSampling, fresnel: bool = False, budg
 
 
 def _sources(x, x0, w, lam: float, d: float, band: float) -> np.ndarray:
-    """:func:`~.wavebase.point_sources`, read-only, the last few kept: the designs of a
-    fit's Jacobian or a tolerance study that leave the grid, the sensitive area and the
-    first gap as they are (most of them) reuse the Fresnel integrals (a tenth of a run)."""
-    args = (np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(x0, dtype=np.float64))
-    args += (np.ascontiguousarray(w, dtype=np.float64),)
-    return _sources_of(*(a.tobytes() for a in args), float(lam), float(d), float(band))
+    """:func:`~.wavebase.point_sources`, read-only, the last 16 kept (both axes of a
+    design in white light's 7 wavelengths): the designs of a fit's Jacobian or a tolerance
+    study that leave the grid, the sensitive area and the first gap as they are (most of
+    them) reuse the Fresnel integrals (a tenth of a run)."""
+    keys = (np.ascontiguousarray(a, dtype=np.float64).tobytes() for a in (x, x0, w))
+    return _sources_of(*keys, float(lam), float(d), float(band))
 
 
-@functools.lru_cache(maxsize=8)
+@functools.lru_cache(maxsize=16)  # a few MB each on the presets' grids
 def _sources_of(x: bytes, x0: bytes, w: bytes, lam: float, d: float, band: float):
     u = point_sources(*(np.frombuffer(v) for v in (x, x0, w)), lam, d, band)
     u.flags.writeable = False
