@@ -375,13 +375,14 @@ def test_kept_point_sources_are_the_closed_forms_own_and_follow_their_inputs():
     wavebase.point_sources for the same inputs, read-only, and computed anew for another
     first gap or sensitive area (not a stale entry)."""
     x = np.linspace(-40.0, 40.0, 801)
-    x0, w = wavebase.gauss_legendre(-4.0, 4.0, 9)
-    for d, lo in ((120.0, -4.0), (121.0, -4.0), (120.0, -3.0)):
+    cases = [(x, 120.0, -4.0, 0.5, 0.2), (x, 121.0, -4.0, 0.5, 0.2), (x, 120.0, -3.0, 0.5, 0.2)]
+    cases += [(x, 120.0, -4.0, 0.6, 0.2), (x, 120.0, -4.0, 0.5, 0.25), (x[1:], 120, -4.0, 0.5, 0.2)]
+    for g, d, lo, lam, b in cases:
         x0, w = wavebase.gauss_legendre(lo, 4.0, 9)
-        kept = wave._sources(x, x0, 0.5 * w, 0.5, d, 0.2)
+        kept = wave._sources(g, x0, lam * w, lam, d, b)
         assert not kept.flags.writeable
-        assert np.array_equal(kept, wavebase.point_sources(x, x0, 0.5 * w, 0.5, d, 0.2))
-        assert wave._sources(x, x0, 0.5 * w, 0.5, d, 0.2) is kept  # kept: the same array
+        assert np.array_equal(kept, wavebase.point_sources(g, x0, lam * w, lam, d, b))
+        assert wave._sources(g, x0, lam * w, lam, d, b) is kept  # kept: the same array
 
 
 def test_hermitian_grams_equal_the_matrix_products():
@@ -394,9 +395,13 @@ def test_hermitian_grams_equal_the_matrix_products():
     g = _gram_rows(a)
     np.testing.assert_allclose(g, a @ a.conj().T, rtol=1e-13, atol=1e-12)
     assert np.array_equal(g, g.conj().T)
-    fields = [a[:, :40].T.copy(), a[:, 40:90].T.copy()]  # (n_j, m) with m = 7 modes
-    c = wave._compress(fields, 0.0)  # every mode kept: the same Gram matrices
-    assert c[0].shape[1] == 7
+    # fields (n_j, 7) of rank 3 together: compressed to 3 modes with the same Grams (a
+    # wrong Gram of the columns would keep other directions and lose light)
+    # their modes span 3 of the 7 columns' (complex) directions
+    mix = rng.standard_normal((3, 7)) + 1j * rng.standard_normal((3, 7))
+    fields = [a[:3, :40].T @ mix, a[:3, 40:90].T @ mix]
+    c = wave._compress(fields, 1e-12)
+    assert c[0].shape[1] == 3
     for i, u in enumerate(fields):
         for j, v in enumerate(fields):
             np.testing.assert_allclose(c[i] @ c[j].conj().T, u @ v.conj().T, atol=1e-11)

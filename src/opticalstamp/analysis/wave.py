@@ -499,13 +499,13 @@ def _sources(x, x0, w, lam: float, d: float, band: float) -> np.ndarray:
     design in white light's 7 wavelengths): the designs of a fit's Jacobian or a tolerance
     study that leave the grid, the sensitive area and the first gap as they are (most of
     them) reuse the Fresnel integrals (a tenth of a run)."""
-    keys = (np.ascontiguousarray(a, dtype=np.float64).tobytes() for a in (x, x0, w))
+    keys = (np.ascontiguousarray(a, dtype=np.float64).ravel().tobytes() for a in (x, x0, w))
     return _sources_of(*keys, float(lam), float(d), float(band))
 
 
 @functools.lru_cache(maxsize=16)  # a few MB each on the presets' grids
 def _sources_of(x: bytes, x0: bytes, w: bytes, lam: float, d: float, band: float):
-    u = point_sources(*(np.frombuffer(v) for v in (x, x0, w)), lam, d, band)
+    u = point_sources(*(np.frombuffer(v) for v in (x, x0, w)), lam, d, band)  # 1-D each
     u.flags.writeable = False
     return u
 

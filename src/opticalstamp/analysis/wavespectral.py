@@ -8,11 +8,11 @@ catalogue takes its index at lambda_i (dispersion; a plain number stays a number
 the band, margin and source points follow lambda_i by :func:`~.wavebase.wave_sampling`'s
 rules, each on its own grid; the line-spread functions (band-limited below 2B / lambda)
 are summed on one grid, the union of theirs at the finest step, by exact band-limited
-(Fourier series) interpolation. A light of one
-wavelength ("mono", the design's ``wavelength_um``) gives :func:`~.wave.wave_response`'s
-figures exactly. Holes that are not rectangles (circles) take the 2-D path at each
-wavelength (:func:`response_at`, :func:`~.wave2dmaps.wave_maps_2d`): the same figures and
-maps, so that no analysis needs to know which path gave them.
+(Fourier series) interpolation. A light of one wavelength ("mono", the design's
+``wavelength_um``) gives :func:`~.wave.wave_response`'s figures exactly. Holes that are
+not rectangles (circles) take the 2-D path at each wavelength (:func:`response_at`,
+:func:`~.wave2dmaps.wave_maps_2d`): the same figures and maps, so that no analysis needs
+to know which path gave them.
 
 R, G and B LEDs lit in turn ("rgb") are three channels, one responsivity each
 (:func:`wave_response_channels`).
@@ -25,7 +25,7 @@ import contextvars
 import functools
 import math
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -468,24 +468,23 @@ class SpectralLSFSource:
         gpu = _on_gpu(design)
         n = len(jobs) if gpu else min(len(jobs), _cores(), CPU_SIDE_BY_SIDE)
         if len(jobs) > 1 and not rectangular(design) and n > 1:
-            # the 2-D path: each wavelength in a thread of its own, on a GPU on a stream
-            # of its own, so that one's host work (set-up, object side) overlaps
-            # another's transforms; on the CPU a few at a time, each with its FFTs on one
-            # thread, so that one's BLAS and copies overlap another's transforms (the
-            # circular prototype's 7 sources: 238 s one after the other, 182 s two at a
-            # time, 2026-11-27); every source is computed as alone (its own seed and
-            # arrays): the same figures as one after the other (on the CPU to the last
-            # bits that FFTs on one thread and on several may differ in).
-            # BLAS held at one thread around the pool: the sources' own limits, entered
-            # and left by the threads in any order, then restore 1, and this restores
-            # the process's own at the end (not whatever a thread saw on entering)
-            # on a GPU the threads are kept (_gpu_threads: CuPy's FFT plans, per thread)
+            # the 2-D path: each wavelength in a thread (a GPU's kept, _gpu_threads) on a
+            # stream of its own, one's host work overlapping another's transforms; on the
+            # CPU a few at a time, FFTs on one thread each, one's BLAS and copies
+            # overlapping another's transforms (the circular prototype's 7: 238 -> 182 s,
+            # 2026-11-27); each computed as alone (its seed, its arrays): the figures of
+            # one after the other (on the CPU to the last bits of FFTs on 1 and 2
+            # threads). BLAS at one thread around the pool: the sources' own limits,
+            # left in any order, restore 1, and this restores the process's at the end
             run = _on_stream if gpu else _one_fft_thread
             with one_blas_thread(), _pool(n, gpu) as pool:
                 runs = [  # each in a copy of this context: the run's device goes along
                     pool.submit(contextvars.copy_context().run, run, one, *job) for job in jobs
                 ]
-                sources = [r.result() for r in runs]
+                try:  # none left running on a kept thread where one fails
+                    sources = [r.result() for r in runs]
+                finally:
+                    wait(runs)
         else:
             sources = [one(lam, s) for lam, s in jobs]
         cyc = [2 * s.band / s.wavelength_um for s in smps]
@@ -505,8 +504,8 @@ def _on_gpu(design: Design) -> bool:
     return not rectangular(design) and wave_backend(None)[0].name == "cuda"
 
 
-#: Wavelengths of the 2-D path run side by side on the CPU, at most (each holds its
-#: range finder's basis, up to 1 GB at the prototype's shortest wavelength).
+#: Wavelengths of the 2-D path side by side on the CPU, at most (each holds its range
+#: finder's basis, up to 1 GB at the prototype's shortest wavelength).
 CPU_SIDE_BY_SIDE = 2
 
 
@@ -517,8 +516,7 @@ def _cores() -> int:
 
 @contextlib.contextmanager
 def _pool(n: int, gpu: bool):
-    """A pool of ``n`` threads: on a GPU the process's kept one (:func:`_gpu_threads`),
-    left running; on the CPU a fresh one, joined on leaving."""
+    """``n`` threads: on a GPU the process's kept ones (:func:`_gpu_threads`), else new."""
     if gpu:
         yield _gpu_threads(n)
         return
@@ -529,8 +527,9 @@ def _pool(n: int, gpu: bool):
 @functools.lru_cache(maxsize=4)
 def _gpu_threads(n: int) -> ThreadPoolExecutor:
     """The process's pool of ``n`` threads for wavelengths on a GPU, made once: CuPy
-    caches FFT plans per thread, and fresh threads made and destroyed them at every call
-    (cudaFree amid the other streams' work: 1.86 -> 1.47 s in white light, an H100)."""
+    caches FFT plans per thread (kept, with their work areas, while the process lives),
+    and fresh threads made and destroyed them at every call (1.86 -> 1.47 s in white
+    light, an H100)."""
     return ThreadPoolExecutor(max_workers=n, thread_name_prefix="opticalstamp-wave-gpu")
 
 
