@@ -24,7 +24,7 @@ from scipy import fft as sfft
 
 from ..device import DeviceUnavailable, run_device
 
-__all__ = ["Backend", "backend", "fft_threads", "fft_workers", "wave_backend"]
+__all__ = ["Backend", "backend", "fft_threads", "fft_workers", "gram_rows", "wave_backend"]
 
 #: Threads of the CPU's FFTs in the work in progress (-1: every core). A context
 #: variable, local to a thread and undone on leaving :func:`fft_threads`: work run side
@@ -78,14 +78,11 @@ class Backend:
         return self._fft.ifft2(a, norm=norm, **self._kw())
 
     def gram_t(self, a):
-        """a^T conj(a) of a 2-D complex array (Hermitian): on the CPU by BLAS's zherk,
-        half the products of a matrix product."""
+        """a^T conj(a) of a 2-D complex array (Hermitian): on the CPU by BLAS's zherk
+        (:func:`gram_rows`), half the products of a matrix product."""
         if self.name == "cuda":
             return a.T @ a.conj()
-        from scipy.linalg import blas
-
-        c = blas.zherk(1.0, np.asarray(a, dtype=np.complex128).T, trans=0, lower=0)
-        return np.triu(c) + np.triu(c, 1).conj().T
+        return gram_rows(np.asarray(a).T)
 
     def add_abs2(self, acc, u) -> None:
         """acc += |u|^2 in place (``acc`` real, ``u`` complex, the same shape): on the CPU
@@ -117,6 +114,22 @@ class Backend:
         """Wait for the device's queued work (for timings)."""
         if self.name == "cuda":
             self.xp.cuda.Device().synchronize()
+
+
+def gram_rows(a: np.ndarray) -> np.ndarray:
+    """G = a a^H of a 2-D complex host array (its rows' Gram matrix) by BLAS's zherk: half
+    the products of a matrix product, G Hermitian to the last bit, and no copy of a C- or
+    Fortran-ordered ``a``."""
+    from scipy.linalg import blas
+
+    a = np.asarray(a, dtype=np.complex128)
+    if a.flags.f_contiguous:
+        g = blas.zherk(1.0, a)  # a a^H, its upper triangle
+    else:  # a^T is Fortran-ordered: (a^T)^H a^T = conj(a a^H)
+        g = blas.zherk(1.0, np.ascontiguousarray(a).T, trans=2).conj()
+    lower = np.tril_indices(g.shape[0], -1)
+    g[lower] = g.T[lower].conj()
+    return g
 
 
 @nb.njit(cache=True, nogil=True)

@@ -45,13 +45,12 @@ import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.linalg import blas
 from threadpoolctl import ThreadpoolController
 
 from ..design import Design
 from ..raytrace.stack import lattice_of, output_pitch
 from ..validate import InputError
-from .arrays import backend
+from .arrays import backend, gram_rows
 from .wavebase import (
     Plane,
     WaveSampling,
@@ -71,7 +70,6 @@ from .wavebase import (
 from .wavefilter import separable_filter
 from .waveobject import (
     ObjectSide,
-    hermitian,
     lsf_x_from,
     marginals_at,
     object_side,
@@ -124,7 +122,7 @@ def _compress(fields: list[np.ndarray], tol: float) -> list[np.ndarray]:
     if not fields:
         return fields
     a = np.concatenate(fields, axis=0)  # (J n, m)
-    g = hermitian(blas.zherk(1.0, a.T).conj())  # a^T conj(a) = conj(a^H a), upper: zherk
+    g = gram_rows(a.T).conj()  # a^H a (zherk)
     p, v = np.linalg.eigh(g)
     p, v = p[::-1], v[:, ::-1]
     p = np.clip(p, 0.0, None)

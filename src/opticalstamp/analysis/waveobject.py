@@ -38,7 +38,7 @@ import numpy as np
 from scipy import fft as sfft
 from scipy.linalg import blas, solve_triangular
 
-from .arrays import fft_workers
+from .arrays import fft_workers, gram_rows
 from .wavebase import Plane, WaveSampling, in_band, object_grid
 
 __all__ = [
@@ -353,18 +353,9 @@ def _eig_modes(a: np.ndarray, tol: float) -> np.ndarray:
 def _gram_rows(a: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
     """G[j, l] = sum_n a[j, n] conj(a[l, n]) (times weight[n]) for a (J, n), in one BLAS
     call: unweighted by ``zherk`` (half the products; G Hermitian to the last bit)."""
-    b = a.T  # (n, J), Fortran-ordered view
     if weight is None:
-        return hermitian(blas.zherk(1.0, b, trans=2).conj())  # b^H b = conj(G), upper
-    return blas.zgemm(1.0, b, (a * weight[None, :]).T, trans_a=2).T  # (b^H c)[l, j]
-
-
-def hermitian(upper: np.ndarray) -> np.ndarray:
-    """The Hermitian matrix whose upper triangle (diagonal included) is ``upper``'s (in
-    place)."""
-    lower = np.tril_indices(upper.shape[0], -1)
-    upper[lower] = upper.T[lower].conj()
-    return upper
+        return gram_rows(a)
+    return blas.zgemm(1.0, a.T, (a * weight[None, :]).T, trans_a=2).T  # (a^T)^H (w a)^T, transposed
 
 
 def cell_weights(x: np.ndarray, cell: float) -> np.ndarray:
