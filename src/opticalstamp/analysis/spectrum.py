@@ -46,7 +46,6 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from ..design import Design
 from ..design.electronics import ILLUMINATIONS, LUMA
@@ -168,6 +167,8 @@ def silicon_qe(wavelength_um) -> np.ndarray:
     monotone cubic interpolation; 0 outside the table)."""
     t = np.asarray(SILICON_QE_TABLE)
     lam = np.asarray(wavelength_um, dtype=np.float64)
+    from scipy.interpolate import PchipInterpolator  # here: ~0.6 s to import
+
     q = PchipInterpolator(t[:, 0], t[:, 1], extrapolate=False)(lam)
     return np.nan_to_num(q, nan=0.0)
 

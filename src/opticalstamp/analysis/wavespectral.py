@@ -14,8 +14,7 @@ not rectangles (circles) take the 2-D path at each wavelength (:func:`response_a
 :func:`~.wave2dmaps.wave_maps_2d`): the same figures and maps, so that no analysis needs
 to know which path gave them.
 
-R, G and B LEDs lit in turn ("rgb") are three channels, one responsivity each
-(:func:`wave_response_channels`).
+R, G and B LEDs lit in turn ("rgb"): three channels (:func:`wave_response_channels`).
 """
 
 from __future__ import annotations
@@ -30,7 +29,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import fft as sfft
-from scipy.signal import czt
 
 from ..design import Design
 from .arrays import fft_threads, fft_workers, wave_backend
@@ -133,6 +131,8 @@ def resample(x: np.ndarray, y: np.ndarray, x_out: np.ndarray, cycles_per_um: flo
     s, shift = x_out[1] - x_out[0], x_out[0] - x[0]
     a = np.exp(-2j * np.pi * shift / period)
     w = np.exp(2j * np.pi * s / period)
+    from scipy.signal import czt  # here: scipy.signal takes ~1.4 s to import
+
     v = czt(coef, x_out.size, w, a, axis=-1)
     ramp = np.exp(-2j * np.pi * q * (shift + np.arange(x_out.size) * s) / period)
     out = (v * ramp).real

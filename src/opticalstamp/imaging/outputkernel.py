@@ -32,10 +32,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage, signal
+from scipy import ndimage
 
 from ..design import AnyDesign
 from ..raytrace.stack import lattice_of
+from .convolve import fft_convolve
 from .kernels import KernelCache, ScanKernel
 from .kinds import scanner_of
 from .scan import ScanSettings, kernels_for, pixel_groups, scan_pitch
@@ -233,7 +234,7 @@ def ghost_background(image: np.ndarray, ok: OutputKernel, surround: float | None
     # coarse cell i covers padded rows [i s, (i + 1) s): centre at (i + 1/2) s - 1/2
     yy = (np.arange(img.shape[0]) + pad_y + 0.5) / s - 0.5
     for r in range(ok.phases):
-        conv = signal.fftconvolve(coarse, ok.ghost[r], mode="same")
+        conv = fft_convolve(coarse, ok.ghost[r], mode="same")
         sel = cols[cols % ok.phases == r]
         xx = (sel + pad_x + 0.5) / s - 0.5
         yg, xg = np.meshgrid(yy, xx, indexing="ij")

@@ -28,7 +28,7 @@ from typing import Literal, get_args
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
-from scipy import ndimage, signal
+from scipy import ndimage
 
 from ..defaults import RAYS_MAP
 from ..design import AnyDesign, Design
@@ -37,6 +37,7 @@ from ..raytrace.launch import progress_bar
 from ..raytrace.pixel import PixelTracer
 from ..units import dpi_of_pitch, pitch_of_dpi
 from ..validate import check_seed
+from .convolve import fft_convolve
 from .heightmap import check_heights
 from .heightmap import sample as sample_height
 from .kernels import KernelCache, ScanKernel, kernel_cache, scan_kernels
@@ -183,7 +184,7 @@ def _ghost_signal(blocks: np.ndarray, kern: ScanKernel, centers, x_pix, surround
     g = kern.ghost
     b = kern.ghost_bin_um
     ny, nx = g.shape
-    r = signal.fftconvolve(blocks, g[:, ::-1], mode="full")
+    r = fft_convolve(blocks, g[:, ::-1], mode="full")
     y0, x0 = kern.ghost_lo_um
     # F[i, j] = sum G[a, e] D[i - a, j + e] lives in r[i, j + nx - 1]; D cell i is centred
     # at (i - pad + 1/2) b on the page
