@@ -23,7 +23,7 @@ SMALL_STUDIES = {"search_population": 4, "search_generations": 2, "tolerance_sam
 
 
 def _small(real):
-    """The full report's work (every section, its heights, RMTF grid, both sensitive
+    """The full report's work (every section, its heights, both sensitive
     areas, scans with OCR, the background studies) with fewer rays, smaller study budgets,
     the RMTF every 0.5 mm (the quick report's grid: 10 heights, not 19) and the charts
     scanned at 600 dpi (the report's 1200: four times the pixels to scan,
