@@ -63,7 +63,7 @@ def test_bad_arguments_are_refused():
 
 
 def test_the_scan_the_studies_and_the_fit_load_no_scipy_signal():
-    """scipy.signal and scipy.stats take 1.4 and 1.2 s to import (SciPy 1.17): every
+    """scipy.signal (which imports scipy.stats) takes 1.4 s to import on SciPy 1.17: every
     `opticalstamp scan` and every process a report, a search or a fit spawns paid them
     (a small scan took 4.0 s, 2.3 s without; a light of several wavelengths still loads
     scipy.signal for its czt, tests/test_architecture.py)."""
