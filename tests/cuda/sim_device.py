@@ -37,7 +37,7 @@ from opticalstamp.raytrace.sampling import hole_targets
 from opticalstamp.raytrace.stack import reverse_path
 
 #: 2^N samples (the simulator is slow; a GPU takes 20)
-N = int(os.environ.get("RAYS_LOG2", "11"))
+N = int(os.environ.get("RAYS_LOG2", "10"))
 FIELDS = ("ids", "x", "y", "sx", "sy", "w", "hole_row", "hole_k")
 #: the plain kernels compared: queued per block (the default) and not at all; per warp too
 #: on a GPU (the simulator has no warp intrinsics)
@@ -84,8 +84,8 @@ def wide(paper):
     """The prototype's reverse path with every hole 160 um wide and 800 um tall (beyond
     what a design may hold: the rows' holes overlap in y; in x 9.2-um walls are left
     between neighbours, so the hole test's x edges still stop rays, and width and height
-    differ), and its pixel A0: 27 % of plain samples and 41 % of importance-sampled rays
-    leave the stack (556 of 2,048 and 424 of 1,024), own and ghost paths alike (with
+    differ), and its pixel A0: 26 % of plain samples and 40 % of importance-sampled rays
+    leave the stack (267 of 1,024 and 204 of 512), own and ghost paths alike (with
     160-um square holes 8 % of plain samples did)."""
     path = reverse_path(paper)
     masks = path.masks.copy()
@@ -115,10 +115,10 @@ def same(a, b, exact=False):
     ("importance", "fresnel", "log2"), [(False, False, N), (True, True, N - 1)]
 )
 def test_launch_on_the_device_gives_the_cpus_rays(wide, importance, fresnel, log2):
-    """Plain sampling (2,048 samples) and importance sampling with Fresnel losses (1,024
+    """Plain sampling (1,024 samples) and importance sampling with Fresnel losses (512
     rays): the same survivors (ids), positions, directions and weights (to 1e-12), holes,
     ledger and launched counts as the CPU kernel, for the same seed; hundreds of rays
-    survive (556 and 424), own and ghost."""
+    survive (267 and 204), own and ghost."""
     path, src = wide
     kw = dict(importance=importance, fresnel=fresnel, chunk=1 << 12, first_id=123)
     cpu = joined(list(launch(path, src, 1 << log2, 7, device="cpu", **kw)))
@@ -130,7 +130,7 @@ def test_launch_on_the_device_gives_the_cpus_rays(wide, importance, fresnel, log
 def test_the_plain_kernels_queued_or_not_give_the_same_rays(wide, monkeypatch):
     """Plain sampling queued per block (the default), per warp (on a GPU) and not at all:
     the same rays, exactly, and the CPU's; with one block, so that each queue fills and
-    drains many times (about 55 % of the samples pass the first mask, 27 % all the way)."""
+    drains many times (about 53 % of the samples pass the first mask, 26 % all the way)."""
     path, src = wide
     monkeypatch.setattr(cuda, "QUEUE_BLOCKS", 1)
     n0 = float(path.slabs[0, 1])
@@ -141,9 +141,9 @@ def test_the_plain_kernels_queued_or_not_give_the_same_rays(wide, monkeypatch):
         for q in QUEUES
     ]
     passed = runs[0].n_launched - int(runs[0].ledger[:n_pre].sum())
-    assert passed >= 6 * cuda.THREADS, passed  # the block's queue filled 6 times at least
+    assert passed >= 4 * cuda.THREADS, passed  # the block's queue filled 4 times at least
     a, *others = ({**r.host(), "ledger": r.ledger, "n_launched": r.n_launched} for r in runs)
-    assert a["ids"].size > 250, a["ids"].size
+    assert a["ids"].size > 200, a["ids"].size
     for b in others:
         same(a, b, exact=True)
     kw = dict(importance=False, fresnel=True, chunk=1 << 12, first_id=123, device="cpu")
@@ -256,8 +256,9 @@ def _same(x, y, where=""):
 
 @pytest.fixture(scope="module")
 def open_design(paper):
-    """The prototype with 82-um holes on thin plates: a tenth of the importance-sampled
-    rays leave the stack, 60 % of them through the pixel's own holes."""
+    """The prototype with 82-um holes on thin plates: about a quarter of the
+    importance-sampled rays leave the stack (263 and 273 of 1,024 for pixels A0 and B0),
+    four in five of them through the pixel's own holes."""
     return with_stack(paper, holes_um=(82, 82, 82), thicknesses_um=(200, 150, 200))
 
 
@@ -266,7 +267,7 @@ def tallied(open_design):
     """The ghost analysis, folded LSFs and maps of two pixels, traced once per device,
     in two chunks (one on a GPU); the pilots on the CPU."""
     d = open_design
-    s = Sampling(n_rays=1 << N, seed=5, chunk=1 << (N - 1))  # 2,048 rays: ~200 leave
+    s = Sampling(n_rays=1 << N, seed=5, chunk=1 << (N - 1))  # 1,024 rays: ~270 leave
     res = {}
     for dev in ("cpu", "cuda"):
         tr = PixelTracer(d, s, replay=True, device="cpu")  # each chunk traced once
