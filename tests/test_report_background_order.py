@@ -4,11 +4,14 @@ seconds in its process are kept for report.json."""
 
 from __future__ import annotations
 
+import os
 import time
+
+import pytest
 
 from opticalstamp.analysis.responsivity import RAY, Optics
 from opticalstamp.design import load_design
-from opticalstamp.report.background import Background
+from opticalstamp.report.background import Background, study_workers
 from opticalstamp.report.studies import job_order, study_jobs
 from opticalstamp.report.work import report_work
 
@@ -37,3 +40,90 @@ def test_each_study_keeps_its_seconds():
     assert set(got) == {"nap"}  # a failed job has no seconds
     assert got["nap"]["wall_s"] >= 0.7  # the two tasks' sum
     assert 0.0 <= got["nap"]["cpu_s"] < 0.5  # asleep: little CPU
+
+
+def _square(payload: dict) -> dict:  # an evaluation (runs in a study's own processes)
+    return {"y": payload["x"] ** 2}
+
+
+def _spread_study(n: int, pid_file: str = "", nap: float = 0.0) -> list:
+    """A background task that spreads its evaluations over two processes of its own, as
+    the report's search and tolerance study do on a machine with idle cores; with
+    ``pid_file``: those processes' ids written there, then a nap while they are alive."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    if pid_file:
+        with ProcessPoolExecutor(2, mp_context=mp.get_context("spawn")) as ex:
+            list(ex.map(abs, range(4)))  # started
+            pids = [p.pid for p in mp.active_children()]
+            with open(pid_file, "w") as f:
+                f.write(" ".join(map(str, pids)))
+            ex.submit(time.sleep, 60.0)
+            time.sleep(nap)
+    from opticalstamp.studies.runner import run_tasks
+
+    recs = run_tasks(_square, [(str(i), {"x": i}) for i in range(n)], workers=2)
+    return sorted(r["result"]["y"] for r in recs.values())
+
+
+def test_a_background_study_may_spread_over_processes_of_its_own():
+    """The report's processes are not daemons: a study in one of them starts a pool of
+    its own (the search and the tolerance study where cores are idle) and gives its
+    result; the task's cores count in what the report's sections leave themselves."""
+    with Background({"spread": [(_spread_study, (6,), 3)]}) as bg:
+        assert bg.running() == 3  # the study's process and its own two
+        assert bg.result("spread") == [0, 1, 4, 9, 16, 25]
+        for _ in bg.as_completed():
+            pass
+        assert bg.running() == 0
+        cpu = bg.seconds()["spread"]["cpu_s"]
+    # the CPU seconds of the study's own two processes too (each imported the library)
+    assert cpu > 0.5, cpu
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in "ZX"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
+def test_a_report_that_fails_leaves_no_study_process_behind(tmp_path):
+    """A report that fails while a study runs ends its processes at once, and those the
+    study started for its evaluations with them (none left behind asleep)."""
+    pids = tmp_path / "pids"
+    t0 = time.perf_counter()
+    with pytest.raises(RuntimeError, match="a section failed"):
+        with Background({"spread": [(_spread_study, (2, str(pids), 60.0), 3)]}):
+            for _ in range(600):  # the study's processes started
+                if pids.exists() and pids.read_text():
+                    break
+                time.sleep(0.1)
+            raise RuntimeError("a section failed")
+    assert time.perf_counter() - t0 < 60  # not the study's 60-s nap
+    children = [int(p) for p in pids.read_text().split()]
+    assert len(children) == 2
+    for _ in range(100):
+        if not any(map(_alive, children)):
+            break
+        time.sleep(0.1)
+    assert not any(map(_alive, children))
+
+
+def test_the_studies_share_the_cores_the_report_leaves_idle(monkeypatch):
+    """On 2 cores the search and the tolerance study run in their own process each, as
+    before; on 16, with 5 tasks in 5 processes and one core for the sections, the 10 idle
+    cores go 5 to each (6 processes each); the report's jobs say so."""
+    d = load_design("paper2016")
+    work = report_work(False)
+    for cores, want in [(1, 1), (2, 1), (4, 1), (8, 2), (16, 6)]:
+        monkeypatch.setattr(os, "cpu_count", lambda c=cores: c)
+        assert study_workers(5, 2) == want, cores
+        jobs = study_jobs(d, 0, False, work, 200.0, optics=RAY)
+        for name in ("search", "tolerance"):
+            ((fn, args, n),) = jobs[name]
+            assert n == want and args[-1] == want, (cores, name)
+        assert all(len(t) == 2 for name in ("parameter_study", "rodlens") for t in jobs[name])

@@ -176,6 +176,6 @@ def test_figures_drawn_by_an_idle_background_process_are_those_drawn_here():
         bg.result("study")
         task = bg.submit(_png, plot_stack, d)
         assert task is not None
-        png = task.get(timeout=120)
+        png = task.result(timeout=120)
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and png == _png(plot_stack, d)
     assert _Background({}).submit(_png, plot_stack, d) is None  # no processes

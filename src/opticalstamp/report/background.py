@@ -1,5 +1,9 @@
 """Jobs of a report that run in processes of their own (the studies, figures when a
-process is idle) while the report's sections run here."""
+process is idle) while the report's sections run here.
+
+The processes are a :class:`~concurrent.futures.ProcessPoolExecutor`'s, which are not
+daemons: a study may spread its own evaluations over processes of its own (the search
+and the tolerance study on the cores the report leaves idle, :func:`study_workers`)."""
 
 from __future__ import annotations
 
@@ -15,19 +19,58 @@ def workers(n_tasks: int) -> int:
     return max(1, min(n_tasks, max(2, (os.cpu_count() or 1) - 1)))
 
 
-def one_numba_thread() -> None:  # pragma: no cover - runs in the background processes
+def study_workers(n_tasks: int, n_spread: int) -> int:
+    """Processes for each of ``n_spread`` background tasks that can spread their
+    evaluations (the search, the tolerance study) when the report starts ``n_tasks``:
+    the one its task runs in, and an even share of the cores that neither this process
+    nor the report's :func:`workers` use (2 cores: none, so 1: in the task's own process;
+    16 cores and 5 tasks: 10 idle, so 6 each). The studies' figures do not depend on it
+    (seeds belong to evaluations, not to processes)."""
+    import os
+
+    spare = max(0, (os.cpu_count() or 1) - 1 - workers(n_tasks))
+    return 1 + spare // max(1, n_spread)
+
+
+def start_worker() -> None:  # pragma: no cover - runs in the background processes
+    """A background process: one numba thread; on SIGTERM (the report failed while it
+    ran) it ends the processes it started (a study's own evaluations) before it ends."""
+    import signal
+
     import numba
 
     numba.set_num_threads(1)
+    signal.signal(signal.SIGTERM, _end_with_children)
+
+
+def _end_with_children(signum, frame) -> None:  # pragma: no cover - background processes
+    import multiprocessing as mp
+    import os
+
+    for child in mp.active_children():
+        child.terminate()
+    os._exit(128 + signum)
 
 
 def timed(fn, args: tuple) -> tuple:  # pragma: no cover - runs in the background processes
-    """``fn(*args)`` with the seconds it took: (result, wall s, CPU s of this process)."""
+    """``fn(*args)`` with the seconds it took: (result, wall s, CPU s of this process and
+    of the processes it started and waited for: a study's own evaluation processes)."""
     import time
 
-    t, c = time.perf_counter(), time.process_time()
+    t, c = time.perf_counter(), time.process_time() + _children_cpu()
     out = fn(*args)
-    return out, time.perf_counter() - t, time.process_time() - c
+    return out, time.perf_counter() - t, time.process_time() + _children_cpu() - c
+
+
+def _children_cpu() -> float:  # pragma: no cover - runs in the background processes
+    """CPU seconds of the processes this one started and waited for (0 where the system
+    does not say)."""
+    try:
+        import resource
+    except ImportError:
+        return 0.0
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
 
 def only_result(name: str, results: list):
@@ -42,11 +85,13 @@ class Background:
 
     Parameters
     ----------
-    jobs : name -> list of (function, arguments), the tasks of each job; functions and
-        results are pickled. The tasks go to :func:`workers` processes in the order
-        given, each to the next process that is free (so the longest first: no process
-        is left alone with a long task at the end while the others idle); each task's
-        seconds are kept (:meth:`seconds`).
+    jobs : name -> list of (function, arguments) or (function, arguments, cores), the
+        tasks of each job; functions and results are pickled; ``cores``: how many cores
+        the task keeps busy (default 1; a study that spreads its evaluations over
+        processes of its own, :func:`study_workers`). The tasks go to :func:`workers`
+        processes in the order given, each to the next process that is free (so the
+        longest first: no process is left alone with a long task at the end while the
+        others idle); each task's seconds are kept (:meth:`seconds`).
     join : ``join(name, results)``: the result of job ``name`` from its tasks' results,
         in the order given (default: the result of its one task)
     """
@@ -55,18 +100,22 @@ class Background:
         self._pool = None
         self._join = join
         self._jobs: dict[str, list] = {}
+        self._cores: list = []  # (future, cores) of every job's task, in the order given
         self._extra: list = []  # tasks given by submit()
         self._n = 0
         tasks = [(name, task) for name, job in jobs.items() for task in job]
         if not tasks:
             return
         import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
 
         ctx = mp.get_context("spawn")  # no fork of numba's threads
         self._n = workers(len(tasks))
-        self._pool = ctx.Pool(self._n, initializer=one_numba_thread)
-        for name, (fn, args) in tasks:
-            self._jobs.setdefault(name, []).append(self._pool.apply_async(timed, (fn, args)))
+        self._pool = ProcessPoolExecutor(self._n, mp_context=ctx, initializer=start_worker)
+        for name, (fn, args, *cores) in tasks:
+            fut = self._pool.submit(timed, fn, args)
+            self._jobs.setdefault(name, []).append(fut)
+            self._cores.append((fut, cores[0] if cores else 1))
 
     def __enter__(self) -> Background:
         return self
@@ -79,35 +128,42 @@ class Background:
         was not started."""
         if name not in self._jobs:
             return None
-        return self._join(name, [task.get()[0] for task in self._jobs[name]])
+        return self._join(name, [task.result()[0] for task in self._jobs[name]])
 
     def seconds(self) -> dict:
         """Per job whose tasks all finished without error, the seconds its tasks took in
         their processes: {name: {"wall_s", "cpu_s"}} (sums over the tasks; the CPU
         seconds of the one process each ran in, which the load changes far less than the
-        wall seconds)."""
+        wall seconds; a study's own evaluation processes counted once they ended)."""
         out = {}
         for name, tasks in self._jobs.items():
-            if not all(t.ready() and t.successful() for t in tasks):
+            if not all(t.done() and t.exception() is None for t in tasks):
                 continue
-            got = [t.get() for t in tasks]
+            got = [t.result() for t in tasks]
             out[name] = {"wall_s": sum(g[1] for g in got), "cpu_s": sum(g[2] for g in got)}
         return out
 
     def _ready(self, name: str) -> bool:
-        return all(task.ready() for task in self._jobs[name])
+        return all(task.done() for task in self._jobs[name])
+
+    def _busy(self) -> list:
+        """Cores of the tasks that run now: the first :func:`workers` unfinished ones in
+        the order given (the processes take them in that order), then submit()'s."""
+        jobs = [c for task, c in self._cores if not task.done()][: self._n]
+        extra = [1 for task in self._extra if not task.done()]
+        return (jobs + extra)[: self._n]
 
     def running(self) -> int:
-        """How many background processes are at work (tasks not finished, at most one per
-        process)."""
-        return min(self._n, sum(not task.ready() for task in self._all()))
+        """How many cores the background keeps busy: its processes at work (at most one
+        task each), a study that spreads its evaluations counted with its own processes."""
+        return sum(self._busy())
 
     def submit(self, fn, *args):
-        """``fn(*args)`` in a background process if one is idle now: its AsyncResult
-        (``get()`` gives the result); else None (nothing started)."""
-        if self._pool is None or self.running() >= self._n:
+        """``fn(*args)`` in a background process if one is idle now: its Future
+        (``result()`` gives the result); else None (nothing started)."""
+        if self._pool is None or len(self._busy()) >= self._n:
             return None
-        task = self._pool.apply_async(fn, args)
+        task = self._pool.submit(fn, *args)
         self._extra.append(task)
         return task
 
@@ -117,12 +173,14 @@ class Background:
     def as_completed(self, poll_s: float = 0.05):
         """The names of the jobs, each as soon as its tasks have finished (failed ones
         too)."""
+        from concurrent.futures import wait
+
         left = list(self._jobs)
         while left:
             ready = [name for name in left if self._ready(name)]
             if not ready:
-                waiting = next(t for t in self._jobs[left[0]] if not t.ready())
-                waiting.wait(poll_s)
+                waiting = next(t for t in self._jobs[left[0]] if not t.done())
+                wait([waiting], timeout=poll_s)
                 continue
             for name in ready:
                 left.remove(name)
@@ -144,12 +202,14 @@ class Background:
             numba.set_num_threads(before)
 
     def close(self) -> None:
-        """End the processes: at once where jobs are still running (the report failed)."""
+        """End the processes: at once where jobs are still running (the report failed),
+        with the processes a study started for its evaluations (:func:`start_worker`)."""
         if self._pool is None:
             return
-        if all(self._ready(name) for name in self._jobs):
-            self._pool.close()
-        else:
-            self._pool.terminate()
-        self._pool.join()
+        if not all(task.done() for task in self._all()):
+            import multiprocessing as mp
+
+            for child in mp.active_children():  # the pool's processes, started here
+                child.terminate()
+        self._pool.shutdown(wait=True, cancel_futures=True)
         self._pool = None

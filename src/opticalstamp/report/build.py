@@ -237,7 +237,7 @@ def build_report(
         # on), else here; written in this order either way
         drawing = {name: background.submit(png, *task) for name, task in figures.items()}
         for name, task in drawing.items():
-            write_atomic(tmp / name, png(*figures[name]) if task is None else task.get())
+            write_atomic(tmp / name, png(*figures[name]) if task is None else task.result())
         names = list(figures)
         clock.lap("figures")
         # each study's figure as soon as that study is done, while the others run on

@@ -12,6 +12,7 @@ from ..analysis.responsivity import RAY, Optics
 from ..design import Design, load_design
 from ..raytrace.stack import output_pitch
 from ..units import dpi_of_pitch
+from .background import study_workers
 from .section import NotMeasurable, needs
 from .work import StudyBudget, Work
 
@@ -78,8 +79,10 @@ def study_jobs(
     jobs["rodlens"] = [(run_rodlens, (seed, fresnel, dpi, work.budget.rodlens_rays))]
     if all(m.shape != "circle" for m in design.masks):
         budget = study_budget(work.budget, optics)
-        jobs["search"] = [(run_search, (design, seed, dpi, budget, optics.engine))]
-        jobs["tolerance"] = [(run_tolerance, (design, seed, dpi, tol_spec, budget, optics))]
+        # each on its own process and its share of the cores the report leaves idle
+        n = study_workers(sum(map(len, jobs.values())) + 2, 2)
+        jobs["search"] = [(run_search, (design, seed, dpi, budget, optics.engine, n), n)]
+        jobs["tolerance"] = [(run_tolerance, (design, seed, dpi, tol_spec, budget, optics, n), n)]
     return {name: jobs[name] for name in job_order(jobs, optics)}
 
 
@@ -151,11 +154,17 @@ def run_rodlens(
 
 
 def run_search(
-    design: Design, seed: int, dof_dpi: float, budget: StudyBudget, optics: str = "ray"
+    design: Design,
+    seed: int,
+    dof_dpi: float,
+    budget: StudyBudget,
+    optics: str = "ray",
+    workers: int = 1,
 ):  # pragma: no cover - background
     """The compact design search of a report (the CLI's `search` runs the full budget),
     every candidate judged by ``optics`` (the report's engine, "ray" or "wave"), its
-    front re-verified by the exact tracer (by wave optics: the exact wave figures)."""
+    front re-verified by the exact tracer (by wave optics: the exact wave figures), on
+    ``workers`` processes (1: this one; the front does not depend on it)."""
     from ..studies.search import search, verify_front
 
     dpi = dpi_of_pitch(output_pitch(design))
@@ -167,7 +176,7 @@ def run_search(
         generations=budget.search_generations,
         seed=seed,
         ghost_rays=budget.search_ghost_rays,
-        workers=1,
+        workers=workers,
         optics=optics,
     )
     return verify_front(
@@ -176,7 +185,7 @@ def run_search(
         lsf_rays=budget.verify_lsf_rays,
         wave_ghost_rays=budget.verify_ghost_rays,
         wave_lsf_rays=budget.verify_lsf_rays,
-        workers=1,
+        workers=workers,
     )
 
 
@@ -187,9 +196,11 @@ def run_tolerance(
     spec: str | None,
     budget: StudyBudget,
     optics: Optics = RAY,
+    workers: int = 1,
 ):  # pragma: no cover - a background process
     """The report's tolerance study (the CLI's `tolerance` runs more samples), every
-    sample by the report's resolved ``optics``."""
+    sample by the report's resolved ``optics``, on ``workers`` processes (1: this one;
+    the figures do not depend on it)."""
     from ..studies.tolerance import tolerance
 
     return tolerance(
@@ -198,7 +209,7 @@ def run_tolerance(
         seed=seed,
         dpi=dpi,
         spec=spec,
-        workers=1,
+        workers=workers,
         optics=optics,
     )
 
