@@ -79,9 +79,14 @@ def study_jobs(
     jobs["rodlens"] = [(run_rodlens, (seed, fresnel, dpi, work.budget.rodlens_rays))]
     if all(m.shape != "circle" for m in design.masks):
         budget = study_budget(work.budget, optics)
-        # each on its own process and its share of the cores the report leaves idle
-        n = study_workers(sum(map(len, jobs.values())) + 2, 2)
-        jobs["search"] = [(run_search, (design, seed, dpi, budget, optics.engine, n), n)]
+        # the tolerance study (one pool for all its evaluations) and, by wave optics, the
+        # search spread over the cores the report leaves idle: by ray optics a search's
+        # 10 generations of 0.1-s evaluations would spend more on starting a pool of
+        # processes for each generation than they save (measured: docs/search.md)
+        wave = optics.engine == "wave"
+        n = study_workers(sum(map(len, jobs.values())) + 2, 2 if wave else 1)
+        m = n if wave else 1
+        jobs["search"] = [(run_search, (design, seed, dpi, budget, optics.engine, m), m)]
         jobs["tolerance"] = [(run_tolerance, (design, seed, dpi, tol_spec, budget, optics, n), n)]
     return {name: jobs[name] for name in job_order(jobs, optics)}
 
