@@ -159,9 +159,9 @@ def test_report_studies_follow_the_report_optics(paper, monkeypatch):
     wave = resolve_optics(paper, "auto")
     work = report_work(False, 1 << 16, None, False)
     jobs = study_jobs(paper, 0, False, work, 200.0, None, optics=wave)
-    (fn, args), (tfn, targs) = jobs["search"][0], jobs["tolerance"][0]
-    assert fn is run_search and args[-1] == "wave"
-    assert tfn is run_tolerance and targs[-1] is wave
+    (fn, args, _), (tfn, targs, _) = jobs["search"][0], jobs["tolerance"][0]
+    assert fn is run_search and args[4] == "wave"  # then the processes (on this machine's
+    assert tfn is run_tolerance and targs[5] is wave  # idle cores, test_report_background)
     budget = study_budget(work.budget, wave)
     assert args[3] == targs[4] == budget
     assert {k: getattr(budget, k) for k in WAVE_STUDY_BUDGET} == dict(WAVE_STUDY_BUDGET)
@@ -174,9 +174,11 @@ def test_report_studies_follow_the_report_optics(paper, monkeypatch):
     assert study_budget(mixed, wave).search_population == 4
     assert study_budget(mixed, wave).tolerance_samples == WAVE_STUDY_BUDGET["tolerance_samples"]
     ray = resolve_optics(paper, "ray")
-    (_, rargs), (_, rtargs) = (study_jobs(paper, 0, False, work, 200.0, None, optics=ray)[k][0]
-                               for k in ("search", "tolerance"))  # fmt: skip
-    assert rargs[-1] == "ray" and rtargs[-1] is ray and rargs[3] == work.budget
+    (_, rargs, _), (_, rtargs, _) = (
+        study_jobs(paper, 0, False, work, 200.0, None, optics=ray)[k][0]
+        for k in ("search", "tolerance")
+    )  # fmt: skip
+    assert rargs[4] == "ray" and rtargs[5] is ray and rargs[3] == work.budget
     # the jobs themselves, on a tiny budget: every figure by the report's optics
     tiny = StudyBudget(
         search_population=4, search_generations=1, search_ghost_rays=RAYS,
