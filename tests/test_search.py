@@ -89,6 +89,40 @@ def test_process_pool_survives_a_dying_worker(tmp_path):
     assert "died" in out[tasks[2][0]]["error"]
 
 
+def _pid(p: dict) -> dict:
+    return {"y": p["v"], "pid": os.getpid()}
+
+
+def test_a_worker_pool_kept_across_calls(tmp_path):
+    """A search's generations share one pool of processes (a pool per generation cost
+    more than the generation): the same processes serve two calls, none of them this
+    one; a worker that dies fails only its own task and the next call gets new
+    processes; leaving the block ends them."""
+    from opticalstamp.studies.runner import WorkerPool
+
+    def tasks(vs):
+        return [(task_key({"v": v}), {"v": v}) for v in vs]
+
+    with WorkerPool(2) as pool:
+        first = run_tasks(_pid, tasks(range(6)), pool=pool)
+        second = run_tasks(_pid, tasks(range(6, 12)), pool=pool)
+        pids = {r["result"]["pid"] for r in [*first.values(), *second.values()]}
+        assert len(pids) <= 2 and os.getpid() not in pids
+        assert [r["result"]["y"] for r in second.values()] == list(range(6, 12))
+        ex = pool.executor()
+        out = run_tasks(_dies_on_two, tasks(range(4)), pool=pool, retries=1)
+        ok = {r["payload"]["v"]: r["ok"] for r in out.values()}
+        assert ok == {0: True, 1: True, 2: False, 3: True}
+        assert pool.executor() is not ex  # the broken pool was replaced
+        again = run_tasks(_pid, tasks(range(20, 24)), pool=pool)
+        assert all(r["ok"] for r in again.values())
+        last = {r["result"]["pid"] for r in again.values()}
+        assert not last & pids
+    for pid in last:  # ended (and reaped) on leaving the block
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+
+
 @pytest.fixture(scope="module")
 def dask_cluster():
     distributed = pytest.importorskip("distributed")

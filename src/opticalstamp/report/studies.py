@@ -79,14 +79,10 @@ def study_jobs(
     jobs["rodlens"] = [(run_rodlens, (seed, fresnel, dpi, work.budget.rodlens_rays))]
     if all(m.shape != "circle" for m in design.masks):
         budget = study_budget(work.budget, optics)
-        # the tolerance study (one pool for all its evaluations) and, by wave optics, the
-        # search spread over the cores the report leaves idle: by ray optics a search's
-        # 10 generations of 0.1-s evaluations would spend more on starting a pool of
-        # processes for each generation than they save (measured: docs/search.md)
-        wave = optics.engine == "wave"
-        n = study_workers(sum(map(len, jobs.values())) + 2, 2 if wave else 1)
-        m = n if wave else 1
-        jobs["search"] = [(run_search, (design, seed, dpi, budget, optics.engine, m), m)]
+        # each on its own process and its share of the cores the report leaves idle (the
+        # search keeps one pool of processes for all its generations: runner.WorkerPool)
+        n = study_workers(sum(map(len, jobs.values())) + 2, 2)
+        jobs["search"] = [(run_search, (design, seed, dpi, budget, optics.engine, n), n)]
         jobs["tolerance"] = [(run_tolerance, (design, seed, dpi, tol_spec, budget, optics, n), n)]
     return {name: jobs[name] for name in job_order(jobs, optics)}
 

@@ -49,7 +49,7 @@ from ..units import pitch_of_dpi
 from ..validate import InputError, check_number, check_seed
 from .evaluate import check_figures
 from .front import front_designs, verify_front
-from .runner import run_tasks, task_key
+from .runner import WorkerPool, run_tasks, task_key
 from .searchresult import (
     FIGURES,
     OBJECTIVES,
@@ -231,7 +231,9 @@ def search(
         # 225-um gap on the 50-um steps, is evaluated exactly for reference below)
         start = {k: on_grid(dists[k], v) for k, v in base_params.items() if k not in pins}
         study.enqueue_trial(start, skip_if_exists=True)
-    with journal_lock(journal):  # one lock for every generation of this run
+    # one lock for every generation of this run, and one pool of processes (a pool per
+    # generation cost more than the generation on 2 cores: runner.WorkerPool)
+    with journal_lock(journal), WorkerPool(workers) as pool:
         # the base design itself, for reference on the front
         ref_payload = payload(base_params)
         ref_key = task_key(ref_payload)
@@ -260,6 +262,7 @@ def search(
                 journal=journal,
                 progress=progress,
                 desc=f"generation {gen + 1}/{generations}",
+                pool=pool,
                 lock=False,
                 check=check_figures,
             )
