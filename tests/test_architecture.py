@@ -203,9 +203,6 @@ ALLOWED_STATE = MappingProxyType(
         "worker processes (one numba thread each), and Background.cores, which sets this "
         "process's threads for a section and restores them (issue 22: to go with the "
         "report's own pool)",
-        ("report.background", "signal.signal"): "the initializer of the report's worker "
-        "processes: on SIGTERM (the report failed while a study ran) a worker ends the "
-        "processes its study started before it ends, so that none is left behind",
         ("imaging.ocr", "reads os.environ"): "the tesseract subprocess's environment: a copy "
         "with its thread limit, nothing read for the library",
     }

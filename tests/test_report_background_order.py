@@ -11,6 +11,7 @@ import pytest
 
 from opticalstamp.analysis.responsivity import RAY, Optics
 from opticalstamp.design import load_design
+from opticalstamp.report import background
 from opticalstamp.report.background import Background, study_workers
 from opticalstamp.report.studies import job_order, study_jobs
 from opticalstamp.report.work import report_work
@@ -51,19 +52,18 @@ def _spread_study(n: int, pid_file: str = "", nap: float = 0.0) -> list:
     the report's search and tolerance study do on a machine with idle cores; with
     ``pid_file``: those processes' ids written there, then a nap while they are alive."""
     import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
 
-    if pid_file:
-        with ProcessPoolExecutor(2, mp_context=mp.get_context("spawn")) as ex:
+    from opticalstamp.studies.runner import WorkerPool, run_tasks
+
+    with WorkerPool(2) as pool:
+        if pid_file:
+            ex = pool.executor()
             list(ex.map(abs, range(4)))  # started
-            pids = [p.pid for p in mp.active_children()]
             with open(pid_file, "w") as f:
-                f.write(" ".join(map(str, pids)))
+                f.write(" ".join(str(p.pid) for p in mp.active_children()))
             ex.submit(time.sleep, 60.0)
             time.sleep(nap)
-    from opticalstamp.studies.runner import run_tasks
-
-    recs = run_tasks(_square, [(str(i), {"x": i}) for i in range(n)], workers=2)
+        recs = run_tasks(_square, [(str(i), {"x": i}) for i in range(n)], workers=2)
     return sorted(r["result"]["y"] for r in recs.values())
 
 
@@ -113,6 +113,41 @@ def test_a_report_that_fails_leaves_no_study_process_behind(tmp_path):
     assert not any(map(_alive, children))
 
 
+KILLED = """
+import sys, time
+from opticalstamp.report.background import Background
+if __name__ == "__main__":
+    bg = Background({"nap": [(time.sleep, (60.0,)), (time.sleep, (60.0,))]})
+    import multiprocessing as mp
+    print(" ".join(str(p.pid) for p in mp.active_children()), flush=True)
+    time.sleep(60.0)
+"""
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
+def test_a_killed_report_leaves_no_background_process_behind(tmp_path):
+    """A report killed outright (SIGKILL: no clean-up runs) leaves none of its background
+    processes waiting for work that will never come: each ends with its parent."""
+    import signal
+    import subprocess
+    import sys
+
+    script = tmp_path / "killed.py"
+    script.write_text(KILLED)
+    with subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True) as proc:
+        try:
+            pids = [int(p) for p in proc.stdout.readline().split()]
+            assert len(pids) == 2 and all(map(_alive, pids))
+        finally:
+            proc.send_signal(signal.SIGKILL)
+            proc.wait()
+    for _ in range(100):
+        if not any(map(_alive, pids)):
+            break
+        time.sleep(0.1)
+    assert not any(map(_alive, pids))
+
+
 def test_the_studies_share_the_cores_the_report_leaves_idle(monkeypatch):
     """On 2 cores the search and the tolerance study run in their own process each, as
     before; on 16, with 5 tasks in 5 processes and one core for the sections, the 10 idle
@@ -120,7 +155,7 @@ def test_the_studies_share_the_cores_the_report_leaves_idle(monkeypatch):
     d = load_design("paper2016")
     work = report_work(False)
     for cores, want in [(1, 1), (2, 1), (4, 1), (8, 2), (16, 6)]:
-        monkeypatch.setattr(os, "cpu_count", lambda c=cores: c)
+        monkeypatch.setattr(background, "usable_cores", lambda c=cores: c)
         assert study_workers(5, 2) == want, cores
         for optics in (WAVE, RAY):
             jobs = study_jobs(d, 0, False, work, 200.0, optics=optics)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import signal
+import time
 
 import numpy as np
 import pytest
@@ -118,6 +120,11 @@ def test_a_worker_pool_kept_across_calls(tmp_path):
         assert all(r["ok"] for r in again.values())
         last = {r["result"]["pid"] for r in again.values()}
         assert not last & pids
+        os.kill(next(iter(last)), signal.SIGKILL)  # a worker killed while the pool idles
+        time.sleep(1.0)
+        after = run_tasks(_pid, tasks(range(30, 34)), pool=pool)
+        assert [r["ok"] for r in after.values()] == [True] * 4  # on new processes
+        last = {r["result"]["pid"] for r in after.values()}
     for pid in last:  # ended (and reaped) on leaving the block
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)

@@ -3,20 +3,22 @@ process is idle) while the report's sections run here.
 
 The processes are a :class:`~concurrent.futures.ProcessPoolExecutor`'s, which are not
 daemons: a study may spread its own evaluations over processes of its own (the search
-and the tolerance study on the cores the report leaves idle, :func:`study_workers`)."""
+and the tolerance study on the cores the report leaves idle, :func:`study_workers`).
+Every such process ends with the process that started it
+(:func:`~opticalstamp.studies.runner.watch_parent`)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from contextlib import contextmanager
 
+from ..studies.runner import usable_cores, watch_parent
+
 
 def workers(n_tasks: int) -> int:
     """Background processes for ``n_tasks`` tasks: one per core but the one this process
     works on, and at least two (so that on two cores the three processes share them)."""
-    import os
-
-    return max(1, min(n_tasks, max(2, (os.cpu_count() or 1) - 1)))
+    return max(1, min(n_tasks, max(2, usable_cores() - 1)))
 
 
 def study_workers(n_tasks: int, n_spread: int) -> int:
@@ -26,30 +28,17 @@ def study_workers(n_tasks: int, n_spread: int) -> int:
     nor the report's :func:`workers` use (2 cores: none, so 1: in the task's own process;
     16 cores and 5 tasks: 10 idle, so 6 each). The studies' figures do not depend on it
     (seeds belong to evaluations, not to processes)."""
-    import os
-
-    spare = max(0, (os.cpu_count() or 1) - 1 - workers(n_tasks))
+    spare = max(0, usable_cores() - 1 - workers(n_tasks))
     return 1 + spare // max(1, n_spread)
 
 
 def start_worker() -> None:  # pragma: no cover - runs in the background processes
-    """A background process: one numba thread; on SIGTERM (the report failed while it
-    ran) it ends the processes it started (a study's own evaluations) before it ends."""
-    import signal
-
+    """A background process: one numba thread; it ends with the report's process (and
+    the processes a study started in it end with it: :func:`watch_parent`)."""
     import numba
 
     numba.set_num_threads(1)
-    signal.signal(signal.SIGTERM, _end_with_children)
-
-
-def _end_with_children(signum, frame) -> None:  # pragma: no cover - background processes
-    import multiprocessing as mp
-    import os
-
-    for child in mp.active_children():
-        child.terminate()
-    os._exit(128 + signum)
+    watch_parent()
 
 
 def timed(fn, args: tuple) -> tuple:  # pragma: no cover - runs in the background processes
@@ -102,6 +91,7 @@ class Background:
         self._jobs: dict[str, list] = {}
         self._cores: list = []  # (future, cores) of every job's task, in the order given
         self._extra: list = []  # tasks given by submit()
+        self._procs: list = []
         self._n = 0
         tasks = [(name, task) for name, job in jobs.items() for task in job]
         if not tasks:
@@ -112,10 +102,13 @@ class Background:
         ctx = mp.get_context("spawn")  # no fork of numba's threads
         self._n = workers(len(tasks))
         self._pool = ProcessPoolExecutor(self._n, mp_context=ctx, initializer=start_worker)
+        before = set(mp.active_children())
         for name, (fn, args, *cores) in tasks:
             fut = self._pool.submit(timed, fn, args)
             self._jobs.setdefault(name, []).append(fut)
             self._cores.append((fut, cores[0] if cores else 1))
+        # the pool's processes (started by the first submit): the ones close() may end
+        self._procs = [p for p in mp.active_children() if p not in before]
 
     def __enter__(self) -> Background:
         return self
@@ -161,9 +154,14 @@ class Background:
     def submit(self, fn, *args):
         """``fn(*args)`` in a background process if one is idle now: its Future
         (``result()`` gives the result); else None (nothing started)."""
+        from concurrent.futures.process import BrokenProcessPool
+
         if self._pool is None or len(self._busy()) >= self._n:
             return None
-        task = self._pool.submit(fn, *args)
+        try:
+            task = self._pool.submit(fn, *args)
+        except BrokenProcessPool:  # a study's process died: drawn here instead
+            return None
         self._extra.append(task)
         return task
 
@@ -202,14 +200,12 @@ class Background:
             numba.set_num_threads(before)
 
     def close(self) -> None:
-        """End the processes: at once where jobs are still running (the report failed),
-        with the processes a study started for its evaluations (:func:`start_worker`)."""
+        """End the processes: at once where jobs are still running (the report failed;
+        the processes a study started end with its process, :func:`start_worker`)."""
         if self._pool is None:
             return
         if not all(task.done() for task in self._all()):
-            import multiprocessing as mp
-
-            for child in mp.active_children():  # the pool's processes, started here
-                child.terminate()
+            for proc in self._procs:  # this pool's, no other child of this process
+                proc.terminate()
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._pool = None

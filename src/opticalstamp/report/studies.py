@@ -62,8 +62,10 @@ def study_jobs(
     tol_spec: str | None = None,
     optics: Optics = RAY,
 ) -> dict:
-    """The report's studies as background jobs: name -> list of (function, arguments),
-    the tasks whose results make the job (:func:`join_job`). The parameter study of the
+    """The report's studies as background jobs: name -> list of (function, arguments)
+    or, for the search and the tolerance study, (function, arguments, cores): the tasks
+    whose results make the job (:func:`join_job`), the cores a study spreads over
+    (:func:`~.background.study_workers`, also its last argument). The parameter study of the
     paper's unstated parameters only with the paper's sections (``work.paper``); the
     search and the tolerance study evaluate in closed form, which needs square holes.
     ``optics``: the report's resolved optics, which the search judges every candidate

@@ -38,10 +38,43 @@ def task_key(payload: dict) -> str:
     return hashlib.sha256(blob).hexdigest()[:16]
 
 
+def usable_cores() -> int:
+    """The cores this process may run on: its CPU affinity where the system says (a
+    container's limit), else every core of the machine."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on every system
+        return os.cpu_count() or 1
+
+
+def watch_parent() -> None:  # pragma: no cover - runs in worker processes
+    """In a spawned worker: a thread that ends the worker, and the processes it started,
+    as soon as the process that started it is gone (killed, or ending its pool at once);
+    a worker waiting for its next task would otherwise live on, orphaned."""
+    import multiprocessing as mp
+    import threading
+
+    parent = mp.parent_process()
+    if parent is None:
+        return
+
+    def watch() -> None:
+        from multiprocessing.connection import wait
+
+        wait([parent.sentinel])
+        for child in mp.active_children():
+            child.terminate()
+        os._exit(1)
+
+    threading.Thread(target=watch, name="watch-parent", daemon=True).start()
+
+
 def single_thread() -> None:  # pragma: no cover - runs in worker processes
+    """A worker process: one numba thread, ended with the process that started it."""
     import numba
 
     numba.set_num_threads(1)
+    watch_parent()
 
 
 def _new_pool(n: int):
@@ -59,10 +92,10 @@ class WorkerPool:
     imports the library and loads numba's cached kernels): with a pool per generation a
     ray search of 5 generations of 24 on 2 cores took 20 s on 2 processes, 11 s on one.
 
-    ``workers``: the processes (default: every core)."""
+    ``workers``: the processes (default: every core this process may use)."""
 
     def __init__(self, workers: int | None = None) -> None:
-        self.workers = workers or os.cpu_count() or 1
+        self.workers = workers or usable_cores()
         self._ex = None
 
     def executor(self):
@@ -108,7 +141,8 @@ def run_tasks(
     tasks : iterable of (str, dict)
         (key, payload) pairs.
     workers : int, optional
-        Local processes (default: every core); 1 runs in this process.
+        Local processes (default: every core this process may use); 1 runs in this
+        process.
     pool : WorkerPool, optional
         Local processes kept across calls, used instead of ``workers`` new ones (its
         ``workers`` processes; one runs in this process).
@@ -176,7 +210,7 @@ def run_tasks(
             pass  # everything is journalled already: nothing to connect to or start
         elif dask_address:
             _run_dask(fn, todo, dask_address, retries, record)
-        elif (pool.workers if pool else workers or os.cpu_count() or 1) <= 1 or len(todo) <= 1:
+        elif (pool.workers if pool else workers or usable_cores()) <= 1 or len(todo) <= 1:
             for key, payload in todo:
                 for attempt in range(1, retries + 2):
                     try:
@@ -186,7 +220,7 @@ def run_tasks(
                         if attempt == retries + 1:
                             record(key, payload, False, f"{type(err).__name__}: {err}", attempt)
         else:
-            _run_pool(fn, todo, workers or os.cpu_count() or 1, retries, record, pool)
+            _run_pool(fn, todo, workers or usable_cores(), retries, record, pool)
         if bar is not None:
             bar.close()
         return {k: done[k] for k, _ in tasks if k in done}
@@ -218,8 +252,19 @@ def _run_pool(fn, todo, workers, retries, record, shared: WorkerPool | None = No
     suspects, broke = [], False
     own = shared is None
     ex = pool(workers) if own else shared.executor()
+
+    def submit_all(ex) -> dict:
+        return {ex.submit(fn, payload): (key, payload) for key, payload in todo}
+
     try:
-        futs = {ex.submit(fn, payload): (key, payload) for key, payload in todo}
+        try:
+            futs = submit_all(ex)
+        except BrokenProcessPool:  # the kept pool broke while idle (a worker was killed)
+            if own:
+                raise
+            shared.discard()
+            ex = shared.executor()
+            futs = submit_all(ex)
         for f in as_completed(futs):
             key, payload = futs[f]
             try:
