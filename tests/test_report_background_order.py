@@ -82,6 +82,25 @@ def test_a_background_study_may_spread_over_processes_of_its_own():
     assert cpu > 0.5, cpu
 
 
+def _dies() -> None:  # a background process killed mid-task (the OOM killer, say)
+    import os
+
+    os._exit(9)
+
+
+def test_a_study_whose_process_dies_is_not_measurable_and_the_rest_goes_on():
+    """A study whose process dies gives "not measurable" with the reason (the report
+    writes every other section); the report's figures are drawn here then."""
+    from opticalstamp.report.section import NotMeasurable, measure
+
+    with Background({"dies": [(_dies, ())], "nap": [(time.sleep, (0.2,))]}) as bg:
+        res = measure(bg.result, "dies")
+        assert isinstance(res, NotMeasurable) and "ended without" in res.reason
+        for _ in bg.as_completed():
+            pass
+        assert bg.submit(abs, -1) is None  # the pool is broken: drawn here
+
+
 def _alive(pid: int) -> bool:
     try:
         with open(f"/proc/{pid}/stat") as f:

@@ -118,10 +118,21 @@ class Background:
 
     def result(self, name: str):
         """The result of job ``name`` (waits for it; re-raises its error), or None if it
-        was not started."""
+        was not started; :class:`~.section.NotMeasurable` where a background process
+        ended without giving it (killed, or out of memory: the pool is broken then, and
+        every job not yet done with it), so that the report still writes the rest."""
+        from concurrent.futures.process import BrokenProcessPool
+
         if name not in self._jobs:
             return None
-        return self._join(name, [task.result()[0] for task in self._jobs[name]])
+        try:
+            return self._join(name, [task.result()[0] for task in self._jobs[name]])
+        except BrokenProcessPool:
+            from .section import NotMeasurable
+
+            return NotMeasurable(
+                "a background process ended without giving its result (killed, or out of memory?)"
+            )
 
     def seconds(self) -> dict:
         """Per job whose tasks all finished without error, the seconds its tasks took in
