@@ -199,8 +199,7 @@ ALLOWED_STATE = MappingProxyType(
         ("raytrace.cuda_ray", "delattr np"): "the same loan, taken back",
         ("studies.runner", "numba.set_num_threads"): "the initializer of the pool's worker "
         "processes (spawned for the study, one numba thread each): their whole state",
-        ("report.background", "numba.set_num_threads"): "the initializer of the report's "
-        "worker processes (one numba thread each), and Background.cores, which sets this "
+        ("report.background", "numba.set_num_threads"): "Background.cores, which sets this "
         "process's threads for a section and restores them (issue 22: to go with the "
         "report's own pool)",
         ("imaging.ocr", "reads os.environ"): "the tesseract subprocess's environment: a copy "

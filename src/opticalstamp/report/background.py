@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from contextlib import contextmanager
 
-from ..studies.runner import usable_cores, watch_parent
+from ..studies.runner import process_pool, usable_cores
 
 
 def workers(n_tasks: int) -> int:
@@ -30,15 +30,6 @@ def study_workers(n_tasks: int, n_spread: int) -> int:
     (seeds belong to evaluations, not to processes)."""
     spare = max(0, usable_cores() - 1 - workers(n_tasks))
     return 1 + spare // max(1, n_spread)
-
-
-def start_worker() -> None:  # pragma: no cover - runs in the background processes
-    """A background process: one numba thread; it ends with the report's process (and
-    the processes a study started in it end with it: :func:`watch_parent`)."""
-    import numba
-
-    numba.set_num_threads(1)
-    watch_parent()
 
 
 def timed(fn, args: tuple) -> tuple:  # pragma: no cover - runs in the background processes
@@ -97,11 +88,9 @@ class Background:
         if not tasks:
             return
         import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
 
-        ctx = mp.get_context("spawn")  # no fork of numba's threads
         self._n = workers(len(tasks))
-        self._pool = ProcessPoolExecutor(self._n, mp_context=ctx, initializer=start_worker)
+        self._pool = process_pool(self._n)  # spawned, one numba thread each
         before = set(mp.active_children())
         for name, (fn, args, *cores) in tasks:
             fut = self._pool.submit(timed, fn, args)
@@ -212,7 +201,8 @@ class Background:
 
     def close(self) -> None:
         """End the processes: at once where jobs are still running (the report failed;
-        the processes a study started end with its process, :func:`start_worker`)."""
+        the processes a study started end with its process:
+        :func:`~opticalstamp.studies.runner.watch_parent`)."""
         if self._pool is None:
             return
         if not all(task.done() for task in self._all()):

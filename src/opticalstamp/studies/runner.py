@@ -77,8 +77,9 @@ def single_thread() -> None:  # pragma: no cover - runs in worker processes
     watch_parent()
 
 
-def _new_pool(n: int):
-    """``n`` spawned worker processes (no fork of numba's threads), one numba thread each."""
+def process_pool(n: int):
+    """``n`` spawned worker processes (no fork of numba's threads), one numba thread each,
+    each ended with the process that started it (:func:`single_thread`)."""
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -101,7 +102,7 @@ class WorkerPool:
     def executor(self):
         """The pool's executor, started at the first call."""
         if self._ex is None:
-            self._ex = _new_pool(self.workers)
+            self._ex = process_pool(self.workers)
         return self._ex
 
     def discard(self) -> None:
@@ -235,8 +236,6 @@ def _run_pool(fn, todo, workers, retries, record, shared: WorkerPool | None = No
     from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    pool = _new_pool
-
     def failed(key, payload, err, attempt) -> bool:
         """Record a final failure, or say that the task is to be tried again."""
         if attempt <= retries:
@@ -251,7 +250,7 @@ def _run_pool(fn, todo, workers, retries, record, shared: WorkerPool | None = No
 
     suspects, broke = [], False
     own = shared is None
-    ex = pool(workers) if own else shared.executor()
+    ex = process_pool(workers) if own else shared.executor()
 
     def submit_all(ex) -> dict:
         return {ex.submit(fn, payload): (key, payload) for key, payload in todo}
@@ -282,7 +281,7 @@ def _run_pool(fn, todo, workers, retries, record, shared: WorkerPool | None = No
         shared.discard()  # broken: new processes for the next call
     for key, payload in suspects:
         for attempt in range(2, retries + 3):
-            with pool(1) as ex:
+            with process_pool(1) as ex:
                 try:
                     record(key, payload, True, ex.submit(fn, payload).result(), attempt)
                     break
