@@ -207,6 +207,31 @@ def test_cuda_backend_gives_the_cpu_figures():
     assert np.abs(gpu[1] - cpu[1]).max() < 1e-9 * cpu[1].max()
 
 
+def test_a_faint_wavelength_gets_a_looser_range_tolerance(monkeypatch):
+    """A wavelength of weight w gets the range finder's tolerance / w (at most
+    MAX_RANGE_TOL): the light's faint end takes fewer blocks of vectors, and the sum
+    leaves out at most n x RANGE_TOL of its light (n wavelengths) against every
+    wavelength at RANGE_TOL (measured here: 1.9e-6 of 3e-6)."""
+    from opticalstamp.analysis import wave2d, wavespectral
+    from opticalstamp.analysis.spectrum import Spectrum
+
+    assert wave2d.range_tol(1.0) == wave2d.RANGE_TOL
+    assert wave2d.range_tol(0.5) == pytest.approx(2 * wave2d.RANGE_TOL)
+    assert wave2d.range_tol(1e-6) == wave2d.MAX_RANGE_TOL
+    d = _stack((10.0, 10.0, 12.0), shape="circle")
+    smp = wavebase.wave_sampling(d, band=0.12)
+    light = Spectrum("faint end", (0.5, 0.6, 0.7), (0.6, 0.399, 0.001))
+    weighted = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
+    monkeypatch.setattr(wavespectral, "range_tol", lambda w: wave2d.RANGE_TOL)
+    even = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
+    blocks = [[s.meta["blocks"] for s in src.sources] for src in (weighted, even)]
+    assert blocks[0][2] < blocks[1][2] and blocks[0][:2] == blocks[1][:2]
+    (_, a, light_a), (_, b, light_b) = weighted.lsf_x(ZS), even.lsf_x(ZS)
+    assert light_a == pytest.approx(light_b, rel=3 * wave2d.RANGE_TOL)
+    assert light_a != light_b
+    assert np.abs(a - b).max() < 3 * wave2d.RANGE_TOL * b.max()
+
+
 def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypatch):
     """Light of several wavelengths by the 2-D path: the sources built in threads, on a
     GPU one per wavelength (here on the CPU, each thread in a copy of the run's context),
@@ -215,19 +240,19 @@ def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypat
     afterwards."""
     from threadpoolctl import threadpool_info
 
-    from opticalstamp.analysis import arrays, wavespectral
+    from opticalstamp.analysis import arrays, wavespectral, wavethreads
     from opticalstamp.analysis.spectrum import Spectrum
     from opticalstamp.device import run_device, using_device
 
     d = _stack((10.0, 10.0, 12.0), shape="circle")
     smp = wavebase.wave_sampling(d, band=0.12)
     light = Spectrum("two", (0.5, 0.6), (0.4, 0.6))
-    monkeypatch.setattr(wavespectral, "CPU_SIDE_BY_SIDE", 1)
+    monkeypatch.setattr(wavethreads, "CPU_SIDE_BY_SIDE", 1)
     one = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
-    monkeypatch.setattr(wavespectral, "CPU_SIDE_BY_SIDE", 2)
-    monkeypatch.setattr(wavespectral, "_cores", lambda: 2)
+    monkeypatch.setattr(wavethreads, "CPU_SIDE_BY_SIDE", 2)
+    monkeypatch.setattr(wavethreads, "_cores", lambda: 2)
     threads, seen = [], []
-    fft_alone = wavespectral._one_fft_thread
+    fft_alone = wavethreads._one_fft_thread
 
     def counted(fn, *args):  # the FFTs' threads inside each side-by-side source
         def seen_by_backend(*a):
@@ -236,7 +261,7 @@ def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypat
 
         return fft_alone(seen_by_backend, *args)
 
-    monkeypatch.setattr(wavespectral, "_one_fft_thread", counted)
+    monkeypatch.setattr(wavethreads, "_one_fft_thread", counted)
     two = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
     assert threads == [(1, 1), (1, 1)]
 
@@ -248,14 +273,14 @@ def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypat
     ran_on = []
 
     monkeypatch.setattr(wavespectral, "_on_gpu", lambda design: True)
-    monkeypatch.setattr(wavespectral, "_on_stream", direct)
+    monkeypatch.setattr(wavethreads, "_on_stream", direct)
     before = [lib["num_threads"] for lib in threadpool_info()]
     with using_device("cpu"):
         side = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
     assert seen == ["cpu"] * 2  # each thread ran in the run's context
     # on a GPU the threads are the process's kept pool, alive after the call (their
     # CuPy FFT plans kept for the next)
-    kept = wavespectral._gpu_threads(2)
+    kept = wavethreads._gpu_threads(2)
     assert all(t in kept._threads and t.is_alive() for t in ran_on)
     assert [lib["num_threads"] for lib in threadpool_info()] == before
     a, c = one.lsf_x(ZS), two.lsf_x(ZS)

@@ -54,6 +54,20 @@ PROPAGATORS = ("exact", "paraxial")
 #: Relative power the randomized range finder may leave out, and its block of vectors.
 RANGE_TOL = 1e-6
 BLOCK = 16
+#: The loosest range-finder tolerance a wavelength of small weight gets (:func:`range_tol`).
+MAX_RANGE_TOL = 1e-3
+
+
+def range_tol(weight: float, tol: float = RANGE_TOL) -> float:
+    """The range finder's tolerance for a wavelength that enters a light's sum with
+    ``weight`` (the weights summing to 1): ``tol / weight``, at most
+    :data:`MAX_RANGE_TOL`, as :func:`~.wavespectral.spectral_samplings` scales the mode
+    compression's. What a wavelength leaves out then counts in the sum as ``tol`` of
+    its own power, whatever its weight: the sum of n wavelengths leaves out at most
+    about n ``tol`` of its power (7e-6 in white light), where every wavelength at ``tol``
+    would spend as much on the light's faint ends as on its peak (the circular
+    prototype's 0.757 um, weight 4e-4: 8 blocks of vectors at 1e-6, 4 at 1e-3)."""
+    return tol if weight >= 1.0 else min(MAX_RANGE_TOL, tol / weight)
 
 
 #: The operator's floating point: "single" (complex64 FFTs, 3x faster on a 2-core CPU;
@@ -159,26 +173,25 @@ def coherent_modes(
     bk, xp = st.bk, st.bk.xp
     rng = np.random.default_rng(seed)
     n0y, n0x = st.sources
-    qs: list = []  # orthonormal rows, block by block
-    total, missing, tries, rank = 0.0, np.inf, 0, 0
+    basis = _Rows(xp)  # the orthonormal rows found, block by block
+    total, missing, tries = 0.0, np.inf, 0
     lost: list[np.ndarray] = []
     step2 = st.cell
-    while missing > tol * total and rank < max_modes:
+    while missing > tol * total and basis.rank < max_modes:
         w = rng.standard_normal((block, n0y, n0x)) + 1j * rng.standard_normal((block, n0y, n0x))
         y, out = st.forward(bk.put(w / np.sqrt(2)), with_power=True)
         lost.append(bk.host(out))
         tries += 1
         total += (float(xp.vdot(y, y).real) / block - total) / tries  # running mean |A w|^2
-        y = _project_out(xp, y, qs)
+        y = _project_out(xp, y, basis.rows)
         missing = float(xp.vdot(y, y).real) / block
         p, v = xp.linalg.eigh(y @ y.conj().T)  # orthonormalise the block (Gram)
         good = p > 1e-24 * max(float(p.max()) if p.size else 0.0, 1e-300)
         if bool(good.any()):  # (a block wholly in the range found adds nothing)
-            qs.append((v[:, good] / xp.sqrt(p[good])).conj().T @ y)
-            rank += qs[-1].shape[0]
-    b = xp.concatenate([st.adjoint(qb) for qb in qs])
+            basis.add((v[:, good] / xp.sqrt(p[good])).conj().T @ y)
+    q = basis.rows
+    b = xp.concatenate([st.adjoint(q[i : i + block]) for i in range(0, q.shape[0], block)])
     st.bufs.clear()  # the work arrays: not needed by what uses the modes
-    q = xp.concatenate(qs)
     bm = b.reshape(q.shape[0], -1).conj()  # B = E^H A, (r, n_src)
     p, v = xp.linalg.eigh(bm @ bm.conj().T)
     p, v = xp.clip(p[::-1], 0, None), v[:, ::-1]
@@ -205,24 +218,47 @@ def coherent_modes(
 REORTH = 1e-5
 
 
-def _project_out(xp, y, qs: list):
-    """The rows of ``y`` less their parts in the span of the orthonormal rows of the
-    blocks ``qs`` (block classical Gram-Schmidt; y q^H as conj(conj(y) q^T), so that no
-    conjugate copy of q is made); a second pass over the block where one of its rows
-    kept less than :data:`REORTH` of its norm."""
-    if not qs:
+def _project_out(xp, y, q):
+    """The rows of ``y`` less their parts in the span of the orthonormal rows ``q`` (r,
+    nb) (classical Gram-Schmidt against all of them in two products, y q^H as
+    conj(conj(y) q^T), so that no conjugate copy of q is made); a second pass where one
+    of its rows kept less than :data:`REORTH` of its norm."""
+    if q.shape[0] == 0:
         return y
     before = xp.linalg.norm(y, axis=1)
     y = y.copy()
     for _ in range(2):
-        yc = y.conj()
-        for qb in qs:
-            y -= (yc @ qb.T).conj() @ qb
+        y -= (y.conj() @ q.T).conj() @ q
         kept = xp.linalg.norm(y, axis=1)
         if float((kept - REORTH * before).min()) >= 0:
             break
         before = kept
     return y
+
+
+class _Rows:
+    """Rows added block by block to one array, its room doubled when full: a product
+    against all of them is one product rather than one per block, and the range needs no
+    copy joined at the end (9 blocks of 16 at the circular prototype's 529^2 in-band
+    bins, BLAS on one thread: 3.6-3.9 s against 3.9-4.6 s block by block)."""
+
+    def __init__(self, xp):
+        self.xp, self.a, self.rank = xp, None, 0
+
+    @property
+    def rows(self):
+        return self.a[: self.rank] if self.a is not None else self.xp.zeros((0, 0))
+
+    def add(self, rows) -> None:
+        k = rows.shape[0]
+        if self.a is None or self.rank + k > self.a.shape[0]:
+            room = max(2 * self.rank, self.rank + k)
+            grown = self.xp.empty((room, rows.shape[1]), dtype=rows.dtype)
+            if self.rank:
+                grown[: self.rank] = self.a[: self.rank]
+            self.a = grown
+        self.a[self.rank : self.rank + k] = rows
+        self.rank += k
 
 
 @dataclass(frozen=True)

@@ -19,29 +19,25 @@ R, G and B LEDs lit in turn ("rgb"): three channels (:func:`wave_response_channe
 
 from __future__ import annotations
 
-import contextlib
-import contextvars
-import functools
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import fft as sfft
 
 from ..design import Design
-from .arrays import fft_threads, fft_workers, wave_backend
+from .arrays import fft_workers, wave_backend
 from .spectrum import Spectrum, channels, one_channel
 from .wave import (
     WaveResponse,
     half_width,
     lsf_source,
-    one_blas_thread,
     stack_reach,
     wave_marginals,
     wave_response,
 )
+from .wave2d import range_tol
+from .wave2dlsf import lsf_source_2d
 from .wave2dmaps import checked_heights
 from .wavebase import (
     SOURCE_EXTRA,
@@ -51,6 +47,7 @@ from .wavebase import (
     stack_axes,
     wave_sampling,
 )
+from .wavethreads import side_by_side
 
 __all__ = [
     "SpectralWaveResponse",
@@ -247,12 +244,14 @@ def response_at(
     fresnel: bool = False,
     progress: bool = False,
     bar=None,
+    weight: float = 1.0,
 ):
     """A used pixel's responsivity at the design's wavelength, by the path its holes
     take: the separable :func:`~.wave.wave_response` for rectangles, else the 2-D path's
-    maps (:func:`~.wave2dmaps.wave_maps_2d`: the same figures and ``spot``), with a
-    progress bar (heights; ``progress``) and, on a CPU, the expected cost (:func:`maps_bar`)
-    unless the caller's ``bar`` counts them."""
+    maps (:func:`~.wave2dmaps.wave_maps_2d`: the same figures and ``spot``; its range
+    finder's tolerance that of a wavelength of ``weight`` in a light,
+    :func:`~.wave2d.range_tol`), with a progress bar (heights; ``progress``) and, on a
+    CPU, the expected cost (:func:`maps_bar`) unless the caller's ``bar`` counts them."""
     if rectangular(design):
         return wave_response(
             design, z_mm, pixel=pixel, sampling=sampling, cell_um=cell_um, fresnel=fresnel
@@ -265,9 +264,8 @@ def response_at(
     if own:
         bar = maps_bar(design, [smp], zs, progress)
     try:
-        return wave_maps_2d(
-            design, zs, pixel=pixel, sampling=smp, cell_um=cell_um, fresnel=fresnel, bar=bar
-        )
+        return wave_maps_2d(design, zs, pixel=pixel, sampling=smp, cell_um=cell_um,
+                            fresnel=fresnel, bar=bar, tol=range_tol(weight))  # fmt: skip
     finally:
         if own:
             bar.close()
@@ -341,8 +339,9 @@ def wave_response_spectral(
                 cell_um=cell_um,
                 fresnel=fresnel,
                 bar=bar,
+                weight=w,
             )
-            for lam, s in zip(spec.wavelengths_um, smps, strict=True)
+            for lam, s, w in zip(spec.wavelengths_um, smps, spec.weights, strict=True)
         ]
     finally:
         if bar is not None:
@@ -459,34 +458,25 @@ class SpectralLSFSource:
         spec = one_channel(design, spectrum)
         smps = spectral_samplings(design, spec, sampling)
 
-        def one(lam: float, s: WaveSampling):
-            return lsf_source(
-                at_wavelength(design, lam), z_max_mm, pixel=pixel, sampling=s, fresnel=fresnel
-            )
+        def one(lam: float, s: WaveSampling, w: float):
+            d = at_wavelength(design, lam)
+            if rectangular(d):
+                return lsf_source(d, z_max_mm, pixel=pixel, sampling=s, fresnel=fresnel)
+            return lsf_source_2d(d, z_max_mm, pixel=pixel, sampling=s, fresnel=fresnel,
+                                 tol=range_tol(w))  # fmt: skip
 
-        jobs = list(zip(spec.wavelengths_um, smps, strict=True))
-        gpu = _on_gpu(design)
-        n = len(jobs) if gpu else min(len(jobs), _cores(), CPU_SIDE_BY_SIDE)
-        if len(jobs) > 1 and not rectangular(design) and n > 1:
-            # the 2-D path: each wavelength in a thread (a GPU's kept, _gpu_threads) on a
-            # stream of its own, one's host work overlapping another's transforms; on the
-            # CPU a few at a time, FFTs on one thread each, one's BLAS and copies
-            # overlapping another's transforms (the circular prototype's 7: 238 -> 182 s,
-            # 2026-11-27); each computed as alone (its seed, its arrays): the figures of
-            # one after the other (on the CPU to the last bits of FFTs on 1 and 2
-            # threads). BLAS at one thread around the pool: the sources' own limits,
-            # left in any order, restore 1, and this restores the process's at the end
-            run = _on_stream if gpu else _one_fft_thread
-            with one_blas_thread(), _pool(n, gpu) as pool:
-                runs = [  # each in a copy of this context: the run's device goes along
-                    pool.submit(contextvars.copy_context().run, run, one, *job) for job in jobs
-                ]
-                try:  # none left running on a kept thread where one fails
-                    sources = [r.result() for r in runs]
-                finally:
-                    wait(runs)
+        jobs = list(zip(spec.wavelengths_um, smps, spec.weights, strict=True))
+        if len(jobs) > 1 and not rectangular(design):
+            # the 2-D path: the wavelengths side by side (:mod:`.wavethreads`; on the
+            # CPU the circular prototype's 7: 238 -> 182 s, 2026-11-27), each computed as
+            # alone (its seed, its arrays): the figures of one after the other (on the
+            # CPU to the last bits of FFTs on 1 and 2 threads); the heaviest first: a
+            # wavelength's tolerance follows its weight (:func:`~.wave2d.range_tol`), so
+            # the lightest cost least and fill the end
+            order = sorted(range(len(jobs)), key=lambda i: -jobs[i][2])
+            sources = side_by_side(one, jobs, order, _on_gpu(design))
         else:
-            sources = [one(lam, s) for lam, s in jobs]
+            sources = [one(*job) for job in jobs]
         cyc = [2 * s.band / s.wavelength_um for s in smps]
         return cls(sources, np.asarray(spec.weights, dtype=np.float64), cyc)
 
@@ -502,51 +492,6 @@ class SpectralLSFSource:
 def _on_gpu(design: Design) -> bool:
     """Whether the design's sources take the 2-D path on a GPU (CuPy) in this run."""
     return not rectangular(design) and wave_backend(None)[0].name == "cuda"
-
-
-#: Wavelengths of the 2-D path side by side on the CPU, at most (each holds its range
-#: finder's basis, up to 1 GB at the prototype's shortest wavelength).
-CPU_SIDE_BY_SIDE = 2
-
-
-def _cores() -> int:
-    """The CPU cores this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-
-
-@contextlib.contextmanager
-def _pool(n: int, gpu: bool):
-    """``n`` threads: on a GPU the process's kept ones (:func:`_gpu_threads`), else new."""
-    if gpu:
-        yield _gpu_threads(n)
-        return
-    with ThreadPoolExecutor(max_workers=n) as pool:
-        yield pool
-
-
-@functools.lru_cache(maxsize=4)
-def _gpu_threads(n: int) -> ThreadPoolExecutor:
-    """The process's pool of ``n`` threads for wavelengths on a GPU, made once: CuPy
-    caches FFT plans per thread (kept, with their work areas, while the process lives),
-    and fresh threads made and destroyed them at every call (1.86 -> 1.47 s in white
-    light, an H100)."""
-    return ThreadPoolExecutor(max_workers=n, thread_name_prefix="opticalstamp-wave-gpu")
-
-
-def _one_fft_thread(fn, *args):
-    """``fn(*args)`` with the CPU's FFTs on one thread (:func:`~.arrays.fft_threads`)."""
-    with fft_threads(1):
-        return fn(*args)
-
-
-def _on_stream(fn, *args):
-    """``fn(*args)`` with CuPy's work queued on a non-blocking stream of its own."""
-    import cupy
-
-    with cupy.cuda.Stream(non_blocking=True) as stream:
-        out = fn(*args)
-        stream.synchronize()
-    return out
 
 
 def mirror_twin(
