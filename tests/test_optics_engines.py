@@ -122,6 +122,31 @@ def test_rmtf_says_which_optics(paper):
     )
 
 
+def test_the_optics_name_the_light(paper):
+    """The wave engine's figures say under which light they were computed: the design's
+    one wavelength, or its illumination's name and wavelengths (the sampling's
+    wavelength, where the band is set, is the design's either way): in the record, the
+    CLI's line, a fit's words and the report's headline."""
+    from opticalstamp.analysis.responsivity import light_words
+    from opticalstamp.cli.optics import optics_line
+    from opticalstamp.design.variants import replace as changed
+    from opticalstamp.report.html.page import _headline_optics
+    from opticalstamp.studies.fitresult import optics_words
+
+    mono = resolve_optics(paper, "wave").to_dict()
+    assert mono["light"] == {"name": "mono", "wavelengths_um": [0.55]}
+    assert light_words(mono) == "at 0.55 µm" and "optics: wave at 0.55 µm," in optics_line(mono)
+    white = resolve_optics(changed(paper, {"electronics.illumination": "white"}), "wave")
+    w = white.to_dict()
+    assert w["light"]["name"] == "white" and len(w["light"]["wavelengths_um"]) == 7
+    assert w["wavelength_um"] == 0.55  # the band's
+    said = "under the white light (7 wavelengths, 0.407-0.757 µm)"
+    assert light_words(w) == said and f"optics: wave {said}," in optics_line(w)
+    assert said in optics_words(w | {"scheme": {}})
+    assert f"scalar diffraction {said} in the band" in _headline_optics(w)
+    assert resolve_optics(paper, "ray").to_dict()["light"] is None
+
+
 def test_bad_optics_are_refused(paper):
     with pytest.raises(InputError, match="optics: must be one of ray, wave, auto"):
         resolve_optics(paper, "waves")

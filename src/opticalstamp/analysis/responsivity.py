@@ -60,6 +60,9 @@ class Optics:
     rule : the validity rule's figures for "auto" (plain data), else None
     fresnel : Fresnel losses in the wave engine (and in the traced light it is joined
         with); the tracer takes its own ``fresnel`` argument
+    light : the wave engine's light where ``engine`` is "wave": {"name": the design's
+        illumination, "wavelengths_um": every wavelength of its channels} (the sampling's
+        wavelength is the design's, where the band is set, not the light's)
     """
 
     asked: str
@@ -68,6 +71,7 @@ class Optics:
     sampling: WaveSampling | None = None
     rule: dict | None = None
     fresnel: bool = False
+    light: dict | None = None
 
     @property
     def band(self) -> float | None:
@@ -82,10 +86,34 @@ class Optics:
             "wavelength_um": None if self.sampling is None else self.sampling.wavelength_um,
             "rule": self.rule,
             "fresnel": self.fresnel,
+            "light": self.light,
         }
 
 
 RAY = Optics("ray", "ray", "asked for")
+
+
+def light_of(design: Design) -> dict:
+    """The design's light as :class:`Optics` records it: its illumination's name and
+    every wavelength of its channels."""
+    from .spectrum import channels
+
+    lams = sorted({lam for s in channels(design).values() for lam in s.wavelengths_um})
+    return {"name": design.electronics.illumination, "wavelengths_um": lams}
+
+
+def light_words(optics: dict) -> str:
+    """Where the wave engine's figures of an :class:`Optics` record (its ``to_dict``) were
+    computed, in words: "at 0.55 µm", or "under the white light (7 wavelengths,
+    0.407-0.757 µm)"."""
+    light = optics.get("light") or {}
+    lams = light.get("wavelengths_um") or []
+    if len(lams) > 1:
+        return (
+            f"under the {light.get('name', '')} light ({len(lams)} wavelengths, "
+            f"{min(lams):.3f}-{max(lams):.3f} µm)"
+        )
+    return f"at {(lams or [optics['wavelength_um']])[0]:g} µm"
 
 
 def wave_unavailable(
@@ -153,7 +181,8 @@ def resolve_optics(
         why = wave_unavailable(design, maps=False, channels=channels)
         if why is not None:
             raise InputError(f"optics: 'wave' is not available for {design.name}: {why}")
-        return Optics("wave", "wave", "asked for", wave_sampling(design), fresnel=bool(fresnel))
+        return Optics("wave", "wave", "asked for", wave_sampling(design), None, bool(fresnel),
+                      light_of(design))  # fmt: skip
     if method == "paraxial":
         return Optics("auto", "ray", "the paraxial closed form asked for is ray optics")
     from .validity import choose_optics
@@ -171,7 +200,8 @@ def resolve_optics(
     if channel is not None:
         rule |= {"channel": channel[0], "channel_predictors": channel[1]}
     if choice.engine == "wave":
-        return Optics("auto", "wave", choice.reason, wave_sampling(design), rule, bool(fresnel))
+        return Optics("auto", "wave", choice.reason, wave_sampling(design), rule, bool(fresnel),
+                      light_of(design))  # fmt: skip
     return Optics("auto", "ray", choice.reason, None, rule)
 
 

@@ -22,8 +22,10 @@ def optics_line(meta: dict) -> str:
     o = meta
     if o["engine"] == "ray":
         return f"optics: ray (geometric; {o['reason']})"
+    from ..analysis.responsivity import light_words
+
     losses = ", Fresnel losses in both" if o.get("fresnel") else ""
     return (
-        f"optics: wave at {o['wavelength_um']:g} µm, band |s| < {o['band']:.3f}, far ghosts "
+        f"optics: wave {light_words(o)}, band |s| < {o['band']:.3f}, far ghosts "
         f"traced{losses} ({o['reason']})"
     )

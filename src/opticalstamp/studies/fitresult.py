@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..analysis.responsivity import light_words
 from ..design import Design
 
 #: Why a parameter is held at its nominal value (the JSON's and the terminal's words).
@@ -117,7 +118,7 @@ def optics_words(o: dict | None) -> str:
     state = "converged" if sc.get("converged") else "NOT converged"
     chis = " to ".join(f"{c:.1f}" for c in sc.get("wave_chi2", []))
     return (
-        f"optics: wave at {o['wavelength_um']:g} um, the wave engine's light in its band "
+        f"optics: wave {light_words(o)}, the wave engine's light in its band "
         f"|s| < {o['band']:.3f} (own path, diffraction, near crosstalk; {o['reason']}); "
         f"the wave model's own least squares from the starts' best minimum, {state} "
         f"({sc.get('stopped')}): wave chi2 {chis} in {sc.get('evaluations')} evaluations, "

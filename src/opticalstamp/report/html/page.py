@@ -6,6 +6,7 @@ from __future__ import annotations
 import html
 from types import MappingProxyType
 
+from ...analysis.responsivity import light_words
 from ...design import Design
 from ...design.describe import describe, sensor_warnings
 from ...raytrace.stack import output_pitch
@@ -184,9 +185,9 @@ def _headline_optics(
     if not o:
         return ""
     if o["engine"] == "wave":
-        at = "each LED's light" if chans else f"{o['wavelength_um']:g} µm"
+        at = "at each LED's light" if chans else html.escape(light_words(o))
         what = (
-            f"wave optics (scalar diffraction at {at} in the band "
+            f"wave optics (scalar diffraction {at} in the band "
             f"|s| &lt; {o['band']:.3f}, the far ghosts traced)"
         )
     else:
