@@ -147,6 +147,21 @@ def test_project_out_orthogonalises_in_one_or_two_passes():
     assert wave2d._project_out(np, y, rows[:0]) is y
 
 
+def test_the_basis_rows_grow_as_their_blocks_joined():
+    """The range finder's basis (rows added block by block to one array that doubles its
+    room) holds the blocks' rows as their concatenation, whatever the blocks' sizes, and
+    an empty basis has no rows."""
+    rng = np.random.default_rng(5)
+    rows = wave2d._Rows(np)
+    assert rows.rows.shape[0] == 0 and rows.rank == 0
+    blocks = [rng.standard_normal((k, 7)) + 1j * rng.standard_normal((k, 7)) for k in
+              (3, 16, 1, 16, 40, 0, 5)]  # fmt: skip
+    for b in blocks:
+        rows.add(b)
+    assert rows.rank == 81 and rows.a.shape[0] >= 81
+    assert np.array_equal(rows.rows, np.concatenate(blocks))
+
+
 def test_gram_t_is_the_product():
     """The CPU's Hermitian Gram product (zherk) equals a^T conj(a)."""
     rng = np.random.default_rng(3)

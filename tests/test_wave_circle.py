@@ -217,7 +217,7 @@ def test_a_faint_wavelength_gets_a_looser_range_tolerance(monkeypatch):
 
     assert wave2d.range_tol(1.0) == wave2d.RANGE_TOL
     assert wave2d.range_tol(0.5) == pytest.approx(2 * wave2d.RANGE_TOL)
-    assert wave2d.range_tol(1e-6) == wave2d.MAX_RANGE_TOL
+    assert wave2d.range_tol(1e-6) == wave2d.MAX_RANGE_TOL == 1e-3
     d = _stack((10.0, 10.0, 12.0), shape="circle")
     smp = wavebase.wave_sampling(d, band=0.12)
     light = Spectrum("faint end", (0.5, 0.6, 0.7), (0.6, 0.399, 0.001))
@@ -230,6 +230,57 @@ def test_a_faint_wavelength_gets_a_looser_range_tolerance(monkeypatch):
     assert light_a == pytest.approx(light_b, rel=3 * wave2d.RANGE_TOL)
     assert light_a != light_b
     assert np.abs(a - b).max() < 3 * wave2d.RANGE_TOL * b.max()
+
+
+def test_the_heaviest_wavelengths_start_first_and_come_back_in_order(monkeypatch):
+    """The 2-D path's wavelengths are started heaviest first (their tolerance, and so
+    their cost, follows their weight: the cheap faint ends fill the end) and come back
+    in the light's order; the maps' path gives each its weight's tolerance too."""
+    from opticalstamp.analysis import wave2d, wave2dmaps, wavespectral, wavethreads
+    from opticalstamp.analysis.spectrum import Spectrum
+
+    d = _stack((10.0, 10.0, 12.0), shape="circle")
+    smp = wavebase.wave_sampling(d, band=0.12)
+    light = Spectrum("three", (0.5, 0.6, 0.7), (0.2, 0.5, 0.3))
+    seen = {}
+
+    def record(fn, jobs, order, gpu):
+        seen["order"] = list(order)
+        return [(lam, w) for lam, _, w in jobs]
+
+    monkeypatch.setattr(wavespectral, "side_by_side", record)
+    src = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
+    assert seen["order"] == [1, 2, 0]
+    assert src.sources == [(0.5, 0.2), (0.6, 0.5), (0.7, 0.3)]
+    # side by side: started in the order given, each result in its job's place
+    monkeypatch.setattr(wavethreads, "_cores", lambda: 2)
+    started = []
+
+    def job(i):
+        started.append(i)
+        return i * i
+
+    assert wavethreads.side_by_side(job, [(i,) for i in range(5)], [4, 3, 2, 1, 0], False) == [
+        0, 1, 4, 9, 16,
+    ]  # fmt: skip
+    assert sorted(started) == list(range(5)) and set(started[:2]) <= {4, 3, 2}
+    # the maps: each wavelength's range finder at its weight's tolerance
+    tols = []
+
+    class Seen(Exception):
+        pass
+
+    def maps(*args, tol, **kwargs):
+        tols.append(tol)
+        raise Seen
+
+    monkeypatch.setattr(wave2dmaps, "wave_maps_2d", maps)
+    faint_first = Spectrum("faint first", (0.7, 0.5), (0.001, 0.999))
+    with pytest.raises(Seen):
+        wavespectral.wave_response_spectral(d, ZS, spectrum=faint_first, sampling=smp)
+    with pytest.raises(Seen):
+        wavespectral.wave_response_spectral(d, ZS, spectrum="mono", sampling=smp)
+    assert tols == [1e-3, wave2d.RANGE_TOL]
 
 
 def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypatch):

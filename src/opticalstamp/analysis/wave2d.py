@@ -62,11 +62,14 @@ def range_tol(weight: float, tol: float = RANGE_TOL) -> float:
     """The range finder's tolerance for a wavelength that enters a light's sum with
     ``weight`` (the weights summing to 1): ``tol / weight``, at most
     :data:`MAX_RANGE_TOL`, as :func:`~.wavespectral.spectral_samplings` scales the mode
-    compression's. What a wavelength leaves out then counts in the sum as ``tol`` of
-    its own power, whatever its weight: the sum of n wavelengths leaves out at most
-    about n ``tol`` of its power (7e-6 in white light), where every wavelength at ``tol``
-    would spend as much on the light's faint ends as on its peak (the circular
-    prototype's 0.757 um, weight 4e-4: 8 blocks of vectors at 1e-6, 4 at 1e-3)."""
+    compression's. What a wavelength leaves out then counts in the sum as about ``tol``
+    of the sum's power, whatever its weight (where the wavelengths' powers are alike):
+    the sum of n wavelengths leaves out about n ``tol`` of its power (sum_i w_i
+    range_tol(w_i) = 6.4e-6 in white light), and up to twice that, since the range
+    finder's stop (an estimate from one block of vectors, not a bound) and the modes'
+    truncation each spend it; where every wavelength at ``tol`` would spend as much on
+    the light's faint ends as on its peak (the circular prototype's 0.757 um, weight
+    4e-4: 8 blocks of vectors at 1e-6, 4 at 1e-3)."""
     return tol if weight >= 1.0 else min(MAX_RANGE_TOL, tol / weight)
 
 
@@ -240,7 +243,11 @@ class _Rows:
     """Rows added block by block to one array, its room doubled when full: a product
     against all of them is one product rather than one per block, and the range needs no
     copy joined at the end (9 blocks of 16 at the circular prototype's 529^2 in-band
-    bins, BLAS on one thread: 3.6-3.9 s against 3.9-4.6 s block by block)."""
+    bins, BLAS on one thread: 3.6-3.9 s against 3.9-4.6 s block by block). Its memory:
+    up to twice the rows in use, three times while it grows (NumPy commits only the
+    pages written; CuPy's pool holds the whole array: the circular prototype's 144 rows
+    in 256, 1.15 GB a wavelength, where the blocks and their join at the end took twice
+    0.65 GB)."""
 
     def __init__(self, xp):
         self.xp, self.a, self.rank = xp, None, 0

@@ -84,7 +84,9 @@ def spectral_samplings(
     wavelength. With it (a sampling at ``sampling.wavelength_um``): its band at every
     wavelength, its step, margin and source points scaled with the wavelength as the
     default rules scale them. The compression tolerance of each is ``mode_tol / w_i``
-    (at most :data:`MAX_MODE_TOL`), so that the weighted sum's is ``mode_tol``.
+    (at most :data:`MAX_MODE_TOL`): each wavelength drops about ``mode_tol`` of the
+    weighted sum's power (where the wavelengths' powers are alike), n wavelengths about
+    n ``mode_tol``.
     """
     lams = spectrum.wavelengths_um
     if sampling is None:
@@ -106,8 +108,8 @@ def spectral_samplings(
             else sampling
             for lam in lams
         ]
-    # each wavelength may drop mode_tol / w_i of its power to compression: the weighted
-    # sum then drops at most mode_tol of its own (one wavelength: as it is)
+    # each wavelength may drop mode_tol / w_i of its power to compression: in the weighted
+    # sum that is about mode_tol of its power for each (one wavelength: as it is)
     return [
         replace(s, mode_tol=min(MAX_MODE_TOL, s.mode_tol / w)) if w < 1.0 else s
         for s, w in zip(smps, spectrum.weights, strict=True)
