@@ -253,7 +253,7 @@ def test_the_heaviest_wavelengths_start_first_and_come_back_in_order(monkeypatch
     assert seen["order"] == [1, 2, 0]
     assert src.sources == [(0.5, 0.2), (0.6, 0.5), (0.7, 0.3)]
     # side by side: started in the order given, each result in its job's place
-    monkeypatch.setattr(wavethreads, "_cores", lambda: 2)
+    monkeypatch.setattr(wavethreads, "usable_cores", lambda: 2)
     started = []
 
     def job(i):
@@ -301,7 +301,7 @@ def test_wavelengths_side_by_side_give_the_figures_one_after_the_other(monkeypat
     monkeypatch.setattr(wavethreads, "CPU_SIDE_BY_SIDE", 1)
     one = wavespectral.SpectralLSFSource.of(d, 0.4, spectrum=light, sampling=smp)
     monkeypatch.setattr(wavethreads, "CPU_SIDE_BY_SIDE", 2)
-    monkeypatch.setattr(wavethreads, "_cores", lambda: 2)
+    monkeypatch.setattr(wavethreads, "usable_cores", lambda: 2)
     threads, seen = [], []
     fft_alone = wavethreads._one_fft_thread
 

@@ -19,6 +19,7 @@ environment.
 from __future__ import annotations
 
 import importlib.util
+import os
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -134,3 +135,12 @@ def using_device(name: str) -> Iterator[str]:
         yield _RUN.get()
     finally:
         _RUN.reset(token)
+
+
+def usable_cores() -> int:
+    """The CPU cores this process may run on: its CPU affinity where the system says (a
+    container's limit), else every core of the machine."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on every system
+        return os.cpu_count() or 1

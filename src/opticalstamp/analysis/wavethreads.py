@@ -14,9 +14,9 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import functools
-import os
 from concurrent.futures import ThreadPoolExecutor, wait
 
+from ..device import usable_cores
 from .arrays import fft_threads
 from .wave import one_blas_thread
 
@@ -34,7 +34,7 @@ def side_by_side(fn, jobs: list[tuple], order: list[int], gpu: bool) -> list:
     goes along); the results in the jobs' order. BLAS runs on one thread around the pool
     (the sources' own limits, left in any order, restore 1, and this restores the
     process's at the end); none is left running on a kept thread where one fails."""
-    n = len(jobs) if gpu else min(len(jobs), _cores(), CPU_SIDE_BY_SIDE)
+    n = len(jobs) if gpu else min(len(jobs), usable_cores(), CPU_SIDE_BY_SIDE)
     if n < 2:
         return [fn(*job) for job in jobs]
     run = _on_stream if gpu else _one_fft_thread
@@ -44,11 +44,6 @@ def side_by_side(fn, jobs: list[tuple], order: list[int], gpu: bool) -> list:
             return [runs[i].result() for i in range(len(jobs))]
         finally:
             wait(runs.values())
-
-
-def _cores() -> int:
-    """The CPU cores this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 @contextlib.contextmanager

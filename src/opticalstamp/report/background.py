@@ -12,7 +12,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from contextlib import contextmanager
 
-from ..studies.runner import process_pool, usable_cores
+from ..device import usable_cores
+from ..studies.runner import process_pool
 
 
 def workers(n_tasks: int) -> int:

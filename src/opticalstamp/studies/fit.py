@@ -409,17 +409,13 @@ def wave_pool(jobs: int = 0):
     if cores < 2:
         yield None
         return
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
-    from .runner import single_thread
+    from .runner import process_pool
 
     made = []
 
     def run(fn, jobs):
         if not made:
-            ctx = mp.get_context("spawn")  # no fork of numba's threads
-            made.append(ProcessPoolExecutor(n, mp_context=ctx, initializer=single_thread))
+            made.append(process_pool(n))  # spawned: no fork of numba's threads
         return list(made[0].map(fn, jobs))
 
     try:

@@ -25,6 +25,7 @@ import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from ..device import usable_cores
 from ..io.files import to_json
 from ..io.journal import append_record, journal_lock, read_journal
 
@@ -36,15 +37,6 @@ def task_key(payload: dict) -> str:
     named = {k: v for k, v in payload.items() if k != "device"}
     blob = json.dumps(named, sort_keys=True, default=str).encode()
     return hashlib.sha256(blob).hexdigest()[:16]
-
-
-def usable_cores() -> int:
-    """The cores this process may run on: its CPU affinity where the system says (a
-    container's limit), else every core of the machine."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on every system
-        return os.cpu_count() or 1
 
 
 def watch_parent() -> None:  # pragma: no cover - runs in worker processes
