@@ -28,6 +28,7 @@ from opticalstamp.io.files import encode_tiff16, save_figure
 from opticalstamp.report.fitsection import fit_figures, fit_section, load_fit
 from opticalstamp.report.html.fit import fit_html
 from opticalstamp.studies import fit as fitmod
+from opticalstamp.studies import fitident
 from opticalstamp.studies.fit import HELD, UNDETERMINED, fit, layout_for
 from opticalstamp.studies.fitdata import observation
 from opticalstamp.studies.fitident import starts_apart, weak_directions
@@ -292,6 +293,9 @@ def test_a_combination_held_at_nominal(monkeypatch):
     obs = _observations(1, z_bars=(0.5, 2.5), z_edges=())
     free = ["layer1.x", "layer2.x", "layer3.x"]
     pins = {"slab2": 420.0, "ref": 200.0}
+    # the threshold from the Jacobian's errors: the secants' check would widen the third
+    # combination (test_a_flat_combination_is_widened), not what this test holds
+    monkeypatch.setattr(fitident, "SECANT_MIN", -np.inf)
     res0 = fit(NOMINAL, obs, free=free, pinned=pins, starts=1)
     monkeypatch.setattr(fitmod, "UNDETERMINED", 0.5 * max(res0.errors) / 3.0)
     res = fit(NOMINAL, obs, free=free, pinned=pins, starts=1)
@@ -302,6 +306,33 @@ def test_a_combination_held_at_nominal(monkeypatch):
     assert any("combination" in m and HELD in m for m in res.degeneracies)
     assert res.chi2 >= res0.chi2 - 1e-6 * res0.chi2
     assert res.to_dict()["held_combinations"][0]["reason"] == HELD
+
+
+def test_a_flat_combination_is_widened(monkeypatch):
+    """The same two bar images: the three x shifts' third combination is far flatter than
+    the Jacobian at the optimum says (the paraxial model's kinks where shadow edges cross
+    make the differences steep): the profile likelihood itself, layer 1 held 3 of the
+    Jacobian's errors either way and the rest fitted again, rises by far less than 9. The
+    secants' check finds it, names it and widens its members' errors; the estimates are
+    the same."""
+    obs = _observations(1, z_bars=(0.5, 2.5), z_edges=())
+    free = ["layer1.x", "layer2.x", "layer3.x"]
+    pins = {"slab2": 420.0, "ref": 200.0}
+    res = fit(NOMINAL, obs, free=free, pinned=pins, starts=1)
+    (w,) = res.optics["error_check"]["widened"]
+    assert set(w["direction"]) == set(free) and w["factor"] > 3
+    assert max(w["rise"]) < fitident.SECANT_MIN * w["expected"]
+    assert any("determined less well" in m and "layer3.x" in m for m in res.degeneracies)
+    with monkeypatch.context() as m:
+        m.setattr(fitident, "SECANT_MIN", -np.inf)
+        local = fit(NOMINAL, obs, free=free, pinned=pins, starts=1)
+    assert local.optics["error_check"]["widened"] == [] and local.values == res.values
+    assert all(e > 2 * e0 for e, e0 in zip(res.errors, local.errors, strict=True))
+    for sign in (-1, 1):
+        v = res.values[0] + 3 * sign * local.errors[0]
+        prof = fit(NOMINAL, obs, free=free[1:], pinned=pins | {"layer1.x": v}, starts=1)
+        rise = (prof.chi2 - res.chi2) / res.error_scale**2
+        assert rise < 9 * fitident.SECANT_MIN, rise
 
 
 def test_fitted_model_predicts_held_out_height_better():

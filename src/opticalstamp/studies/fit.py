@@ -30,7 +30,15 @@ from threadpoolctl import threadpool_limits
 from ..analysis.responsivity import Optics, resolve_optics
 from ..design import Design
 from .fitdata import Observation
-from .fitident import combination, degeneracies, names_in, starts_apart, weak_directions
+from .fitident import (
+    combination,
+    degeneracies,
+    name_undetermined,
+    names_in,
+    secant_estimate,
+    starts_apart,
+    weak_directions,
+)
 from .fitlm import geodesic_lm
 from .fitmodel import smear_of, spreads, with_params
 from .fitproblem import (  # noqa: F401 - the fit's problem, re-exported
@@ -172,16 +180,7 @@ def _estimate(prob: Problem, theta: np.ndarray, jac: np.ndarray | None = None):
     cov *= scale2
     msgs, blind = degeneracies(jac, lay, cov)
     weak = weak_directions(jac, lay, scale2, UNDETERMINED)
-    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-    for k in range(lay.n_free):  # an error far beyond the assembly scale: not determined
-        p = lay.params[lay.free[k]]
-        if k not in blind and sd[k] > UNDETERMINED * p.scale:
-            blind.add(k)
-            msgs.append(
-                f"{p.name} is not determined by these images (standard error "
-                f"{sd[k]:.3g} um, over {UNDETERMINED:g} x its assembly scale {p.scale:g} um): "
-                f"fix it with --pin {p.name}=..., or add images at other heights"
-            )
+    name_undetermined(lay, cov, msgs, blind, UNDETERMINED)
     return chi2, int(dof), scale2, cov, msgs, blind, weak
 
 
@@ -327,7 +326,8 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
         return theta, prob, est
 
     est = (chi2, dof, scale2, cov, msgs, blind, weak)
-    theta, prob, est = hold_rounds(theta, prob, est, lambda p, t0: (_refit(p, t0, max_nfev), p))
+    refit = lambda p, t0: (_refit(p, t0, max_nfev), p)  # noqa: E731
+    theta, prob, est = hold_rounds(theta, prob, est, refit)
     info = opt.to_dict() | {"forward_model": dict(FORWARD)[opt.engine]}
     if wave is not None:
         # the wave model's own optimum; what it finds undetermined there (the y shifts'
@@ -342,6 +342,13 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
 
         theta, prob = polish(prob, theta)
         theta, prob, est = hold_rounds(theta, prob, _estimate(prob, theta), polish)
+        refit = polish
+    memo = at if wave is not None else None
+    est, info["error_check"], loose = secant_estimate(prob, theta, est, UNDETERMINED, memo)
+    if len(loose):  # undetermined by the secants: held as the Jacobian's weak ones are
+        theta, prob, est = hold_rounds(theta, prob, est[:6] + (loose,), refit)
+        est, info["error_check"], _ = secant_estimate(prob, theta, est, UNDETERMINED, memo)
+    if wave is not None:
         info["scheme"] = _schemes(schemes)
     chi2, dof, scale2, cov, msgs, blind, weak = est
     msgs = said + [m for m in msgs if m not in said]
@@ -484,6 +491,21 @@ def _schemes(schemes: list[dict]) -> dict:
     return out
 
 
+def _exact(prob: Problem, runs: _WaveRuns) -> Problem:
+    """``prob`` on the wave model itself (``runs``, the fit's), each Jacobian's wave runs
+    side by side first (the polish's and the errors' Jacobians, :func:`_estimate`)."""
+    lay = prob.lay
+    exact = Problem(prob.design, prob.obs, lay, hold=prob.hold, model=lambda d, z, s, v: runs(v))
+    serial = exact.jacobian
+
+    def jacobian(t):
+        runs.prefetch(lay.physical(pt) for _, pt in exact.column_points(t))
+        return serial(t)
+
+    exact.jacobian = jacobian
+    return exact
+
+
 def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns):
     """The wave model's optimum from ``theta`` (the optimum of the fast model corrected
     about the nominal design, :mod:`.fitwave`): Levenberg-Marquardt with geodesic
@@ -499,16 +521,9 @@ def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns):
     Returns (theta, the wave model's problem, scheme: how it ran and converged).
     """
     lay = prob.lay
-    exact = Problem(prob.design, prob.obs, lay, hold=prob.hold, model=lambda d, z, s, v: runs(v))
+    exact = _exact(prob, runs)
     theta = exact.fit_nuisance(theta)
     chi_start = float(np.sum(exact.residuals(theta) ** 2))
-    serial = exact.jacobian
-
-    def jacobian(t):  # each Jacobian's wave runs side by side first, then read
-        runs.prefetch(lay.physical(pt) for _, pt in exact.column_points(t))
-        return serial(t)
-
-    exact.jacobian = jacobian  # the errors' Jacobian (_estimate) too
 
     def ahead(points):
         runs.prefetch((lay.physical(p) for p in points), min_runs=2)

@@ -114,3 +114,149 @@ def starts_apart(
         int(k): (float(good[:, k].min()), float(good[:, k].max()))
         for k in np.flatnonzero(far.any(axis=0))
     }
+
+
+#: The errors' check by secants (:func:`secant_check`): each principal direction of the
+#: physical parameters' covariance is probed SECANT_AT errors either way of the optimum ...
+SECANT_AT = 3.0
+#: ... and widened where the sum of squares rises there by less than this fraction of
+#: the SECANT_AT^2 x error scale^2 its quadratic model predicts (its error x 2 at least).
+SECANT_MIN = 0.25
+
+
+def secant_check(
+    sumsq, theta: np.ndarray, cov: np.ndarray, scale2: float, scales: np.ndarray, keep
+) -> tuple[np.ndarray, list[dict]]:
+    """The covariance ``cov`` of the fit at ``theta`` checked against the sum of squares
+    itself, away from the optimum: the errors from the Jacobian there are the inverse
+    curvature at one point, which a curved or flat valley (the wave fit's layer shifts
+    on bench_fit.py --wave's charts: two paths of its polish ended 1 chi2 apart with
+    layer 1 at +0.7 and -2.5 um, stated error 0.8 um) makes far too small.
+
+    Along each principal direction e of the physical block (in assembly ``scales``;
+    physical columns ``keep`` only), with its error s_e, the profile step d = SECANT_AT
+    s_e (e and the other columns' shift that the covariance's regression gives) is
+    taken either way; where ``sumsq`` (points (m, p) -> their sums of squares, the data
+    and the held directions' penalty; NaN for a point beyond the parameters' bounds:
+    that side is not measured) rises by a mean fraction rho < SECANT_MIN of the
+    SECANT_AT^2 scale2 a quadratic would, the direction's variance is divided by rho
+    (undetermined, error x 100, where rho <= 1e-4). No minimisation at the probes, so
+    rho is at least the profile's: a direction flagged is looser still.
+
+    Returns (the covariance widened, one record per direction widened: "direction" (free
+    columns' coefficients in assembly scales, unit length), "rise" (the two rises),
+    "expected", "factor" (error multiplier), "error_scales" (its error now, in assembly
+    scales)).
+    """
+    keep = np.asarray(sorted(keep), dtype=int)
+    if keep.size == 0:
+        return cov, []
+    s = scales[keep]
+    cpp = cov[np.ix_(keep, keep)]
+    lam, vec = np.linalg.eigh(cpp / np.outer(s, s))
+    regress = cov[:, keep] @ np.linalg.pinv(cpp, hermitian=True)
+    steps, dirs = [], []
+    for k in range(lam.size):
+        if not lam[k] > 0:
+            continue
+        dp = SECANT_AT * np.sqrt(lam[k]) * vec[:, k] * s
+        steps.append(regress @ dp)
+        dirs.append(k)
+    if not steps:
+        return cov, []
+    pts = np.array([theta + sign * d for d in steps for sign in (1.0, -1.0)])
+    rise = np.asarray(sumsq(np.vstack([theta[None], pts])), dtype=float)
+    rise = rise[1:] - rise[0]
+    expected = SECANT_AT**2 * scale2
+    out, found = cov.copy(), []
+    for i, k in enumerate(dirs):
+        both = rise[2 * i : 2 * i + 2]
+        if np.isnan(both).all():  # both probes beyond a bound: not measured
+            continue
+        rho = float(np.nanmean(both)) / expected
+        if rho >= SECANT_MIN:
+            continue
+        rho = max(rho, 1e-4)
+        u = steps[i] / SECANT_AT  # one error along the profile
+        out += (1 / rho - 1) * np.outer(u, u)
+        e = np.zeros(scales.size)
+        e[keep] = vec[:, k] * np.sign(vec[np.argmax(np.abs(vec[:, k])), k])
+        found.append(
+            {
+                "direction": e,
+                "rise": [float(r) for r in both],
+                "expected": float(expected),
+                "factor": float(1 / np.sqrt(rho)),
+                "error_scales": float(np.sqrt(lam[k] / rho)),
+            }
+        )
+    return out, found
+
+
+def name_undetermined(
+    lay: Layout, cov: np.ndarray, msgs: list[str], blind: set[int], undetermined: float
+) -> None:
+    """Each free parameter whose error lies beyond ``undetermined`` x its assembly scale
+    named (in ``msgs``) and marked (in ``blind``) as not determined."""
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    for k in range(lay.n_free):
+        p = lay.params[lay.free[k]]
+        if k not in blind and sd[k] > undetermined * p.scale:
+            blind.add(k)
+            msgs.append(
+                f"{p.name} is not determined by these images (standard error "
+                f"{sd[k]:.3g} um, over {undetermined:g} x its assembly scale {p.scale:g} um): "
+                f"fix it with --pin {p.name}=..., or add images at other heights"
+            )
+
+
+def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, runs=None):
+    """``est`` (the fit's estimate at the optimum of the problem ``prob``: chi2, dof,
+    error scale^2, covariance, messages, blind, weak directions) with its covariance checked by
+    secants (:func:`secant_check`: 2 evaluations a free parameter, side by side
+    on the wave fit's ``runs``, each image's nuisance parameters fitted again there from
+    where the step put them) and widened along each direction where the sum of squares
+    rises far less than its curvature at the optimum says, each such direction named.
+    Returns (the estimate, the check's record, the directions (m, free) now beyond
+    ``undetermined`` assembly scales: not determined, for the hold rounds)."""
+    chi2, dof, scale2, cov, msgs, blind, weak = est
+    lay = prob.lay
+    names = [lay.params[j].name for j in lay.free]
+    scales = np.array([lay.params[j].scale for j in lay.free])
+    lo, hi = prob.bounds()
+
+    def sumsq(points):
+        inside = [bool(np.all((p >= lo) & (p <= hi))) for p in points]
+        if runs is not None:
+            runs.prefetch(lay.physical(p) for p, ok in zip(points, inside, strict=True) if ok)
+        return [
+            float(np.sum(prob.residuals(prob.fit_nuisance(p, search=False)) ** 2)) if ok else np.nan
+            for p, ok in zip(points, inside, strict=True)
+        ]
+
+    keep = [k for k in range(lay.n_free) if k not in blind]
+    cov, found = secant_check(sumsq, theta, cov, scale2, scales, keep)
+    msgs, blind = list(msgs), set(blind)
+    for f in found:
+        terms = " ".join(f"{c:+.2f} {n}" for n, c in combination(f["direction"], names).items())
+        msgs.append(
+            f"the combination {terms} (each in its assembly scale) is determined less well "
+            f"than the curvature at the optimum says: {SECANT_AT:g} errors either way along "
+            f"it raise chi2 by {' and '.join(f'{r:.3g}' for r in f['rise'] if r == r)} where "
+            f"{f['expected']:.3g} was expected; its members' errors are widened along it "
+            f"({f['factor']:.3g} x)"
+        )
+    name_undetermined(lay, cov, msgs, blind, undetermined)
+    record = {
+        "method": f"secants {SECANT_AT:g} errors either way along each principal direction "
+        f"of the physical parameters; widened where chi2 rises by less than {SECANT_MIN:g} "
+        "of the quadratic's rise",
+        "widened": [
+            {"direction": combination(f["direction"], names)}
+            | {k: f[k] for k in ("rise", "expected", "factor")}
+            for f in found
+        ],
+    }
+    loose = [f["direction"] for f in found if f["error_scales"] > undetermined]
+    loose = np.array(loose) if loose else np.zeros((0, lay.n_free))
+    return (chi2, dof, scale2, cov, msgs, blind, weak), record, loose

@@ -303,17 +303,18 @@ class Problem:
                     lo[k], hi[k] = -0.5, 1.5
         return lo, hi
 
-    def fit_nuisance(self, theta: np.ndarray) -> np.ndarray:
+    def fit_nuisance(self, theta: np.ndarray, search: bool = True) -> np.ndarray:
         """Each image's nuisance parameters fitted with the physical ones held: the bar
         blocks' phases first by a search over one period (a block past the RMTF's zero
-        shows its bars in reverse), then every nuisance parameter by least squares."""
+        shows its bars in reverse; ``search=False``: from where they are), then every
+        nuisance parameter by least squares."""
         theta = theta.copy()
         lo, hi = self.bounds()
         sps = self.spreads(self.lay.physical(theta))
         if sps is None:
             return theta
         for i, (sl, _) in enumerate(self.lay.nuis):
-            if self.obs[i].kind == "bars":
+            if search and self.obs[i].kind == "bars":
                 theta[sl] = _phase_search(self.obs[i], sps[i], theta[sl])
 
             def res(nu, i=i, sl=sl):

@@ -1,0 +1,104 @@
+"""The fit's errors checked by secants (issue 24, studies/fitident.py: secant_check): on
+least squares whose sums of squares are known in closed form, a quadratic one keeps its
+covariance to rounding, a direction flatter than its curvature at the optimum says is
+widened by exactly the measured factor, and a probe beyond a bound is not measured."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from opticalstamp.studies.fitident import SECANT_AT, SECANT_MIN, secant_check
+
+SCALES = np.array([3.0, 20.0])
+
+
+def _cov(jac: np.ndarray, scale2: float = 1.0) -> np.ndarray:
+    return scale2 * np.linalg.inv(jac.T @ jac)
+
+
+def test_a_quadratic_sum_of_squares_keeps_its_covariance():
+    """Linear residuals A theta - b, two physical columns and one nuisance column (not
+    probed, shifted by the covariance's regression): every probe rises by exactly
+    SECANT_AT^2 x scale^2, so nothing is widened."""
+    rng = np.random.default_rng(5)
+    a = rng.standard_normal((40, 3)) * [1 / 3.0, 1 / 20.0, 1.0]
+    a[:, 2] += 0.8 * a[:, 0] * 3.0  # the nuisance correlated with the first
+    b = rng.standard_normal(40)
+    theta = np.linalg.lstsq(a, b, rcond=None)[0]
+    chi2 = float(np.sum((a @ theta - b) ** 2))
+    scale2 = max(1.0, chi2 / 37)
+    seen = []
+
+    def sumsq(points):
+        out = [float(np.sum((a @ p - b) ** 2)) for p in points]
+        seen.extend(out)
+        return out
+
+    cov = _cov(a, scale2)
+    out, found = secant_check(sumsq, theta, cov, scale2, SCALES, [0, 1])
+    assert found == [] and np.array_equal(out, cov)
+    rises = np.array(seen[1:]) - seen[0]
+    assert rises.size == 4
+    assert np.allclose(rises, SECANT_AT**2 * scale2, rtol=1e-9)
+
+
+def test_a_flat_direction_is_widened_by_its_secant():
+    """r0 = tanh(theta0 / s0) (its error s0 at the optimum), r1 = theta1 / s1: SECANT_AT
+    errors along theta0 raise the sum by tanh(SECANT_AT)^2 = 0.99 where 9 is expected,
+    so theta0's error is widened by SECANT_AT / tanh(SECANT_AT) and theta1's kept."""
+    s0, s1 = 0.5, 15.0
+
+    def res(p):
+        return np.array([np.tanh(p[0] / s0), p[1] / s1])
+
+    theta = np.zeros(2)
+    jac = np.diag([1 / s0, 1 / s1])
+    out, found = secant_check(
+        lambda pts: [float(res(p) @ res(p)) for p in pts], theta, _cov(jac), 1.0, SCALES, [0, 1]
+    )
+    assert len(found) == 1
+    f = found[0]
+    assert np.allclose(np.abs(f["direction"]), [1, 0], atol=1e-12)
+    assert f["factor"] == pytest.approx(SECANT_AT / np.tanh(SECANT_AT), rel=1e-9)
+    assert f["rise"] == pytest.approx([np.tanh(SECANT_AT) ** 2] * 2, rel=1e-9)
+    assert np.sqrt(out[0, 0]) == pytest.approx(s0 * f["factor"], rel=1e-9)
+    assert out[1, 1] == pytest.approx(s1**2, rel=1e-12) and abs(out[0, 1]) < 1e-9
+    # a curvature a little below the one claimed (rho = 1.2 SECANT_MIN): kept
+    c = np.sqrt(1.2 * SECANT_MIN)
+
+    def mild(p):
+        return np.array([c * p[0] / s0, p[1] / s1])
+
+    _, found = secant_check(
+        lambda pts: [float(mild(p) @ mild(p)) for p in pts], theta, _cov(jac), 1.0, SCALES, [0, 1]
+    )
+    assert found == []
+
+
+def test_a_probe_beyond_a_bound_is_not_measured():
+    """A side that the caller cannot evaluate (NaN) leaves the other side's rise alone to
+    judge; with both sides missing the direction is not judged at all; a rise below zero
+    (the point is no minimum along it) widens its error 100 x."""
+    s0, s1 = 0.5, 15.0
+    jac = np.diag([1 / s0, 1 / s1])
+    theta = np.zeros(2)
+
+    def flat_right(pts):  # flat for theta0 > 0, quadratic for theta0 < 0, nan below -1
+        out = []
+        for p in pts:
+            if p[0] < -1.0:
+                out.append(np.nan)
+            else:
+                out.append(float((min(p[0], 0.0) / s0) ** 2 + (p[1] / s1) ** 2))
+        return out
+
+    _, found = secant_check(flat_right, theta, _cov(jac), 1.0, SCALES, [0, 1])
+    assert len(found) == 1 and found[0]["factor"] == pytest.approx(100.0)
+    assert np.isnan(found[0]["rise"]).sum() == 1
+
+    def none_left(pts):
+        return [np.nan if abs(p[0]) > 1e-9 else float((p[1] / s1) ** 2) for p in pts]
+
+    _, found = secant_check(none_left, theta, _cov(jac), 1.0, SCALES, [0, 1])
+    assert found == []
