@@ -335,6 +335,26 @@ def test_a_flat_combination_is_widened(monkeypatch):
         assert rise < 9 * fitident.SECANT_MIN, rise
 
 
+def test_a_direction_the_secants_find_undetermined_is_held(monkeypatch):
+    """The same images with the threshold at 3 assembly scales: the secants widen the
+    flat combination beyond it, so the fit holds it at nominal as it holds the
+    Jacobian's weak directions, says why, and checks the rest again."""
+    monkeypatch.setattr(fitmod, "UNDETERMINED", 3.0)
+    obs = _observations(1, z_bars=(0.5, 2.5), z_edges=())
+    free = ["layer1.x", "layer2.x", "layer3.x"]
+    res = fit(NOMINAL, obs, free=free, pinned={"slab2": 420.0, "ref": 200.0}, starts=1)
+    check = res.optics["error_check"]
+    (first,) = check["passes"]
+    (w,) = first["widened"]
+    assert w["held"] and w["factor"] > 3
+    (combo,) = res.held_combinations
+    assert set(combo) == set(free) == set(w["direction"])
+    v = np.array([combo[n] for n in free])
+    assert abs(v @ np.array([w["direction"][n] for n in free])) > 0.99 * np.linalg.norm(v) ** 2
+    assert w["message"] in res.degeneracies
+    assert not any(x["held"] for x in check["widened"])
+
+
 def test_fitted_model_predicts_held_out_height_better():
     res = _truth_fit()
     held = [observation(_scan("bars", 3.0, 2), 300.0, 3.0, name="held")]

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opticalstamp.studies.fitident import SECANT_AT, SECANT_MIN, secant_check
+from opticalstamp.studies.fitident import SECANT_AT, SECANT_MIN, secant_check, secant_words
 
 SCALES = np.array([3.0, 20.0])
 
@@ -78,8 +78,8 @@ def test_a_flat_direction_is_widened_by_its_secant():
 
 def test_a_probe_beyond_a_bound_is_not_measured():
     """A side that the caller cannot evaluate (NaN) leaves the other side's rise alone to
-    judge; with both sides missing the direction is not judged at all; a rise below zero
-    (the point is no minimum along it) widens its error 100 x."""
+    judge (here none: flat, so its error x 100); with both sides missing the direction is
+    not judged at all."""
     s0, s1 = 0.5, 15.0
     jac = np.diag([1 / s0, 1 / s1])
     theta = np.zeros(2)
@@ -102,3 +102,29 @@ def test_a_probe_beyond_a_bound_is_not_measured():
 
     _, found = secant_check(none_left, theta, _cov(jac), 1.0, SCALES, [0, 1])
     assert found == []
+
+
+def test_the_two_sides_are_averaged_and_a_fall_is_said():
+    """One side flat, the other rising 3.6 (a parabola's 9 x 0.4): the mean 1.8 is 0.2 of
+    9, so the error is widened by sqrt(5) (the larger side alone, 0.4, would pass). Falls
+    on both sides (the point is no minimum along it): widened 100 x and said so."""
+    s0, s1 = 0.5, 15.0
+    jac = np.diag([1 / s0, 1 / s1])
+    theta = np.zeros(2)
+
+    def one_sided(pts):
+        return [float(0.4 * (max(p[0], 0.0) / s0) ** 2 + (p[1] / s1) ** 2) for p in pts]
+
+    _, found = secant_check(one_sided, theta, _cov(jac), 1.0, SCALES, [0, 1])
+    assert len(found) == 1 and found[0]["factor"] == pytest.approx(np.sqrt(5), rel=1e-9)
+    assert "rises by 3.6 and 0 where a rise of 9 was expected" in secant_words(
+        found[0], ["layer1.x", "slab1"]
+    )
+
+    def saddle(pts):
+        return [float(10 - (p[0] / s0) ** 2 + (p[1] / s1) ** 2) for p in pts]
+
+    _, found = secant_check(saddle, theta, _cov(jac), 1.0, SCALES, [0, 1])
+    assert len(found) == 1 and found[0]["factor"] == pytest.approx(100.0)
+    words = secant_words(found[0], ["layer1.x", "slab1"])
+    assert "chi2 falls by -9 and -9" in words and "+1.00 layer1.x" in words

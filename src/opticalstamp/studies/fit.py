@@ -343,11 +343,17 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
         theta, prob = polish(prob, theta)
         theta, prob, est = hold_rounds(theta, prob, _estimate(prob, theta), polish)
         refit = polish
-    memo = at if wave is not None else None
-    est, info["error_check"], loose = secant_estimate(prob, theta, est, UNDETERMINED, memo)
-    if len(loose):  # undetermined by the secants: held as the Jacobian's weak ones are
+    # the errors checked by secants; what they find undetermined is held as the
+    # Jacobian's weak directions are (its reason said), and the rest checked again
+    memo, passes = (at if wave is not None else None), []
+    for rnd in range(HOLD_ROUNDS + 1):
+        est, record, loose = secant_estimate(prob, theta, est, UNDETERMINED, memo)
+        passes.append(record)
+        if not len(loose) or rnd == HOLD_ROUNDS:
+            break
+        said.extend(w["message"] for w in record["widened"] if w["held"])
         theta, prob, est = hold_rounds(theta, prob, est[:6] + (loose,), refit)
-        est, info["error_check"], _ = secant_estimate(prob, theta, est, UNDETERMINED, memo)
+    info["error_check"] = passes[-1] | {"passes": passes[:-1]}
     if wave is not None:
         info["scheme"] = _schemes(schemes)
     chi2, dof, scale2, cov, msgs, blind, weak = est

@@ -137,11 +137,13 @@ def secant_check(
     physical columns ``keep`` only), with its error s_e, the profile step d = SECANT_AT
     s_e (e and the other columns' shift that the covariance's regression gives) is
     taken either way; where ``sumsq`` (points (m, p) -> their sums of squares, the data
-    and the held directions' penalty; NaN for a point beyond the parameters' bounds:
-    that side is not measured) rises by a mean fraction rho < SECANT_MIN of the
-    SECANT_AT^2 scale2 a quadratic would, the direction's variance is divided by rho
-    (undetermined, error x 100, where rho <= 1e-4). No minimisation at the probes, so
-    rho is at least the profile's: a direction flagged is looser still.
+    and the held directions' penalty, the caller minimising what it will at each probe;
+    NaN where it cannot evaluate one: that side is not measured) rises by a mean
+    fraction rho < SECANT_MIN of the SECANT_AT^2 scale2 a quadratic would, the
+    direction's variance is divided by rho (error x 100 where rho <= 1e-4: a fall along
+    it, the point no minimum there). The other physical columns are not minimised at the
+    probes, so rho is at least the profile's: a direction flagged is looser still.
+    Directions of round-off variance (below 1e-12 of the largest) are not probed.
 
     Returns (the covariance widened, one record per direction widened: "direction" (free
     columns' coefficients in assembly scales, unit length), "rise" (the two rises),
@@ -157,7 +159,7 @@ def secant_check(
     regress = cov[:, keep] @ np.linalg.pinv(cpp, hermitian=True)
     steps, dirs = [], []
     for k in range(lam.size):
-        if not lam[k] > 0:
+        if not lam[k] > 1e-12 * lam.max():
             continue
         dp = SECANT_AT * np.sqrt(lam[k]) * vec[:, k] * s
         steps.append(regress @ dp)
@@ -225,27 +227,27 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
     scales = np.array([lay.params[j].scale for j in lay.free])
     lo, hi = prob.bounds()
 
+    nf = lay.n_free
+
+    def one(p) -> float:
+        if not np.all((p[:nf] >= lo[:nf]) & (p[:nf] <= hi[:nf])):
+            return np.nan  # beyond a physical bound
+        if prob.spreads(lay.physical(p)) is None:
+            return np.nan  # a design rule broken, or no light: not measured
+        return float(np.sum(prob.residuals(prob.fit_nuisance(p, search=False)) ** 2))
+
     def sumsq(points):
-        inside = [bool(np.all((p >= lo) & (p <= hi))) for p in points]
         if runs is not None:
-            runs.prefetch(lay.physical(p) for p, ok in zip(points, inside, strict=True) if ok)
-        return [
-            float(np.sum(prob.residuals(prob.fit_nuisance(p, search=False)) ** 2)) if ok else np.nan
-            for p, ok in zip(points, inside, strict=True)
-        ]
+            inside = (p for p in points if np.all((p[:nf] >= lo[:nf]) & (p[:nf] <= hi[:nf])))
+            runs.prefetch(lay.physical(p) for p in inside)
+        return [one(p) for p in points]
 
     keep = [k for k in range(lay.n_free) if k not in blind]
     cov, found = secant_check(sumsq, theta, cov, scale2, scales, keep)
     msgs, blind = list(msgs), set(blind)
     for f in found:
-        terms = " ".join(f"{c:+.2f} {n}" for n, c in combination(f["direction"], names).items())
-        msgs.append(
-            f"the combination {terms} (each in its assembly scale) is determined less well "
-            f"than the curvature at the optimum says: {SECANT_AT:g} errors either way along "
-            f"it raise chi2 by {' and '.join(f'{r:.3g}' for r in f['rise'] if r == r)} where "
-            f"{f['expected']:.3g} was expected; its members' errors are widened along it "
-            f"({f['factor']:.3g} x)"
-        )
+        f["message"] = secant_words(f, names)
+        msgs.append(f["message"])
     name_undetermined(lay, cov, msgs, blind, undetermined)
     record = {
         "method": f"secants {SECANT_AT:g} errors either way along each principal direction "
@@ -253,10 +255,24 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
         "of the quadratic's rise",
         "widened": [
             {"direction": combination(f["direction"], names)}
-            | {k: f[k] for k in ("rise", "expected", "factor")}
+            | {k: f[k] for k in ("rise", "expected", "factor", "message")}
+            | {"held": bool(f["error_scales"] > undetermined)}
             for f in found
         ],
     }
     loose = [f["direction"] for f in found if f["error_scales"] > undetermined]
     loose = np.array(loose) if loose else np.zeros((0, lay.n_free))
     return (chi2, dof, scale2, cov, msgs, blind, weak), record, loose
+
+
+def secant_words(f: dict, names: list[str]) -> str:
+    """A direction that :func:`secant_check` widened, in words."""
+    terms = " ".join(f"{c:+.2f} {n}" for n, c in combination(f["direction"], names).items())
+    rises = " and ".join(f"{r:.3g}" for r in f["rise"] if r == r)  # NaN: not measured
+    how = "falls" if np.nanmean(f["rise"]) < 0 else "rises"
+    return (
+        f"the combination {terms} (each in its assembly scale) is determined less well "
+        f"than the curvature at the optimum says: {SECANT_AT:g} errors either way along it, "
+        f"chi2 {how} by {rises} where a rise of {f['expected']:.3g} was expected; its "
+        f"members' errors are widened along it ({f['factor']:.3g} x)"
+    )
