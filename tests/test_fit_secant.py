@@ -8,7 +8,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opticalstamp.studies.fitident import SECANT_AT, SECANT_MIN, secant_check, secant_words
+from opticalstamp.studies.fitident import (
+    SECANT_AT,
+    SECANT_MIN,
+    joined,
+    secant_check,
+    secant_words,
+)
 
 SCALES = np.array([3.0, 20.0])
 
@@ -128,3 +134,14 @@ def test_the_two_sides_are_averaged_and_a_fall_is_said():
     assert len(found) == 1 and found[0]["factor"] == pytest.approx(100.0)
     words = secant_words(found[0], ["layer1.x", "slab1"])
     assert "chi2 falls by -9 and -9" in words and "+1.00 layer1.x" in words
+
+
+def test_directions_joined_once():
+    """The Jacobian's weak directions and the secants' loose ones joined: one already
+    spanned is dropped, one half new keeps its new part (unit length), none gives (0, n)."""
+    a = np.array([[1.0, 0.0, 0.0]])
+    more = np.array([[0.999, 0.0447, 0.0], [0.6, 0.8, 0.0]])
+    out = joined(a, more)
+    assert out.shape == (2, 3) and np.allclose(out[1], [0, 1, 0])
+    assert joined(np.zeros((0, 3)), np.zeros((0, 3))).shape == (0, 3)
+    assert np.allclose(joined(np.zeros((0, 3)), more[1:]), [[0.6, 0.8, 0.0]])

@@ -33,6 +33,7 @@ from .fitdata import Observation
 from .fitident import (
     combination,
     degeneracies,
+    joined,
     name_undetermined,
     names_in,
     secant_estimate,
@@ -71,6 +72,12 @@ SINGLE = 0.99
 #: POLISH_JACOBIANS Jacobians (each one wave run a physical parameter) or POLISH_NFEV
 #: other evaluations (each one wave run).
 POLISH_CHI2 = 0.1
+#: The first polish stops at this (the same two rules): there, within about 1 of the
+#: optimum, what the wave model leaves undetermined is found and held before the rest
+#: is polished to POLISH_CHI2. On bench_fit.py --wave's charts (2026-11-27) the polish
+#: went on to 0.1 first and crawled along the layers' x tilt, which the secants then
+#: held: 818 wave runs; held at 1.0: 463 runs (docs/fit.md).
+POLISH_COARSE = 1.0
 POLISH_JACOBIANS = 40
 POLISH_NFEV = 400
 #: Steps in a row on a Broyden-updated Jacobian between full ones (:func:`~.fitlm.
@@ -334,14 +341,25 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
         # tilt, flat and not quadratic, can wander far) is held and polished again
         schemes = []
 
-        def polish(p, t0):
+        def polish(p, t0, tol=POLISH_CHI2):
             # onto the held combinations: not 10^4 x their distance away in the residuals
-            t, exact, sc = _polish(p, p.onto_held(t0), at)
+            t, exact, sc = _polish(p, p.onto_held(t0), at, tol)
             schemes.append(sc)
             return t, exact
 
-        theta, prob = polish(prob, theta)
-        theta, prob, est = hold_rounds(theta, prob, _estimate(prob, theta), polish)
+        # first to within POLISH_COARSE of the optimum, where what the wave model leaves
+        # undetermined (the Jacobian's weak directions, the secants' loose ones: the
+        # stack's tilts) is held, then the rest to POLISH_CHI2: the polish would
+        # otherwise crawl along those flat valleys, for the hold to put them back
+        theta, prob = polish(prob, theta, POLISH_COARSE)
+        est, record, loose = secant_estimate(prob, theta, _estimate(prob, theta), UNDETERMINED, at)
+        weak = joined(est[6], loose)
+        if len(weak):
+            said.extend(w["message"] for w in record["widened"] if w["held"])
+            theta, prob, est = hold_rounds(theta, prob, est[:6] + (weak,), polish)
+        else:
+            theta, prob = polish(prob, theta)
+            theta, prob, est = hold_rounds(theta, prob, _estimate(prob, theta), polish)
         refit = polish
     # the errors checked by secants; what they find undetermined is held as the
     # Jacobian's weak directions are (its reason said), and the rest checked again
@@ -512,7 +530,7 @@ def _exact(prob: Problem, runs: _WaveRuns) -> Problem:
     return exact
 
 
-def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns):
+def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns, tol: float = POLISH_CHI2):
     """The wave model's optimum from ``theta`` (the optimum of the fast model corrected
     about the nominal design, :mod:`.fitwave`): Levenberg-Marquardt with geodesic
     acceleration (:func:`~.fitlm.geodesic_lm`) on the wave model's own residuals, its
@@ -542,7 +560,7 @@ def _polish(prob: Problem, theta: np.ndarray, runs: _WaveRuns):
         (lo, hi),
         max_nfev=POLISH_NFEV,
         max_njev=POLISH_JACOBIANS,
-        chi2_tol=POLISH_CHI2,
+        chi2_tol=tol,
         lam0=POLISH_LAMBDA,
         ahead=ahead,
         broyden=POLISH_BROYDEN,

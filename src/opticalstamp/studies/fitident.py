@@ -276,3 +276,16 @@ def secant_words(f: dict, names: list[str]) -> str:
         f"chi2 {how} by {rises} where a rise of {f['expected']:.3g} was expected; its "
         f"members' errors are widened along it ({f['factor']:.3g} x)"
     )
+
+
+def joined(weak: np.ndarray, more: np.ndarray) -> np.ndarray:
+    """The directions ``weak`` (m, free), unit length, and those of ``more`` that they do
+    not already span (what is left of each, if over half its length, normalised)."""
+    rows = list(weak)
+    for v in more:
+        if rows:
+            q, _ = np.linalg.qr(np.array(rows).T)
+            v = v - q @ (q.T @ v)
+        if np.linalg.norm(v) > 0.5:
+            rows.append(v / np.linalg.norm(v))
+    return np.array(rows) if rows else np.zeros((0, weak.shape[1]))
