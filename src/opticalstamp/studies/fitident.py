@@ -268,13 +268,13 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
 def secant_words(f: dict, names: list[str]) -> str:
     """A direction that :func:`secant_check` widened, in words."""
     terms = " ".join(f"{c:+.2f} {n}" for n, c in combination(f["direction"], names).items())
-    rises = " and ".join(f"{r:.3g}" for r in f["rise"] if r == r)  # NaN: not measured
-    how = "falls" if np.nanmean(f["rise"]) < 0 else "rises"
+    rises = " and ".join(f"{r:+.3g}" for r in f["rise"] if r == r)  # NaN: not measured
+    fall = " (a fall: the point is no minimum along it)" if np.nanmean(f["rise"]) < 0 else ""
     return (
         f"the combination {terms} (each in its assembly scale) is determined less well "
         f"than the curvature at the optimum says: {SECANT_AT:g} errors either way along it, "
-        f"chi2 {how} by {rises} where a rise of {f['expected']:.3g} was expected; its "
-        f"members' errors are widened along it ({f['factor']:.3g} x)"
+        f"chi2 changes by {rises} where a rise of {f['expected']:.3g} was expected{fall}; "
+        f"its members' errors are widened along it ({f['factor']:.3g} x)"
     )
 
 
