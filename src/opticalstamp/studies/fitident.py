@@ -225,21 +225,20 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
     lay = prob.lay
     names = [lay.params[j].name for j in lay.free]
     scales = np.array([lay.params[j].scale for j in lay.free])
-    lo, hi = prob.bounds()
-
     nf = lay.n_free
+    lo, hi = (b[:nf] for b in prob.bounds())
+
+    def inside(p) -> bool:  # within the physical parameters' bounds (the nuisance clipped)
+        return bool(np.all((p[:nf] >= lo) & (p[:nf] <= hi)))
 
     def one(p) -> float:
-        if not np.all((p[:nf] >= lo[:nf]) & (p[:nf] <= hi[:nf])):
-            return np.nan  # beyond a physical bound
-        if prob.spreads(lay.physical(p)) is None:
-            return np.nan  # a design rule broken, or no light: not measured
+        if not inside(p) or prob.spreads(lay.physical(p)) is None:
+            return np.nan  # beyond a bound, a design rule broken or no light: not measured
         return float(np.sum(prob.residuals(prob.fit_nuisance(p, search=False)) ** 2))
 
     def sumsq(points):
         if runs is not None:
-            inside = (p for p in points if np.all((p[:nf] >= lo[:nf]) & (p[:nf] <= hi[:nf])))
-            runs.prefetch(lay.physical(p) for p in inside)
+            runs.prefetch(lay.physical(p) for p in points if inside(p))
         return [one(p) for p in points]
 
     keep = [k for k in range(lay.n_free) if k not in blind]
@@ -247,6 +246,7 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
     msgs, blind = list(msgs), set(blind)
     for f in found:
         f["message"] = secant_words(f, names)
+        f["held"] = bool(f["error_scales"] > undetermined)
         msgs.append(f["message"])
     name_undetermined(lay, cov, msgs, blind, undetermined)
     record = {
@@ -255,12 +255,11 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
         "of the quadratic's rise",
         "widened": [
             {"direction": combination(f["direction"], names)}
-            | {k: f[k] for k in ("rise", "expected", "factor", "message")}
-            | {"held": bool(f["error_scales"] > undetermined)}
+            | {k: f[k] for k in ("rise", "expected", "factor", "message", "held")}
             for f in found
         ],
     }
-    loose = [f["direction"] for f in found if f["error_scales"] > undetermined]
+    loose = [f["direction"] for f in found if f["held"]]
     loose = np.array(loose) if loose else np.zeros((0, lay.n_free))
     return (chi2, dof, scale2, cov, msgs, blind, weak), record, loose
 
