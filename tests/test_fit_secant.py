@@ -11,6 +11,7 @@ import pytest
 from opticalstamp.studies.fitident import (
     SECANT_AT,
     SECANT_MIN,
+    descend,
     joined,
     secant_check,
     secant_words,
@@ -146,3 +147,18 @@ def test_directions_joined_once():
     assert out.shape == (2, 3) and np.allclose(out[1], [0, 1, 0])
     assert joined(np.zeros((0, 3)), np.zeros((0, 3))).shape == (0, 3)
     assert np.allclose(joined(np.zeros((0, 3)), more[1:]), [[0.6, 0.8, 0.0]])
+
+
+def test_a_descent_is_kept_only_where_it_ends_lower():
+    """:func:`descend` keeps the refit from a probe below the optimum where its chi2 ends
+    below the optimum's, with the three chi2 recorded, and refuses one that does not."""
+    est = (100.0, 10, 1.0)
+    probe = np.array([1.0, 2.0])
+
+    def estimate(prob, t):
+        return (prob, 10, 1.0)
+
+    t, p, new, rec = descend(96.0, None, est, (3.0, probe), lambda pr, t0: (t0, 95.5), estimate)
+    assert np.array_equal(t, probe) and new[0] == 95.5
+    assert rec == {"chi2_from": 100.0, "chi2_probe": 97.0, "chi2_to": 95.5}
+    assert descend(96.0, None, est, (3.0, probe), lambda pr, t0: (t0, 100.0), estimate) is None

@@ -33,6 +33,7 @@ from .fitdata import Observation
 from .fitident import (
     combination,
     degeneracies,
+    descend,
     joined,
     name_undetermined,
     names_in,
@@ -62,6 +63,8 @@ from .fitwave import WaveModel, held_sampling
 UNDETERMINED = 10.0
 #: Rounds of holding undetermined parameters at nominal and fitting the rest again.
 HOLD_ROUNDS = 3
+#: Times at most that a secant probe below the optimum takes the fit on from there.
+DESCENTS = 2
 #: Width (assembly scales) of the prior on every parameter in a search's first stage.
 PRIOR_SCALES = 1.0
 #: A direction not determined whose largest component (unit vector) is above this is
@@ -352,7 +355,8 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
         # stack's tilts) is held, then the rest to POLISH_CHI2: the polish would
         # otherwise crawl along those flat valleys, for the hold to put them back
         theta, prob = polish(prob, theta, POLISH_COARSE)
-        est, record, loose = secant_estimate(prob, theta, _estimate(prob, theta), UNDETERMINED, at)
+        est = _estimate(prob, theta)
+        est, record, loose, _ = secant_estimate(prob, theta, est, UNDETERMINED, at)
         weak = joined(est[6], loose)
         if len(weak):
             said.extend(w["message"] for w in record["widened"] if w["held"])
@@ -363,12 +367,21 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
         refit = polish
     # the errors checked by secants; what they find undetermined is held as the
     # Jacobian's weak directions are (its reason said), and the rest checked again
-    memo, passes = (at if wave is not None else None), []
-    for rnd in range(HOLD_ROUNDS + 1):
-        est, record, loose = secant_estimate(prob, theta, est, UNDETERMINED, memo)
+    # (a probe below the optimum: the fit stopped short of a minimum, and goes on from it)
+    memo, passes, rnd, descents = (at if wave is not None else None), [], 0, 0
+    while True:
+        est, record, loose, lower = secant_estimate(prob, theta, est, UNDETERMINED, memo)
         passes.append(record)
+        moved = None
+        if lower is not None and descents < DESCENTS:
+            descents += 1
+            moved = descend(prob, theta, est, lower, refit, _estimate)
+        if moved is not None:
+            theta, prob, est, record["descended"] = moved
+            continue
         if not len(loose) or rnd == HOLD_ROUNDS:
             break
+        rnd += 1
         said.extend(w["message"] for w in record["widened"] if w["held"])
         theta, prob, est = hold_rounds(theta, prob, est[:6] + (loose,), refit)
     info["error_check"] = passes[-1] | {"passes": passes[:-1]}

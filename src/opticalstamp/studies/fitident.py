@@ -122,6 +122,10 @@ SECANT_AT = 3.0
 #: ... and widened where the sum of squares rises there by less than this fraction of
 #: the SECANT_AT^2 x error scale^2 its quadratic model predicts (its error x 2 at least).
 SECANT_MIN = 0.25
+#: A secant probe whose sum of squares lies this many error scale^2 below the optimum's
+#: shows that the fit stopped short of a minimum: it fits again from there
+#: (:func:`descend`; at most ``fit.DESCENTS`` times).
+DESCEND_MIN = 1.0
 
 
 def secant_check(
@@ -220,7 +224,9 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
     where the step put them) and widened along each direction where the sum of squares
     rises far less than its curvature at the optimum says, each such direction named.
     Returns (the estimate, the check's record, the directions (m, free) now beyond
-    ``undetermined`` assembly scales: not determined, for the hold rounds)."""
+    ``undetermined`` assembly scales: not determined, for the hold rounds, the lowest
+    probe where its sum of squares lies over DESCEND_MIN error scale^2 below the
+    optimum's (its fall, the point with its nuisance fitted again), else None)."""
     chi2, dof, scale2, cov, msgs, blind, weak = est
     lay = prob.lay
     names = [lay.params[j].name for j in lay.free]
@@ -236,13 +242,22 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
             return np.nan  # beyond a bound, a design rule broken or no light: not measured
         return float(np.sum(prob.residuals(prob.fit_nuisance(p, search=False)) ** 2))
 
+    probed = []
+
     def sumsq(points):
         if runs is not None:
             runs.prefetch(lay.physical(p) for p in points if inside(p))
-        return [one(p) for p in points]
+        probed.extend(zip(points, vals := [one(p) for p in points], strict=True))
+        return vals
 
     keep = [k for k in range(lay.n_free) if k not in blind]
     cov, found = secant_check(sumsq, theta, cov, scale2, scales, keep)
+    lower = None
+    if len(probed) > 1:
+        at_opt = probed[0][1]  # the optimum is the first point evaluated
+        point, low = min(probed[1:], key=lambda pv: np.inf if np.isnan(pv[1]) else pv[1])
+        if at_opt - low > DESCEND_MIN * scale2:
+            lower = (float(at_opt - low), prob.fit_nuisance(point, search=False))
     msgs, blind = list(msgs), set(blind)
     for f in found:
         f["message"] = secant_words(f, names)
@@ -261,7 +276,22 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
     }
     loose = [f["direction"] for f in found if f["held"]]
     loose = np.array(loose) if loose else np.zeros((0, lay.n_free))
-    return (chi2, dof, scale2, cov, msgs, blind, weak), record, loose
+    return (chi2, dof, scale2, cov, msgs, blind, weak), record, loose, lower
+
+
+def descend(prob, theta: np.ndarray, est: tuple, lower, refit, estimate):
+    """The fit taken on from a secant probe below its optimum (``lower`` from
+    :func:`secant_estimate`): ``refit(problem, start) -> (theta, problem)`` from the
+    probe, kept where it ends below the optimum's chi2. Returns (theta, problem,
+    estimate, record: the chi2 before, at the probe and after) or None."""
+    fall, point = lower
+    t, p = refit(prob, point)
+    new = estimate(p, t)
+    if not new[0] < est[0]:
+        return None
+    record = {"chi2_from": float(est[0]), "chi2_probe": float(est[0] - fall)}
+    record["chi2_to"] = float(new[0])
+    return t, p, new, record
 
 
 def secant_words(f: dict, names: list[str]) -> str:
