@@ -5,6 +5,8 @@ widened by exactly the measured factor, and a probe beyond a bound is not measur
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -14,6 +16,7 @@ from opticalstamp.studies.fitident import (
     descend,
     joined,
     secant_check,
+    secant_estimate,
     secant_words,
 )
 
@@ -160,5 +163,63 @@ def test_a_descent_is_kept_only_where_it_ends_lower():
 
     t, p, new, rec = descend(96.0, None, est, (3.0, probe), lambda pr, t0: (t0, 95.5), estimate)
     assert np.array_equal(t, probe) and new[0] == 95.5
-    assert rec == {"chi2_from": 100.0, "chi2_probe": 97.0, "chi2_to": 95.5}
+    assert rec == {"chi2_from": 100.0, "fall": 3.0, "chi2_to": 95.5}
+    # above the probe but below the optimum: kept (the optimum is what it must beat)
+    assert descend(96.0, None, est, (3.0, probe), lambda pr, t0: (t0, 98.0), estimate)[2][0] == 98
     assert descend(96.0, None, est, (3.0, probe), lambda pr, t0: (t0, 100.0), estimate) is None
+
+
+class _Lay:
+    """Two free physical columns of assembly scales SCALES, no nuisance."""
+
+    params = [SimpleNamespace(name=n, scale=s) for n, s in zip(("a", "b"), SCALES, strict=True)]
+    free = (0, 1)
+    n_free = 2
+
+    @staticmethod
+    def physical(p):
+        return np.asarray(p)
+
+
+class _Quadratic:
+    """Residuals (theta - opt) / SCALES: chi2 = |.|^2, its minimum at ``opt``; NaN where
+    ``bad`` says (a probe whose design cannot be evaluated)."""
+
+    lay = _Lay()
+
+    def __init__(self, opt, bad=lambda p: False):
+        self.opt, self.bad = np.asarray(opt, dtype=float), bad
+
+    def bounds(self):
+        return np.full(2, -np.inf), np.full(2, np.inf)
+
+    def spreads(self, phys):
+        return None if self.bad(phys) else {}
+
+    def residuals(self, p):
+        return (np.asarray(p) - self.opt) / SCALES
+
+    def fit_nuisance(self, p, search=False):
+        return np.asarray(p, dtype=float)
+
+
+@pytest.mark.parametrize("scale2", [1.0, 4.0])
+def test_a_probe_below_the_point_is_found_past_its_threshold_in_error_scales(scale2):
+    """chi2 = |(theta - 0) / SCALES|^2, checked at a point k errors (of the covariance
+    scale2 x diag(SCALES^2)) from its minimum along the first column: the probe 3 errors
+    back lies at k - 3, its fall (k^2 - (k - 3)^2) scale2. At k = 2 (fall 3 scale2) it is
+    found, with its point; at k = 1.6 (fall 0.6 scale2, over DESCEND_MIN = 1 in chi2 where
+    scale2 is 4, but not in error scales) it is not; a probe that cannot be evaluated
+    (NaN) is never the lowest."""
+    s = np.sqrt(scale2)
+    est = (0.0, 10, scale2, scale2 * np.diag(SCALES**2), [], set(), np.zeros((0, 2)))
+    prob = _Quadratic([0.0, 0.0])
+
+    def at(k):
+        return np.array([k * s * SCALES[0], 0.0])
+
+    fall, point = secant_estimate(prob, at(2.0), est, 10.0)[3]
+    assert fall == pytest.approx(3 * scale2) and np.allclose(point, at(-1.0))
+    assert secant_estimate(prob, at(1.6), est, 10.0)[3] is None
+    nan = _Quadratic([0.0, 0.0], bad=lambda p: p[0] < at(1.0)[0])
+    assert secant_estimate(nan, at(2.0), est, 10.0)[3] is None

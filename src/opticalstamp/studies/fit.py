@@ -39,6 +39,7 @@ from .fitident import (
     names_in,
     secant_estimate,
     starts_apart,
+    stopped_short,
     weak_directions,
 )
 from .fitlm import geodesic_lm
@@ -365,21 +366,24 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
             theta, prob = polish(prob, theta)
             theta, prob, est = hold_rounds(theta, prob, _estimate(prob, theta), polish)
         refit = polish
-    # the errors checked by secants; what they find undetermined is held as the
-    # Jacobian's weak directions are (its reason said), and the rest checked again
-    # (a probe below the optimum: the fit stopped short of a minimum, and goes on from it)
+    # the errors checked by secants: a probe below the optimum takes the fit on from it
+    # (descend); what they find undetermined is held as the Jacobian's weak ones are
     memo, passes, rnd, descents = (at if wave is not None else None), [], 0, 0
     while True:
         est, record, loose, lower = secant_estimate(prob, theta, est, UNDETERMINED, memo)
         passes.append(record)
-        moved = None
-        if lower is not None and descents < DESCENTS:
-            descents += 1
-            moved = descend(prob, theta, est, lower, refit, _estimate)
-        if moved is not None:
+        go = lower is not None and descents < DESCENTS
+        descents += go
+        moved = descend(prob, theta, est, lower, refit, _estimate) if go else None
+        if moved is not None:  # the optimum, on (its Jacobian's weak directions held)
             theta, prob, est, record["descended"] = moved
+            for w in record["widened"]:
+                w["held"] = False  # the descent, not a hold, followed this check
+            theta, prob, est = hold_rounds(theta, prob, est, refit)
             continue
+        record |= {} if lower is None else {"below": lower[0]}
         if not len(loose) or rnd == HOLD_ROUNDS:
+            said.extend([] if lower is None else [stopped_short(lower[0], descents)])
             break
         rnd += 1
         said.extend(w["message"] for w in record["widened"] if w["held"])

@@ -282,16 +282,24 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
 def descend(prob, theta: np.ndarray, est: tuple, lower, refit, estimate):
     """The fit taken on from a secant probe below its optimum (``lower`` from
     :func:`secant_estimate`): ``refit(problem, start) -> (theta, problem)`` from the
-    probe, kept where it ends below the optimum's chi2. Returns (theta, problem,
-    estimate, record: the chi2 before, at the probe and after) or None."""
+    probe (the ray fit's refit also from nominal, the lower kept), kept where it ends
+    below the optimum's chi2. Returns (theta, problem, estimate, record: the chi2 before
+    and after, and the probe's fall in the sums the check compares) or None."""
     fall, point = lower
     t, p = refit(prob, point)
     new = estimate(p, t)
     if not new[0] < est[0]:
         return None
-    record = {"chi2_from": float(est[0]), "chi2_probe": float(est[0] - fall)}
-    record["chi2_to"] = float(new[0])
-    return t, p, new, record
+    return t, p, new, {"chi2_from": float(est[0]), "fall": fall, "chi2_to": float(new[0])}
+
+
+def stopped_short(fall: float, descents: int) -> str:
+    """The words for a fit left with a secant probe ``fall`` below its optimum."""
+    return (
+        f"the fit stopped short of a minimum: a secant probe lies {fall:.3g} below its chi2 "
+        f"after {descents} descent(s) from such probes; its errors are those of a point that "
+        "is no minimum: fit again with more starts, or pin what the images do not determine"
+    )
 
 
 def secant_words(f: dict, names: list[str]) -> str:
