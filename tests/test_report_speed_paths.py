@@ -179,3 +179,28 @@ def test_figures_drawn_by_an_idle_background_process_are_those_drawn_here():
         png = task.result(timeout=120)
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and png == _png(plot_stack, d)
     assert _Background({}).submit(_png, plot_stack, d) is None  # no processes
+
+
+def test_without_studies_a_drawer_draws_every_other_figure_as_here(monkeypatch):
+    """A report without studies (the quick one) starts one drawing process where it may
+    use more than one core: every other figure is queued to it, the rest are left to be
+    drawn here, and its PNGs are those drawn here, byte for byte; on one core, or
+    without the drawer, no process and every figure here."""
+    from opticalstamp.report import background as bgmod
+    from opticalstamp.report.build import _Background, _png
+    from opticalstamp.report.plotting.stack import plot_stack
+
+    d = load_design("paper2016")
+    figures = {f"f{i}.png": (plot_stack, d) for i in range(4)}
+    monkeypatch.setattr(bgmod, "usable_cores", lambda: 2)
+    with _Background({}, drawer=True) as bg:
+        drawing = bg.share(_png, figures)
+        assert [k for k, t in drawing.items() if t is None] == ["f0.png", "f2.png"]
+        got = [bg.done_or_here(drawing[k], _png, figures[k]) for k in ("f1.png", "f3.png")]
+    here = _png(plot_stack, d)
+    assert got == [here, here] and here[:8] == b"\x89PNG\r\n\x1a\n"
+    with _Background({}) as bg:
+        assert set(bg.share(_png, figures).values()) == {None}
+    monkeypatch.setattr(bgmod, "usable_cores", lambda: 1)
+    with _Background({}, drawer=True) as bg:
+        assert set(bg.share(_png, figures).values()) == {None}

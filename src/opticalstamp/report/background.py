@@ -54,6 +54,13 @@ def _children_cpu() -> float:  # pragma: no cover - runs in the background proce
     return r.ru_utime + r.ru_stime
 
 
+def _warm() -> None:  # pragma: no cover - runs in the background process
+    """Import what drawing a figure needs (the drawer's first task, while the report's
+    sections run)."""
+    from . import plotting  # noqa: F401 - matplotlib and the plots, loaded once
+    from .plotting import stack  # noqa: F401
+
+
 def only_result(name: str, results: list):
     """The result of a job of one task (the default ``join`` of :class:`Background`)."""
     (result,) = results
@@ -75,9 +82,14 @@ class Background:
         others idle); each task's seconds are kept (:meth:`seconds`).
     join : ``join(name, results)``: the result of job ``name`` from its tasks' results,
         in the order given (default: the result of its one task)
+    drawer : with no jobs (a quick report), one process all the same where this process
+        may use more than one core, started at once and its imports made there while the
+        report runs here, to draw a share of the figures (:meth:`share`)
     """
 
-    def __init__(self, jobs: dict, join: Callable[[str, list], object] = only_result) -> None:
+    def __init__(
+        self, jobs: dict, join: Callable[[str, list], object] = only_result, drawer: bool = False
+    ) -> None:
         self._pool = None
         self._join = join
         self._jobs: dict[str, list] = {}
@@ -86,17 +98,19 @@ class Background:
         self._procs: list = []
         self._n = 0
         tasks = [(name, task) for name, job in jobs.items() for task in job]
-        if not tasks:
+        if not tasks and not (drawer and usable_cores() > 1):
             return
         import multiprocessing as mp
 
-        self._n = workers(len(tasks))
+        self._n = workers(len(tasks)) if tasks else 1
         self._pool = process_pool(self._n)  # spawned, one numba thread each
         before = set(mp.active_children())
         for name, (fn, args, *cores) in tasks:
             fut = self._pool.submit(timed, fn, args)
             self._jobs.setdefault(name, []).append(fut)
             self._cores.append((fut, cores[0] if cores else 1))
+        if not tasks:  # the drawer alone, its imports made now (not counted as busy)
+            self._pool.submit(_warm)
         # the pool's processes (started by the first submit): the ones close() may end
         self._procs = [p for p in mp.active_children() if p not in before]
 
@@ -165,6 +179,33 @@ class Background:
             return None
         self._extra.append(task)
         return task
+
+    def share(self, fn, tasks: dict) -> dict:
+        """name -> the Future of ``fn(*args)`` in a background process, or None where it
+        is to be run here, for ``tasks`` (name -> args): with jobs, one task to each
+        process that is idle now (:meth:`submit`); with the drawer alone, every other
+        task, queued, while this process runs the rest."""
+        if self._jobs or self._pool is None:
+            return {name: self.submit(fn, *args) for name, args in tasks.items()}
+        from concurrent.futures.process import BrokenProcessPool
+
+        out = {}
+        for i, (name, args) in enumerate(tasks.items()):
+            try:
+                out[name] = self._pool.submit(fn, *args) if i % 2 else None
+            except BrokenProcessPool:
+                out[name] = None
+        return out
+
+    @staticmethod
+    def done_or_here(task, fn, args):
+        """``task``'s result, or ``fn(*args)`` here where its process ended without it."""
+        from concurrent.futures.process import BrokenProcessPool
+
+        try:
+            return task.result()
+        except BrokenProcessPool:
+            return fn(*args)
 
     def _all(self) -> list:
         return [task for job in self._jobs.values() for task in job] + self._extra

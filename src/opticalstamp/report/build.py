@@ -171,7 +171,7 @@ def build_report(
     jobs = study_jobs(design, seed, fresnel, work, dpi, tol_spec, optics=one)
     traced = dict(seed=seed, fresnel=fresnel)
     # the folder is replaced as a whole once everything is written, or not at all
-    with replace_folder(Path(out_dir)) as tmp, Background(jobs, join_job) as background:
+    with replace_folder(Path(out_dir)) as tmp, Background(jobs, join_job, True) as background:
 
         def run(compute, *args, **kwargs):  # a section, on the cores the studies leave free
             with background.cores():  # numba threads
@@ -234,10 +234,13 @@ def build_report(
             fit=fitted,
         )
         # each figure drawn by a background process that is idle (while the studies run
-        # on), else here; written in this order either way
-        drawing = {name: background.submit(png, *task) for name, task in figures.items()}
+        # on), or every other one by the drawer (no studies), else here: here first
+        drawing = background.share(png, figures)
+        for name in [n for n, task in drawing.items() if task is None]:
+            write_atomic(tmp / name, png(*figures[name]))
         for name, task in drawing.items():
-            write_atomic(tmp / name, png(*figures[name]) if task is None else task.result())
+            if task is not None:
+                write_atomic(tmp / name, background.done_or_here(task, png, figures[name]))
         names = list(figures)
         clock.lap("figures")
         # each study's figure as soon as that study is done, while the others run on
