@@ -110,7 +110,11 @@ class Background:
             self._jobs.setdefault(name, []).append(fut)
             self._cores.append((fut, cores[0] if cores else 1))
         if not tasks:  # the drawer alone, its imports made now (not counted as busy)
-            self._pool.submit(_warm)
+            try:
+                self._pool.submit(_warm)
+            except (OSError, RuntimeError):  # no process can be started: all drawn here
+                self._pool, self._n = None, 0
+                return
         # the pool's processes (started by the first submit): the ones close() may end
         self._procs = [p for p in mp.active_children() if p not in before]
 
