@@ -53,6 +53,37 @@ def test_chart_then_scan_writes_png_tiff_json(tmp_path):
     assert meta["settings"]["surround"] == 1.0
 
 
+def test_scan_takes_the_optics_the_other_commands_take(tmp_path):
+    """--kernel auto follows --optics as every other command does: the prototype (wave
+    by the validity rule) is scanned through wave kernels by default, and says so in its
+    output and sidecar (the optics and the kernel used); --optics ray gives the closed
+    form's scan, the same image as --kernel paraxial, which names no optics."""
+    from opticalstamp.analysis.responsivity import resolve_optics
+
+    assert resolve_optics(load_design("paper2016"), "auto").engine == "wave"
+    doc = tmp_path / "bars.png"
+    _ok(_run("chart", "bars", "-o", doc, "--dpi", "600"))
+    out = {}
+    for name, extra in (
+        ("auto", ()),
+        ("ray", ("--optics", "ray")),
+        ("paraxial", ("--kernel", "paraxial")),
+        ("wave", ("--kernel", "wave")),
+    ):
+        res = _ok(_run("scan", doc, "-o", tmp_path / f"{name}.png", "--z", "1.0", *extra))
+        meta = json.loads((tmp_path / f"{name}.json").read_text())
+        out[name] = (res.output, meta, tifffile.imread(tmp_path / f"{name}.tif"))
+    text, meta, auto = out["auto"]
+    assert meta["optics"]["engine"] == "wave" and meta["kernel_used"] == "wave"
+    assert "optics: wave" in text
+    assert np.array_equal(auto, out["wave"][2])
+    _, ray_meta, ray = out["ray"]
+    assert ray_meta["optics"]["engine"] == "ray" and ray_meta["kernel_used"] == "paraxial"
+    assert "optics: ray" in out["ray"][0]
+    assert np.array_equal(ray, out["paraxial"][2]) and not np.array_equal(ray, auto)
+    assert "optics" not in out["paraxial"][1] and "optics:" not in out["paraxial"][0]
+
+
 def test_measure_rmtf_on_a_scanned_tiff(tmp_path):
     """The CLI's own chain: chart -> scan (16-bit linear TIFF) -> measure-rmtf."""
     _ok(_run("chart", "bars", "-o", tmp_path / "bars.png"))

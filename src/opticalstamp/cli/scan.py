@@ -26,6 +26,7 @@ from .common import (
     writable,
 )
 from .metrics import DpiOpt, ImageArg
+from .optics import OpticsOpt
 
 
 def _document(path: Path, dpi: float | None, color: bool, min_px: int = 2):
@@ -68,6 +69,23 @@ def _illumination_profile(path: Path) -> tuple:
         return read_illumination_profile(path)
     except InputError as err:
         fail(f"--illumination: {err}")
+
+
+def _kernel_for(d, kernel: str, optics: str, fresnel: bool) -> tuple[str, list[str], dict]:
+    """``--kernel auto`` for a stamp by ``--optics``, as the other commands choose: wave
+    kernels where the design's optics is wave (``auto``: the measured validity rule),
+    else the closed form or the tracer; any other ``--kernel``, and a rod-lens array's,
+    as asked. Returns (the kernel source, the line saying which optics and why, the
+    optics' record for the sidecar: empty where none was chosen)."""
+    from ..design import Design
+
+    if kernel != "auto" or not isinstance(d, Design):
+        return kernel, [], {}
+    from ..analysis.responsivity import resolve_optics
+    from .optics import optics_line
+
+    opt = resolve_optics(d, optics, fresnel=fresnel, channels=True)
+    return ("wave" if opt.engine == "wave" else "auto"), [optics_line(opt.to_dict())], opt.to_dict()
 
 
 def _settings(
@@ -178,8 +196,12 @@ def scan(
     ] = None,
     kernel: Annotated[
         str,
-        typer.Option(help="auto (paraxial or trace), paraxial, trace or wave (scalar diffraction)"),
+        typer.Option(
+            help="auto (by --optics: wave kernels where the optics is wave, else paraxial "
+            "or trace), paraxial, trace or wave (scalar diffraction)"
+        ),
     ] = "auto",
+    optics: OpticsOpt = "auto",
     speed_error: Annotated[
         float,
         typer.Option(
@@ -228,6 +250,7 @@ def scan(
         from .restore import check_stamp
 
         check_stamp(d, "--restore")
+    kernel, said, chosen = _kernel_for(d, kernel, optics, fresnel)
     st = _settings(
         illumination,
         kernel,
@@ -269,6 +292,8 @@ def scan(
         )
     except ValueError as err:
         fail(str(err))
+    from ..imaging.kernels import kernel_source
+
     meta = provenance(d, seed) | {k: v for k, v in r.meta.items() if k != "settings"}
     meta |= {  # paths relative to the sidecar's folder, where restore looks for them
         "input": relative_to_sidecar(str(image), sidecar),
@@ -276,7 +301,8 @@ def scan(
         "settings": r.meta["settings"],
         "height_map_spec": relative_to_sidecar(height_map, sidecar),
         "design_source": relative_to_sidecar(design, sidecar),
-    }
+        "kernel_used": kernel_source(d, kernel, fresnel),  # what auto meant here
+    } | ({"optics": chosen} if chosen else {})
     write_set(
         {
             png: encode_png(r.image, r.dpi),
@@ -307,7 +333,7 @@ def scan(
             extra={"input": str(png), "design_source": design, "height_map_spec": height_map},
         )["restoration"]
     sg = r.meta["signal"]
-    lines = [
+    lines = said + [
         f"signal: {sg['electrons_white']:,.0f} e- at white (own path + the ghost light a white "
         f"page adds; {sg['full_well_fraction_white']:.0%} "
         f"of the full well), SNR {sg['snr_white']:.0f} at white, {sg['snr_grey18']:.0f} at 18 % "
@@ -315,7 +341,7 @@ def scan(
         f"ms per line (at most {sg['max_line_rate_for_target_hz']:,.0f} lines/s)"
     ]
     if sg["electrons_white"] == 0:  # a statement, not a row of zeros and infinities
-        lines = [
+        lines = said + [
             "signal: no light found reaching the pixels (0 e- at white): the scan shows only "
             "the sensor's dark signal and noise"
         ]
@@ -411,6 +437,7 @@ def ocr_eval(
     seed: SeedOpt = 0,
     dpi: DpiOpt = None,
     noiseless: Annotated[bool, typer.Option("--noiseless", help="no sensor noise")] = False,
+    optics: OpticsOpt = "auto",
     as_json: JsonOpt = False,
 ) -> None:
     """Scan text at each Z, read it with Tesseract, report the character error rate.
@@ -426,7 +453,8 @@ def ocr_eval(
 
     d = open_design(design, kinds=BOTH_KINDS)
     # as `scan` scans it: the design's electronics, a white surround as in the report
-    settings = ScanSettings(sensor=d.electronics)
+    kernel, said, chosen = _kernel_for(d, "auto", optics, False)  # as scan's --kernel auto
+    settings = ScanSettings(sensor=d.electronics, kernel=kernel)
     if image is None:
         for name, given in (("--text", text), ("--dpi", dpi)):
             if given is not None:
@@ -477,7 +505,8 @@ def ocr_eval(
     if image is not None:
         cer, got = read(doc, use, truth)
         data = {"z_mm": list(zs), "cer": cer, "text": got, "provenance": provenance(d, seed)}
-        lines = [f"{image}: character error rate against {text}"]
+        data |= {"optics": chosen} if chosen else {}
+        lines = said + [f"{image}: character error rate against {text}"]
         lines += [f"Z = {zz:g} mm: CER {c:.3f}" for zz, c in zip(zs, cer, strict=True)]
         emit(data, as_json, lines)
         return
@@ -492,8 +521,8 @@ def ocr_eval(
         "chart_dpi": OCR_CHART_DPI,
         "charts": charts,
         "provenance": provenance(d, seed),
-    }
-    lines = [
+    } | ({"optics": chosen} if chosen else {})
+    lines = said + [
         f"character error rate of the built-in text charts ({OCR_CHART_DPI:g} dpi) "
         f"scanned by design {design}, read by Tesseract",
         f"{'face':<6}{'points':>7}" + "".join(f"{f'Z {zz:g} mm':>10}" for zz in zs),
