@@ -291,14 +291,16 @@ def geometric_optics_warnings(design: Design, warn_fraction: float = 0.25) -> li
 
     The per-layer budget of :func:`diffraction_budget` at the design's wavelength and
     Z = 0: a layer whose holes diffract more than ``warn_fraction`` of their light outside
-    the geometric shadow is outside the ray model's validity, and its RMTF, spots and
-    ghosts are optimistic.
+    the geometric shadow is outside the ray model's validity: its ray figures (light,
+    spots, RMTF) are off, in either direction (diffraction both spreads the light and
+    brings more of it through small holes: docs/wave.md), and the wave engine's hold.
     """
     b = diffraction_budget(
         design, z_mm=0.0, wavelengths_um=(design.wavelength_um,), warn_fraction=warn_fraction
     )
     return [
-        w + " (geometric optics no longer holds: the traced figures are optimistic)"
+        w + " (geometric optics does not hold there: the ray figures are off, either way; "
+        "--optics auto, the default, or wave gives the wave engine's)"
         for w in b["warnings"]
     ]
 
