@@ -161,7 +161,7 @@ def test_report_writes_every_section(full_report):
         "ghosts",
         "spots",
         "psf_x0",
-        "psf_x42",
+        "psf_half_pitch",
         "rmtf",
         "chart_profiles",
         "efficiency",

@@ -53,7 +53,7 @@ def section_figures(
         figures["spots.png"] = (plotting.plot_spots, spots)
     if measured(psfs) is not None:
         figures["psf_x0.png"] = (plotting.plot_psf, psfs[0])
-        figures["psf_x42.png"] = (plotting.plot_psf, psfs[1])
+        figures["psf_half_pitch.png"] = (plotting.plot_psf, psfs[1])
     if measured(rmtf) is not None:
         figures["rmtf.png"] = (plotting.plot_rmtf, rmtf.result)
         figures["chart_profiles.png"] = (plotting.plot_chart_profiles, rmtf.profiles)

@@ -178,7 +178,7 @@ def psf_html(psfs: list[dict] | dict) -> str:
     ]
     return f"""<h2>{title}</h2>
 {table(psf_rows, head)}
-<img src="psf_x0.png"><img src="psf_x42.png">
+<img src="psf_x0.png"><img src="psf_half_pitch.png">
 """
 
 
