@@ -10,9 +10,10 @@ import pytest
 
 from opticalstamp.analysis.wavebase import fresnel_numbers
 from opticalstamp.design import load_design, preset_names, scale_to_dpi, with_stack
-from opticalstamp.design.resolution import dof_chart_dpi
+from opticalstamp.design.resolution import dof_chart_dpi, output_pitch_um
 from opticalstamp.report.build import build_report
 from opticalstamp.report.section import not_measurable
+from opticalstamp.units import dpi_of_pitch
 
 
 def half_scale_prototype():
@@ -38,6 +39,11 @@ def test_quick_report_on_every_design(name, tmp_path):
         assert dof_chart_dpi(d) == 400.0
         # the paper's statements only for the paper's own design
         assert "the paper's statement" not in page
+    # the scans' charts at least twice the design's resolution (a 600-dpi design's
+    # 400-dpi bars 3 chart pixels wide, not 1.5), the page saying at which
+    raster = max(600.0, float(round(2 * dpi_of_pitch(output_pitch_um(d)))))
+    assert saved["scans"]["raster_dpi"] == raster == (1200.0 if name == "half" else 600.0)
+    assert f"Built-in charts at {raster:g} dpi" in page
     for row in saved["scans"]["sfr"]:  # measured, or said why not
         assert "not_measurable" in row or row["mtf50_cy_per_mm"] is not None
     # ray vs wave optics (issue 23) on every design (square holes), its verdict in the box

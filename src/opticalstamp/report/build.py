@@ -39,10 +39,11 @@ from ..analysis.responsivity import resolve_optics
 from ..defaults import RAYS_MAP
 from ..design import Design, load_design
 from ..design.describe import stack_rows
-from ..design.resolution import dof_chart_dpi
+from ..design.resolution import dof_chart_dpi, output_pitch_um
 from ..io.files import provenance, replace_folder, save_figure, to_json, write_atomic
 from ..raytrace.passes import TracePasses
 from ..raytrace.pixel import PixelTracer
+from ..units import dpi_of_pitch
 from .background import Background
 from .figures import png, rodlens_figures, section_figures, study_figure
 from .fitsection import fit_section
@@ -166,7 +167,7 @@ def build_report(
     dpi = dof_chart_dpi(design) if dpi is None else float(dpi)
     if paper_sections is None:
         paper_sections = is_paper_preset(design)
-    work = report_work(quick, n_rays, z_mm, paper_sections)
+    work = report_work(quick, n_rays, z_mm, paper_sections, dpi_of_pitch(output_pitch_um(design)))
     tol_spec = tolerance_spec(parse_report_spec(spec))
     jobs = study_jobs(design, seed, fresnel, work, dpi, tol_spec, optics=one)
     traced = dict(seed=seed, fresnel=fresnel)

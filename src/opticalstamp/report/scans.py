@@ -194,6 +194,7 @@ def scan_section(
     tilt = scan(text, z_mm=None, height_map=hm)
     panels["scan_tilt"] = [("tilt: Z = 0 mm at the top, 4 mm at the bottom", tilt.image)]
     res["chart_dpi"] = float(chart_dpi)
+    res["raster_dpi"] = float(dpi)  # the charts' own pixels (work.scan_dpi)
     res["optics"] = "wave" if wave else "ray"  # the engine of the kernels (the verdict says)
     res["settings"] = (
         f"{'wave' if wave else 'ray'}-optics kernels, "

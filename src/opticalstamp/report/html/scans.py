@@ -15,6 +15,7 @@ def scans_html(s: dict, pitch_um: float, ghost_span: str = "") -> str:
     if missing is not None:
         return missing
     chart = s.get("chart_dpi", 200.0)
+    raster = s.get("raster_dpi", 1200.0)  # a report.json written before it was recorded
     at = [f"{chart / 2:g}", f"{chart:g}"]
     sfr = [
         [x["z_mm"], x["axis"], x["mtf50_cy_per_mm"], *(x["sfr_at_dpi"][k] for k in at)]
@@ -52,7 +53,7 @@ def scans_html(s: dict, pitch_um: float, ghost_span: str = "") -> str:
         for p in s["profiles"]
     ]
     return f"""<h2>Simulated scans (paper Figs. 8, 9, 12)</h2>
-<p>Built-in charts at 1200 dpi through the scan simulation ({html.escape(s["settings"])}):
+<p>Built-in charts at {raster:g} dpi through the scan simulation ({html.escape(s["settings"])}):
 the document moves one {pitch_um:.1f} um line per period, the rows are merged with the line delay,
 and dark/white shading correction is applied. See <code>opticalstamp scan</code>.</p>
 <img src="scan_text.png"><img src="scan_text_zoom.png">{ocr_p}
