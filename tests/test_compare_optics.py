@@ -31,6 +31,9 @@ def test_a_stamps_figures_follow_the_optics_asked_for(paper):
     assert wave["light_vs_f10"] == eff.ratio_own
     assert abs(wave["light_vs_f10"] / ray["light_vs_f10"] - 1) > 0.03
     assert engine_cell(wave) == "wave (asked for)" and engine_cell(ray) == "ray (asked for)"
+    # the ghost fraction's denominator named where it is wave optics' light (not `ghosts`')
+    assert "all light by wave optics" in wave["ghost_note"]
+    assert "wave optics" not in ray["ghost_note"]
 
 
 def test_circles_wave_figures_only_where_wave_optics_is_asked_for(paper, monkeypatch):

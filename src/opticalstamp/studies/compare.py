@@ -172,7 +172,13 @@ def stamp_row(design: Design, eff, r) -> dict:
         },
         "dof_dpi": r.dof_dpi,
         "ghost_fraction": ghost,
-        "ghost_note": "traced ghost (crosstalk) light over all light reaching the pixel",
+        "ghost_note": "traced ghost (crosstalk) light over all light reaching the pixel"
+        + (
+            " (all light by wave optics: the wave engine's band, own path and near crosstalk,"
+            " with the traced far ghosts; `opticalstamp ghosts` divides by the ray light)"
+            if eff.own_method.startswith("wave")
+            else ""
+        ),
         "contrast": {
             "heights_mm": list(r.z_mm),
             "by_dpi": {
