@@ -84,8 +84,8 @@ def _kernel_for(d, kernel: str, optics: str, fresnel: bool) -> tuple[str, list[s
     from ..analysis.responsivity import resolve_optics
     from .optics import optics_line
 
-    opt = resolve_optics(d, optics, fresnel=fresnel, channels=True)
-    return ("wave" if opt.engine == "wave" else "auto"), [optics_line(opt.to_dict())], opt.to_dict()
+    opt = resolve_optics(d, optics, fresnel=fresnel, channels=True).to_dict()
+    return ("wave" if opt["engine"] == "wave" else "auto"), [optics_line(opt)], opt
 
 
 def _settings(

@@ -173,13 +173,18 @@ class Background:
     def submit(self, fn, *args):
         """``fn(*args)`` in a background process if one is idle now: its Future
         (``result()`` gives the result); else None (nothing started)."""
-        from concurrent.futures.process import BrokenProcessPool
-
         if self._pool is None or len(self._busy()) >= self._n:
             return None
+        return self._queue(fn, *args)
+
+    def _queue(self, fn, *args):
+        """``fn(*args)`` queued to the processes: its Future, or None where the pool is
+        broken (a process died: run here instead)."""
+        from concurrent.futures.process import BrokenProcessPool
+
         try:
             task = self._pool.submit(fn, *args)
-        except BrokenProcessPool:  # a study's process died: drawn here instead
+        except BrokenProcessPool:
             return None
         self._extra.append(task)
         return task
@@ -191,15 +196,10 @@ class Background:
         task, queued, while this process runs the rest."""
         if self._jobs or self._pool is None:
             return {name: self.submit(fn, *args) for name, args in tasks.items()}
-        from concurrent.futures.process import BrokenProcessPool
-
-        out = {}
-        for i, (name, args) in enumerate(tasks.items()):
-            try:
-                out[name] = self._pool.submit(fn, *args) if i % 2 else None
-            except BrokenProcessPool:
-                out[name] = None
-        return out
+        return {
+            name: self._queue(fn, *args) if i % 2 else None
+            for i, (name, args) in enumerate(tasks.items())
+        }
 
     @staticmethod
     def done_or_here(task, fn, args):

@@ -112,14 +112,15 @@ def report_work(
     resolution, which the scans' charts exceed ``SCAN_OVERSAMPLE`` times at least.
     """
     work = _work(quick, n_rays)
-    changes: dict = {}
     if design_dpi is not None and SCAN_OVERSAMPLE[quick] * design_dpi > work.scan_dpi:
         dpi = float(round(SCAN_OVERSAMPLE[quick] * design_dpi))
-        changes["scan_dpi"] = dpi
-        changes["reduced"] = tuple(
-            x.replace(f"{work.scan_dpi:g}-dpi charts", f"{dpi:g}-dpi charts") for x in work.reduced
+        old = f"{work.scan_dpi:g}-dpi charts"
+        work = replace(
+            work,
+            scan_dpi=dpi,
+            reduced=tuple(x.replace(old, f"{dpi:g}-dpi charts") for x in work.reduced),
         )
-        work = replace(work, **changes)
+    changes: dict = {}
     if z_mm is not None:
         changes["z_mm"] = tuple(sorted(set(float(z) for z in z_mm)))
         grid = work.lsf_z_mm if work.lsf_z_mm is not None else _default_rmtf_z()

@@ -237,18 +237,20 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
     def inside(p) -> bool:  # within the physical parameters' bounds (the nuisance clipped)
         return bool(np.all((p[:nf] >= lo) & (p[:nf] <= hi)))
 
-    def one(p) -> float:
+    def one(p) -> tuple[np.ndarray, float]:  # (the point, nuisance fitted; its sum)
         if not inside(p) or prob.spreads(lay.physical(p)) is None:
-            return np.nan  # beyond a bound, a design rule broken or no light: not measured
-        return float(np.sum(prob.residuals(prob.fit_nuisance(p, search=False)) ** 2))
+            return p, np.nan  # beyond a bound, a design rule broken or no light: not measured
+        q = prob.fit_nuisance(p, search=False)
+        return q, float(np.sum(prob.residuals(q) ** 2))
 
     probed = []
 
     def sumsq(points):
         if runs is not None:
             runs.prefetch(lay.physical(p) for p in points if inside(p))
-        probed.extend(zip(points, vals := [one(p) for p in points], strict=True))
-        return vals
+        new = [one(p) for p in points]
+        probed.extend(new)
+        return [v for _, v in new]
 
     keep = [k for k in range(lay.n_free) if k not in blind]
     cov, found = secant_check(sumsq, theta, cov, scale2, scales, keep)
@@ -257,7 +259,7 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
         at_opt = probed[0][1]  # the optimum is the first point evaluated
         point, low = min(probed[1:], key=lambda pv: np.inf if np.isnan(pv[1]) else pv[1])
         if at_opt - low > DESCEND_MIN * scale2:
-            lower = (float(at_opt - low), prob.fit_nuisance(point, search=False))
+            lower = (float(at_opt - low), point)
     msgs, blind = list(msgs), set(blind)
     for f in found:
         f["message"] = secant_words(f, names)
