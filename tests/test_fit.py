@@ -91,11 +91,11 @@ def test_bar_fraction_is_the_convolution_of_the_spread():
         assert fi == pytest.approx(float(lsf[white].sum()), abs=2e-3)
 
 
-def test_edge_sum_is_the_interpolated_cumulative_summed_bit_for_bit():
-    """The edge model's loop (slopes once, bracket by a product) gives sum_i w_i C(d_j -
-    cross_i) with C ``np.interp(x, u, c, left=0, right=1)``, exactly the bits of the
-    formula it replaced (``_cum`` at every node): points on the knots, outside the table
-    and between."""
+def test_edge_sum_is_the_interpolated_cumulative_summed():
+    """The edge model's branch-free loop (slopes once, the argument clamped, the bracket
+    by a product, the sum's order the compiler's) gives sum_i w_i C(d_j - cross_i) with
+    C ``np.interp(x, u, c, left=0, right=1)`` and the formula it replaced (``_cum`` at
+    every node) to rounding: points on the knots, outside the table and between."""
     from opticalstamp.studies.fitmodel import _cum, _edge_sum
 
     rng = np.random.default_rng(0)
@@ -113,9 +113,13 @@ def test_edge_sum_is_the_interpolated_cumulative_summed_bit_for_bit():
         got = _edge_sum(u, c, d, cross, w)
         pairs = list(zip(cross, w, strict=True))
         want = np.array([sum(wi * _cum(u, c, dj - ci) for ci, wi in pairs) for dj in d])
-        assert np.array_equal(got, want)
+        assert np.allclose(got, want, rtol=0, atol=4e-15)
         interp = np.array([w @ np.interp(dj - cross, u, c, left=0.0, right=1.0) for dj in d])
-        assert np.allclose(got, interp, rtol=0, atol=1e-13)
+        assert np.allclose(got, interp, rtol=0, atol=4e-15)
+        outside = d[(d - cross.max() > u[-1]) | (d - cross.min() < u[0])]  # wholly off
+        if outside.size:
+            off = _edge_sum(u, c, outside, cross, w)
+            assert np.all((off == 0.0) | (np.abs(off - 1.0) < 4e-15))
 
 
 @functools.cache

@@ -32,6 +32,7 @@ analyses need, with three exact shortcuts:
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,9 +98,18 @@ class ObjectSide:
         return [_crop(g, u) for g, u in zip(self.grids, self.fields(z_mm), strict=True)]
 
     def gram(self, a: int) -> np.ndarray:
-        """G_jl = integral sum_m u_jm conj(u_lm) dx of axis ``a`` (J, J), at every Z."""
-        s = self.spectra[a]
-        return _gram_rows(s.reshape(s.shape[0], -1)) * (self.sampling.step_um / self.grids[a].size)
+        """G_jl = integral sum_m u_jm conj(u_lm) dx of axis ``a`` (J, J), at every Z (each
+        axis's computed once: read-only)."""
+        return self._grams[a]
+
+    @functools.cached_property
+    def _grams(self) -> tuple[np.ndarray, np.ndarray]:
+        out = []
+        for s, g in zip(self.spectra, self.grids, strict=True):
+            gr = _gram_rows(s.reshape(s.shape[0], -1)) * (self.sampling.step_um / g.size)
+            gr.flags.writeable = False
+            out.append(gr)
+        return tuple(out)
 
     def coarse(self, a: int) -> tuple[np.ndarray, int]:
         """The grid of axis ``a`` at the intensity's rate: (x (N',), N'), the same period
@@ -134,15 +144,15 @@ def object_side(
         d_max = pl.reduced(float(z_max)) - pl.heights[-1]
         xf, off = object_grid(xs, d_max, smp)
         n = xf.size
-        m = terms[keys[0]][a].shape[1]
-        u = np.zeros((len(keys), m, n), dtype=np.complex128)
-        for j, k in enumerate(keys):
-            u[j, :, off : off + xs.size] = terms[k][a].T
+        u = np.stack([terms[k][a].T for k in keys])  # (J, m, n_s)
         f = sfft.fftfreq(n, smp.step_um)
         k_in = np.flatnonzero(in_band(f, smp.wavelength_um, smp.band))
-        spec = sfft.fft(u, axis=-1, workers=fft_workers())[..., k_in]
+        # the fields zero-padded to n points by the transform itself, placed at ``off``
+        # by the shift's phase on the in-band bins
+        spec = sfft.fft(u, n=n, axis=-1, workers=fft_workers())[..., k_in]
+        spec *= np.exp(-2j * np.pi * (k_in * off % n) / n)
         grids.append(xf)
-        spectra.append(np.ascontiguousarray(spec))
+        spectra.append(spec)
         bins.append(np.where(k_in > n // 2, k_in - n, k_in))
     return ObjectSide(tuple(grids), tuple(spectra), tuple(bins), planes, smp)
 

@@ -218,35 +218,29 @@ def _bar_sum(u, c, x, p, phase, n_k):
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, fastmath=True)
 def _edge_sum(u, c, d, cross, w):
     """sum_i w_i C(d_j - cross_i) for each d_j, C the cumulative ``c`` on the uniform grid
-    ``u`` (0 before, 1 after): :func:`_cum`'s value, bit for bit, with each interval's
-    slope computed once and the bracket found by a product (the fit's hottest loop: each
-    edge's pixels times the cross distribution's nodes)."""
+    ``u`` (0 before, 1 after: c[0] and c[-1]), linear between its nodes: the fit's
+    hottest loop (each edge's pixels times the cross distribution's nodes). Branch-free,
+    so that the compiler vectorises it: the argument clamped onto the table, its interval
+    by one product, each interval's slope computed once (the last one 0); the sum's order
+    left to the compiler (``fastmath``), which moves it by a few 1e-16 (4x faster than
+    :func:`_cum`'s search; equal to it to 2e-15)."""
     n = u.size
     u0, un = u[0], u[n - 1]
     inv = 1.0 / (u[1] - u[0])
-    slope = np.empty(n - 1)
+    slope = np.zeros(n)
     for k in range(n - 1):
         slope[k] = (c[k + 1] - c[k]) / (u[k + 1] - u[k])
     out = np.empty(d.size)
     for j in range(d.size):
         s = 0.0
+        dj = d[j]
         for i in range(w.size):
-            x = d[j] - cross[i]
-            if x < u0:
-                v = 0.0
-            elif x > un:
-                v = 1.0
-            else:
-                k = min(int((x - u0) * inv), n - 2)
-                while k > 0 and x < u[k]:
-                    k -= 1
-                while k < n - 2 and x >= u[k + 1]:
-                    k += 1
-                v = c[k + 1] if x == u[k + 1] else slope[k] * (x - u[k]) + c[k]
-            s += w[i] * v
+            x = min(max(dj - cross[i], u0), un)
+            k = int((x - u0) * inv)
+            s += w[i] * (c[k] + slope[k] * (x - u[k]))
         out[j] = s
     return out
 

@@ -100,18 +100,74 @@ def nuisance_start(obs: Observation) -> np.ndarray:
     return np.array(v)
 
 
-def predict(obs: Observation, sp, nuis: np.ndarray) -> np.ndarray:
-    """The model's values of an observation's data (concatenated as in :func:`data_of`)."""
-    out = []
+def item_fraction(obs: Observation, i: int, sp, nuis: np.ndarray) -> np.ndarray:
+    """The white fraction F of an observation's item ``i`` (bar block or edge region)
+    under its own four nuisance parameters ``nuis`` (phase/pos, period/slope, black,
+    white: the last two unused)."""
     if obs.kind == "bars":
-        for i, b in enumerate(obs.blocks):
-            phase, per, black, white = nuis[4 * i : 4 * i + 4]
-            out.append(black + (white - black) * bar_fraction(sp, b.x_um, per, phase))
-        return np.concatenate(out)
-    for i, e in enumerate(obs.edges):
-        pos, slope, black, white = nuis[4 * i : 4 * i + 4]
-        out.append(black + (white - black) * edge_fraction(sp, e, pos, slope))
+        b = obs.blocks[i]
+        return bar_fraction(sp, b.x_um, nuis[1], nuis[0])
+    return edge_fraction(sp, obs.edges[i], nuis[0], nuis[1])
+
+
+def predict(obs: Observation, sp, nuis: np.ndarray) -> np.ndarray:
+    """The model's values of an observation's data (concatenated as in :func:`data_of`):
+    per item ``black + (white - black) F``."""
+    items = obs.blocks if obs.kind == "bars" else obs.edges
+    out = []
+    for i in range(len(items)):
+        nu = nuis[4 * i : 4 * i + 4]
+        out.append(nu[2] + (nu[3] - nu[2]) * item_fraction(obs, i, sp, nu))
     return np.concatenate(out)
+
+
+def fit_items(obs: Observation, sp, nuis: np.ndarray, lo: np.ndarray, hi: np.ndarray, steps):
+    """An observation's nuisance parameters ``nuis`` fitted by least squares with the
+    spread ``sp`` held, each item (bar block, edge region) on its own
+    (:func:`_fit_item`): its four parameters move its own data only, so the image's
+    problem is block-diagonal and its minimum is the items' minima."""
+    items = obs.blocks if obs.kind == "bars" else obs.edges
+    out = np.array(nuis, dtype=np.float64)
+    for i in range(len(items)):
+        sl = slice(4 * i, 4 * i + 4)
+        out[sl] = _fit_item(obs, i, sp, out[sl], lo[sl], hi[sl], steps[sl])
+    return out
+
+
+def _fit_item(obs: Observation, i: int, sp, nu0, lo, hi, h) -> np.ndarray:
+    """Item ``i``'s four nuisance parameters by least squares, its Jacobian's black and
+    white columns exact (the model is linear in them: (1 - F) / s and F / s), its
+    phase/pos and period/slope ones by forward differences of ``h`` (as
+    :meth:`Problem.jacobian`): a twentieth of the image-wide finite differences'
+    evaluations on the bar charts."""
+    it = (obs.blocks if obs.kind == "bars" else obs.edges)[i]
+    inv = 1.0 / np.maximum(np.sqrt(it.var), 1e-9)
+    memo: dict = {}
+
+    def frac(nu):  # F at the point, once for the residuals and the Jacobian
+        key = (float(nu[0]), float(nu[1]))
+        if key not in memo:
+            memo.clear()
+            memo[key] = item_fraction(obs, i, sp, nu)
+        return memo[key]
+
+    def res(nu):
+        return (nu[2] + (nu[3] - nu[2]) * frac(nu) - it.value) * inv
+
+    def jac(nu):
+        f = frac(nu)
+        r0 = nu[2] + (nu[3] - nu[2]) * f
+        j = np.empty((f.size, 4))
+        for k in (0, 1):
+            t = nu.copy()
+            t[k] += h[k]
+            j[:, k] = (t[2] + (t[3] - t[2]) * item_fraction(obs, i, sp, t) - r0) * inv / h[k]
+        j[:, 2] = (1.0 - f) * inv
+        j[:, 3] = f * inv
+        return j
+
+    nu0 = np.clip(nu0, lo + 1e-9, hi - 1e-9)
+    return least_squares(res, nu0, jac=jac, bounds=(lo, hi), x_scale="jac").x
 
 
 def _phase_search(obs: Observation, sp, nuis: np.ndarray, n: int = 24) -> np.ndarray:
@@ -260,7 +316,7 @@ class Problem:
         for k, (step, t) in enumerate(self.column_points(theta)):
             jac[:, k] = (self.residuals(t) - r0) / step
         for i, (sl, names) in enumerate(self.lay.nuis):
-            a, b = starts[i], starts[i + 1]
+            a = starts[i]
             level = [n.rsplit(".", 1)[1] for n in names]  # 4 an item: phase/pos, ...
             unit = theta[sl].copy()  # every item's black 0, white 1: the fractions F
             unit[[m for m, n in enumerate(level) if n == "black"]] = 0.0
@@ -277,9 +333,15 @@ class Problem:
                     f = frac[lo - a : hi - a]
                     jac[lo:hi, k] = f if which == "white" else inv[lo - a : hi - a] - f
                     continue
-                t = theta.copy()
-                t[k] += h[k]
-                jac[a:b, k] = (self.residual_of(i, sps[i], t) - r0[a:b]) / h[k]
+                # phase/pos, period/slope: its own item's rows only (the others' are 0)
+                item = (k - sl.start) // 4
+                lo, hi = ends[item], ends[item + 1]
+                nu = theta[sl.start + 4 * item : sl.start + 4 * item + 4].copy()
+                nu[(k - sl.start) % 4] += h[k]
+                f = item_fraction(self.obs[i], item, sps[i], nu)
+                pred = nu[2] + (nu[3] - nu[2]) * f
+                v, s = self.data[i][0][lo - a : hi - a], self.data[i][1][lo - a : hi - a]
+                jac[lo:hi, k] = ((pred - v) / s - r0[lo:hi]) / h[k]
         return jac
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -313,17 +375,11 @@ class Problem:
         sps = self.spreads(self.lay.physical(theta))
         if sps is None:
             return theta
+        h = self.steps(theta)
         for i, (sl, _) in enumerate(self.lay.nuis):
             if search and self.obs[i].kind == "bars":
                 theta[sl] = _phase_search(self.obs[i], sps[i], theta[sl])
-
-            def res(nu, i=i, sl=sl):
-                t = theta.copy()
-                t[sl] = nu
-                return self.residual_of(i, sps[i], t)
-
-            nu0 = np.clip(theta[sl], lo[sl] + 1e-9, hi[sl] - 1e-9)
-            theta[sl] = least_squares(res, nu0, bounds=(lo[sl], hi[sl]), x_scale="jac").x
+            theta[sl] = fit_items(self.obs[i], sps[i], theta[sl], lo[sl], hi[sl], h[sl])
         return theta
 
 
