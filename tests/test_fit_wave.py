@@ -184,3 +184,38 @@ def test_cli_fit_takes_the_designs_optics(tmp_path):
     assert json.loads((rep / "fit.json").read_text())["rmtf"]["optics"] == "wave"
     r = CliRunner().invoke(app, ["fit", *args, "-o", str(out), "--optics", "bogus"])
     assert r.exit_code == 2 and "--optics" in r.output, r.output
+
+
+def test_secant_refits_on_the_pool_are_the_fits_own():
+    """The secant probes' nuisance refits, run side by side on the wave fit's pool
+    (:meth:`_WaveRuns.refits`: wave run, refit and sum in a worker), are the bits the
+    fit's own process gives (the run, ``fit_nuisance(search=False)``, the sum of squares),
+    the runs are kept, and a point whose design breaks a rule is NaN."""
+    from opticalstamp.studies.fit import _exact, _WaveRuns, wave_pool
+    from opticalstamp.studies.fitproblem import nuisance_start
+
+    obs = _observations()[-2:]  # bars at 4.5 mm and the edge
+    lay = layout_for(NOMINAL, obs, free=["layer2.x", "slab2", "ref"])
+    zs = sorted({o.z_mm for o in obs})
+    opt = resolve_optics(NOMINAL, "wave")
+    wave = WaveModel(held_sampling(NOMINAL, opt.sampling, max(zs))).held(
+        NOMINAL, zs, smear_of(NOMINAL)
+    )
+    theta = np.concatenate([lay.fixed[list(lay.free)]] + [nuisance_start(o) for o in obs])
+    alone = _WaveRuns(wave, NOMINAL, list(lay.params), zs, smear_of(NOMINAL), None)
+    serial = _exact(Problem(NOMINAL, obs, lay), alone)
+    theta = serial.fit_nuisance(theta)
+    points = [theta + d for d in (0.0, 2.0, -3.0)]
+    for p, d in zip(points, (0.0, 2.0, -3.0), strict=True):
+        p[:3] = theta[:3] + d * np.array([1.0, 5.0, 10.0])
+    broken = theta.copy()
+    broken[1] = -50.0  # plate 2 -50 um thick: no design
+    with wave_pool(2) as pool:
+        runs = _WaveRuns(wave, NOMINAL, list(lay.params), zs, smear_of(NOMINAL), pool)
+        got = runs.refits(serial, points + [broken])
+        assert runs.runs == len(points)
+    for p, (q, value) in zip(points, got[:-1], strict=True):
+        want_q = serial.fit_nuisance(p, search=False)
+        assert np.array_equal(q, want_q)
+        assert value == float(np.sum(serial.residuals(want_q) ** 2))
+    assert np.isnan(got[-1][1])

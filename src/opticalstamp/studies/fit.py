@@ -433,6 +433,24 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
     )
 
 
+def _refit_job(job):  # pragma: no cover - runs in the pool's processes
+    """A point's wave run (or the one given), its nuisance fitted again and its sum of
+    squares, as :func:`~.fitident.secant_estimate` does them in the fit's own process:
+    (point, sum or NaN, the run's spreads or None)."""
+    wave, design, obs, lay, hold, zs, smear, made, theta = job
+    if made is None:
+        with threadpool_limits(limits=1, user_api="blas"):
+            try:
+                d = with_params(design, list(lay.params), lay.physical(theta))
+                made = wave(d, zs, smear)
+            except ValueError:  # a rule broken or no light: not measured
+                return theta, np.nan, None
+    prob = Problem(design, obs, lay, hold=hold, model=lambda d, z, s, v: made)
+    with threadpool_limits(limits=1, user_api="blas"):
+        q = prob.fit_nuisance(theta, search=False)
+        return q, float(np.sum(prob.residuals(q) ** 2)), made
+
+
 def _wave_run(job):  # pragma: no cover - runs in the pool's processes
     model, design, zs, smear = job
     with threadpool_limits(limits=1, user_api="blas"):  # as the fit's own process
@@ -498,6 +516,24 @@ class _WaveRuns:
             d = with_params(self.design, self.params, phys)
             self._keep(key, self.wave(d, self.zs, self.smear))
         return self.memo[key]
+
+    def refits(self, prob: Problem, points) -> list | None:
+        """Each point of ``prob`` (the wave model's problem of this fit) with its images'
+        nuisance fitted again from where it is, and its sum of squares (the data and the
+        held directions' penalty): the wave run (unless kept), the refit and the sum side
+        by side on the pool, each new run kept; NaN where the point's design breaks a
+        rule or passes no light. None where there is no pool (the caller does them)."""
+        if self.pool is None:
+            return None
+        keys = [prob.lay.physical(p).tobytes() for p in points]
+        fixed = (self.wave, prob.design, prob.obs, prob.lay, prob.hold, self.zs, self.smear)
+        jobs = [fixed + (self.memo.get(k), p) for k, p in zip(keys, points, strict=True)]
+        out = []
+        for key, job, (q, value, made) in zip(keys, jobs, self.pool(_refit_job, jobs), strict=True):
+            if made is not None and job[-2] is None:
+                self._keep(key, made)
+            out.append((q, value))
+        return out
 
     def prefetch(self, points, min_runs: int = POOL_MIN_RUNS) -> None:
         if self.pool is None:

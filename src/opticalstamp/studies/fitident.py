@@ -246,9 +246,10 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
     probed = []
 
     def sumsq(points):
-        if runs is not None:
-            runs.prefetch(lay.physical(p) for p in points if inside(p))
-        new = [one(p) for p in points]
+        ins = [p for p in points if inside(p)]
+        pooled = None if runs is None else runs.refits(prob, ins)
+        done = {} if pooled is None else {p.tobytes(): v for p, v in zip(ins, pooled, strict=True)}
+        new = [done.get(p.tobytes()) or one(p) for p in points]
         probed.extend(new)
         return [v for _, v in new]
 
