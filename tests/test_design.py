@@ -125,6 +125,35 @@ def test_unknown_key(where, field):
     assert "unknown key" in msg
 
 
+@pytest.mark.parametrize(
+    ("where", "typo", "meant"),
+    [
+        ((), "sensr", "sensor"),
+        (("sensor",), "row", "rows"),
+        (("slabs", 0), "thickness", "thickness_um"),
+        (("slabs", 0, "mask_top"), "offset_x", "offset_x_um"),
+        (("reference_gap",), "thicknes_um", "thickness_um"),
+    ],
+)
+def test_a_misspelt_key_names_the_field_it_is_closest_to(where, typo, meant):
+    """An unknown key close to a field of its own table (a slab's, a mask's, the
+    sensor's) says which: "did you mean 'sensor'?"; one close to none says nothing more."""
+
+    def mutate(d):
+        for key in where:
+            d = d[key]
+        d[typo] = 1
+
+    msg = _error(mutate)
+    line = next(x for x in msg.splitlines() if f"{typo}: unknown key" in x)
+    assert line.count("did you mean") == 1 and f"did you mean {meant!r}?" in line
+
+    def far(d):
+        d["zzz_unrelated"] = 1
+
+    assert "did you mean" not in _error(far)
+
+
 def test_every_offending_field_is_named():
     def mutate(d):
         d["slabs"][0]["thickness_um"] = -1.0

@@ -5,12 +5,14 @@ Invalid input raises :class:`DesignError` naming every offending field and its r
 
 from __future__ import annotations
 
+import difflib
 import re
 import tomllib
+import typing
 from importlib import resources
 from pathlib import Path
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from .model import MAX_DESIGN_FILE_BYTES, Design, DesignError
 from .rodlens import KIND as RODLENS
@@ -41,9 +43,45 @@ def slab_where(loc: tuple, data: object = None) -> str:
     return f"[[slabs]] table {i + 1} of {n} counted from the sensor ({side})"
 
 
-def format_validation_error(err: ValidationError, source: str, data: object = None) -> str:
+def _model_at(model: type[BaseModel], loc: tuple) -> type[BaseModel] | None:
+    """The model whose field the path ``loc`` (pydantic's, list indices included) names
+    last, or None where the path leaves the models."""
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        field = model.model_fields.get(part)
+        if field is None:
+            return None
+        inner = [field.annotation]
+        found = None
+        while inner and found is None:
+            t = inner.pop()
+            if isinstance(t, type) and issubclass(t, BaseModel):
+                found = t
+            else:
+                inner.extend(typing.get_args(t))
+        if found is None:
+            return None
+        model = found
+    return model
+
+
+def _did_you_mean(model: type[BaseModel], loc: tuple) -> str:
+    """ ", did you mean 'x'?" for an unknown key ``loc[-1]`` close to a field of its
+    table, else ""."""
+    parent = _model_at(model, loc[:-1])
+    if parent is None or not loc or not isinstance(loc[-1], str):
+        return ""
+    close = difflib.get_close_matches(loc[-1], list(parent.model_fields), n=1, cutoff=0.75)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def format_validation_error(
+    err: ValidationError, source: str, data: object = None, model: type[BaseModel] = Design
+) -> str:
     """One line per offending field: its path (a slab's field after where the user finds
-    it, see :func:`slab_where`; ``data`` is the design as read), the rule, the value given."""
+    it, see :func:`slab_where`; ``data`` is the design as read), the rule, the value given
+    (an unknown key: the field of ``model``'s table it is closest to, where one is)."""
     lines = [f"invalid design {source}:"]
     for e in err.errors():
         loc, msg = tuple(e["loc"]), e["msg"].removeprefix("Value error, ")
@@ -52,9 +90,9 @@ def format_validation_error(err: ValidationError, source: str, data: object = No
             loc = tuple(int(p) if p.isdigit() else p for p in head[1].split("."))
             msg = msg[head.end() :]
         where = slab_where(loc, data)
-        loc = (f"{where} — " if where else "") + (".".join(map(str, loc)) or "(top level)")
         if e["type"] == "extra_forbidden":
-            msg = "unknown key (not part of the design format)"
+            msg = "unknown key (not part of the design format)" + _did_you_mean(model, loc)
+        loc = (f"{where} — " if where else "") + (".".join(map(str, loc)) or "(top level)")
         got = e.get("input")
         skip = isinstance(got, dict | list) or e["type"] == "missing" or "(got" in msg
         shown = "" if skip else f" (got {got!r})"
@@ -73,12 +111,13 @@ def design_from_dict(data: dict, source: str = "<dict>") -> AnyDesign:
         raise DesignError(
             f"invalid design {source}:\n  kind: must be one of {', '.join(KINDS)} (got {kind!r})"
         )
+    model = RodLensDesign if kind == RODLENS else Design
     try:
         if kind == RODLENS:
             return RodLensDesign.model_validate(data)
         return Design.model_validate({k: v for k, v in data.items() if k != "kind"})
     except ValidationError as err:
-        raise DesignError(format_validation_error(err, source, data)) from None
+        raise DesignError(format_validation_error(err, source, data, model)) from None
     except RecursionError:
         raise DesignError(f"invalid design {source}: nested too deeply") from None
 
