@@ -128,6 +128,11 @@ BAD_OPTIONS = [
     (["search", "--workers", "0"], "--workers"),
     (["chart", "bars", "-o", "c.png", "--dpi", "nan"], "--dpi"),
     (["chart", "bars", "-o", "c.png", "--points", "3"], "--points"),
+    (["chart", "bars", "-o", "c.png", "--blocks", "100,abc"], "--blocks"),
+    (["chart", "bars", "-o", "c.png", "--blocks", "5"], "--blocks"),
+    (["chart", "bars", "-o", "c.png", "--blocks", "700"], "--blocks"),
+    (["chart", "bars", "-o", "c.png", "--dpi", "300"], "--dpi"),
+    (["chart", "edge", "-o", "c.png", "--blocks", "100"], "--blocks"),
     (["chart", "text", "-o", "c.png", "--points", "0.5"], "--points"),
     (["chart", "text", "-o", "c.png", "--face", "mono"], "--face"),
     (["chart", "text", "-o", "c.png", "--face", "sans,serif"], "--face"),
@@ -193,6 +198,6 @@ def test_output_paths_are_checked_first(tmp_path, monkeypatch):
 
 def test_missing_output_folders_are_created_and_suffix_kept(tmp_path):
     out = tmp_path / "new" / "deeper" / "C.PNG"
-    res = run(["chart", "bars", "-o", out, "--dpi", "300"])
+    res = run(["chart", "bars", "-o", out, "--dpi", "600"])
     assert res.exit_code == 0, res.output
     assert out.is_file()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -375,10 +376,18 @@ def chart(
         str | None,
         typer.Option(help="type face of the text chart: sans (default) or serif (DejaVu Serif)"),
     ] = None,
+    blocks: Annotated[
+        str | None,
+        typer.Option(
+            help="the bar chart's blocks: chart resolutions in dpi, comma-separated (default "
+            "100,150,200,247, the paper's; a 600-dpi design's depth-of-field chart is 400), "
+            "each at most half of --dpi"
+        ),
+    ] = None,
 ) -> None:
     """Write a built-in test chart (bar charts, slanted edge, text, fine lines); the text
     chart's ground truth goes beside it as .txt."""
-    from ..imaging.charts import KINDS, make_chart
+    from ..imaging.charts import BAR_BLOCKS_DPI, KINDS, make_chart
     from ..io.files import write_atomic, write_png
 
     if kind not in KINDS:
@@ -387,14 +396,35 @@ def chart(
         for name, given in (("--points", points), ("--face", face)):
             if given is not None:
                 fail(f"{name}: for the text chart only (got KIND {kind!r})")
+    if kind != "bars" and blocks is not None:
+        fail(f"--blocks: for the bar chart only (got KIND {kind!r})")
+    bars = BAR_BLOCKS_DPI if blocks is None else _block_dpis(blocks)
+    if kind == "bars" and max(bars) > dpi / 2:
+        name = "--blocks" if blocks is not None else "--dpi"
+        fail(
+            f"{name}: {max(bars):g}-dpi bars need a chart of at least {2 * max(bars):g} dpi "
+            f"(two chart pixels a period; got --dpi {dpi:g})"
+            + ("" if blocks is not None else "; --blocks draws other blocks")
+        )
     sizes, faces = _ocr_charts(f"{points if points is not None else 8.0:g}", face or "sans")
     if len(faces) != 1:
         fail(f"--face: one face for a chart (got {face!r})")
-    img, text = make_chart(kind, dpi, sizes[0], faces[0])
+    img, text = make_chart(kind, dpi, sizes[0], faces[0], blocks=bars)
     write_png(output, img, dpi)
     if text is not None:
         write_atomic(output.with_suffix(".txt"), text + "\n")
     typer.echo(f"wrote {output} ({img.shape[1]} x {img.shape[0]} at {dpi:g} dpi)", err=True)
+
+
+def _block_dpis(text: str) -> tuple[float, ...]:
+    """``--blocks``: 1 to 12 chart resolutions (dpi), each finite and at least 10."""
+    try:
+        out = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        fail(f"--blocks: comma-separated numbers (dpi), e.g. 100,200,400 (got {text!r})")
+    if not 1 <= len(out) <= 12 or not all(math.isfinite(v) and v >= 10 for v in out):
+        fail(f"--blocks: 1 to 12 chart resolutions, each at least 10 dpi (got {text!r})")
+    return out
 
 
 #: ocr-eval without IMAGE: the text sizes (pt) and faces of its built-in charts by default

@@ -39,9 +39,13 @@ def _px(dpi: float) -> float:
     return pitch_of_dpi(dpi)
 
 
+#: The bar chart's blocks by default (chart resolutions, dpi): the paper's Fig. 11 charts.
+BAR_BLOCKS_DPI = (100.0, 150.0, 200.0, 247.0)
+
+
 def bar_chart(
     dpi: float = 1200.0,
-    chart_dpi=(100.0, 150.0, 200.0, 247.0),
+    chart_dpi=BAR_BLOCKS_DPI,
     block_mm: float = 6.0,
     gap_mm: float = 2.0,
     height_mm: float = 8.0,
@@ -176,11 +180,16 @@ def line_chart(
 
 
 def make_chart(
-    kind: str, dpi: float = 1200.0, points: float = 8.0, face: str = "sans"
+    kind: str,
+    dpi: float = 1200.0,
+    points: float = 8.0,
+    face: str = "sans",
+    blocks: tuple[float, ...] = BAR_BLOCKS_DPI,
 ) -> tuple[np.ndarray, str | None]:
-    """A chart by name, with the ground-truth text for ``text`` (of ``points`` in ``face``)."""
+    """A chart by name, with the ground-truth text for ``text`` (of ``points`` in ``face``);
+    the bar chart has one block for each chart resolution of ``blocks`` (dpi)."""
     if kind == "bars":
-        return bar_chart(dpi), None
+        return bar_chart(dpi, chart_dpi=tuple(blocks)), None
     if kind == "edge":
         return edge_chart(dpi), None
     if kind == "text":
