@@ -339,7 +339,8 @@ def scan(
         f"page adds; {sg['full_well_fraction_white']:.0%} "
         f"of the full well), SNR {sg['snr_white']:.0f} at white, {sg['snr_grey18']:.0f} at 18 % "
         f"grey; SNR {sg['target_snr_white']:g} at white needs {sg['exposure_for_target_ms']:.3g} "
-        f"ms per line (at most {sg['max_line_rate_for_target_hz']:,.0f} lines/s)"
+        f"ms per line (at most {sg['max_line_rate_for_target_hz']:,.0f} lines/s; the "
+        "report's light section counts the own path alone, a longer exposure)"
     ]
     if sg["electrons_white"] == 0:  # a statement, not a row of zeros and infinities
         lines = said + [
