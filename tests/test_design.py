@@ -154,6 +154,20 @@ def test_a_misspelt_key_names_the_field_it_is_closest_to(where, typo, meant):
     assert "did you mean" not in _error(far)
 
 
+@pytest.mark.parametrize(("where", "typo", "meant"), [((), "aray", "array"),
+                                                      (("array",), "row", "rows")])  # fmt: skip
+def test_a_rod_lens_arrays_misspelt_key_names_its_field(where, typo, meant):
+    """The same hint in a rod-lens array's file, from its own model's tables."""
+
+    def mutate(d):
+        for key in where:
+            d = d[key]
+        d[typo] = 1
+
+    msg = _error(mutate, "sla-1row-12deg")
+    assert f"{typo}: unknown key" in msg and f"did you mean {meant!r}?" in msg
+
+
 def test_every_offending_field_is_named():
     def mutate(d):
         d["slabs"][0]["thickness_um"] = -1.0

@@ -188,10 +188,15 @@ def test_cli_fit_takes_the_designs_optics(tmp_path):
 
 def test_secant_refits_on_the_pool_are_the_fits_own():
     """The secant probes' nuisance refits, run side by side on the wave fit's pool
-    (:meth:`_WaveRuns.refits`: wave run, refit and sum in a worker), are the bits the
-    fit's own process gives (the run, ``fit_nuisance(search=False)``, the sum of squares),
-    the runs are kept, and a point whose design breaks a rule is NaN."""
-    from opticalstamp.studies.fit import _exact, _WaveRuns, wave_pool
+    (:meth:`~opticalstamp.studies.fitpool.WaveRuns.refits`: wave run, refit and sum in a
+    worker), are the bits the fit's own process gives (the run, ``fit_nuisance(search=
+    False)``, the sum of squares); new runs are kept, a kept one is not run again, a point
+    whose design breaks a rule is NaN, a batch below ``min_runs`` is left to the caller;
+    and the secant check itself (:func:`~opticalstamp.studies.fitident.secant_estimate`)
+    gives the same covariance and record with the pool as without."""
+    from opticalstamp.studies.fit import UNDETERMINED, _estimate, _exact
+    from opticalstamp.studies.fitident import secant_estimate
+    from opticalstamp.studies.fitpool import WaveRuns, wave_pool
     from opticalstamp.studies.fitproblem import nuisance_start
 
     obs = _observations()[-2:]  # bars at 4.5 mm and the edge
@@ -202,20 +207,30 @@ def test_secant_refits_on_the_pool_are_the_fits_own():
         NOMINAL, zs, smear_of(NOMINAL)
     )
     theta = np.concatenate([lay.fixed[list(lay.free)]] + [nuisance_start(o) for o in obs])
-    alone = _WaveRuns(wave, NOMINAL, list(lay.params), zs, smear_of(NOMINAL), None)
-    serial = _exact(Problem(NOMINAL, obs, lay), alone)
+
+    def runs_on(pool):
+        return WaveRuns(wave, NOMINAL, list(lay.params), zs, smear_of(NOMINAL), pool)
+
+    serial = _exact(Problem(NOMINAL, obs, lay), runs_on(None))
     theta = serial.fit_nuisance(theta)
-    points = [theta + d for d in (0.0, 2.0, -3.0)]
+    points = [theta.copy() for _ in range(3)]
     for p, d in zip(points, (0.0, 2.0, -3.0), strict=True):
         p[:3] = theta[:3] + d * np.array([1.0, 5.0, 10.0])
     broken = theta.copy()
     broken[1] = -50.0  # plate 2 -50 um thick: no design
+    est = _estimate(serial, theta)
+    alone = secant_estimate(serial, theta, est, UNDETERMINED, None)
     with wave_pool(2) as pool:
-        runs = _WaveRuns(wave, NOMINAL, list(lay.params), zs, smear_of(NOMINAL), pool)
-        got = runs.refits(serial, points + [broken])
+        runs = runs_on(pool)
+        runs(serial.lay.physical(points[0]))  # kept: not run again
+        assert runs.refits(serial, points, min_runs=4) is None
+        got = runs.refits(serial, points + [broken], min_runs=4)
         assert runs.runs == len(points)
+        pooled = secant_estimate(_exact(serial, runs), theta, est, UNDETERMINED, runs)
     for p, (q, value) in zip(points, got[:-1], strict=True):
         want_q = serial.fit_nuisance(p, search=False)
         assert np.array_equal(q, want_q)
         assert value == float(np.sum(serial.residuals(want_q) ** 2))
     assert np.isnan(got[-1][1])
+    assert np.array_equal(pooled[0][3], alone[0][3])  # the covariance
+    assert json.dumps(pooled[1], default=str) == json.dumps(alone[1], default=str)

@@ -382,7 +382,7 @@ def chart(
         typer.Option(
             help="the bar chart's blocks: chart resolutions in dpi, comma-separated (default "
             "100,150,200,247, the paper's; a 600-dpi design's depth-of-field chart is 400), "
-            "each at most half of --dpi"
+            "each at most half of --dpi (two chart pixels a bar)"
         ),
     ] = None,
 ) -> None:
@@ -404,7 +404,7 @@ def chart(
         name = "--blocks" if blocks is not None else "--dpi"
         fail(
             f"{name}: {max(bars):g}-dpi bars need a chart of at least {2 * max(bars):g} dpi "
-            f"(two chart pixels a period; got --dpi {dpi:g})"
+            f"(two chart pixels a bar; got --dpi {dpi:g})"
             + ("" if blocks is not None else "; --blocks draws other blocks")
         )
     sizes, faces = _ocr_charts(f"{points if points is not None else 8.0:g}", face or "sans")

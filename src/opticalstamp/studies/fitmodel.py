@@ -218,15 +218,15 @@ def _bar_sum(u, c, x, p, phase, n_k):
     return out
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(cache=True)
 def _edge_sum(u, c, d, cross, w):
     """sum_i w_i C(d_j - cross_i) for each d_j, C the cumulative ``c`` on the uniform grid
     ``u`` (0 before, 1 after: c[0] and c[-1]), linear between its nodes: the fit's
-    hottest loop (each edge's pixels times the cross distribution's nodes). Branch-free,
-    so that the compiler vectorises it: the argument clamped onto the table, its interval
-    by one product, each interval's slope computed once (the last one 0); the sum's order
-    left to the compiler (``fastmath``), which moves it by a few 1e-16 (4x faster than
-    :func:`_cum`'s search; equal to it to 2e-15)."""
+    hottest loop (each edge's pixels times the cross distribution's nodes). Branch-free:
+    the argument clamped onto the table, its interval by one product, each interval's
+    slope computed once (the last one 0); the sum in the nodes' order, so the same bits on
+    every machine (no reassociation: 1.8x faster with it, but the vector width would
+    choose the order). 1.6x faster than :func:`_cum`'s search; equal to it to 2e-15."""
     n = u.size
     u0, un = u[0], u[n - 1]
     inv = 1.0 / (u[1] - u[0])
