@@ -31,8 +31,14 @@ def test_a_stamps_figures_follow_the_optics_asked_for(paper):
     assert wave["light_vs_f10"] == eff.ratio_own
     assert abs(wave["light_vs_f10"] / ray["light_vs_f10"] - 1) > 0.03
     assert engine_cell(wave) == "wave (asked for)" and engine_cell(ray) == "ray (asked for)"
-    # the ghost fraction's denominator named where it is wave optics' light (not `ghosts`')
-    assert "all light by wave optics" in wave["ghost_note"]
+    # one ghost fraction whatever the light's optics: the traced ghost light over all the
+    # traced light (as `ghosts` and the report), the wave row saying so and giving its far share
+    g = eff.etendue_ghost_um2sr
+    assert wave["ghost_fraction"] == pytest.approx(g / (eff.etendue_own_traced_um2sr + g))
+    assert wave["ghost_fraction"] == pytest.approx(ray["ghost_fraction"], rel=0.05)
+    assert "by ray optics as `opticalstamp ghosts`" in wave["ghost_note"]
+    far = 1 - eff.etendue_own_um2sr / eff.etendue_um2sr
+    assert f"the far ghosts, is {far:.3g} of all light" in wave["ghost_note"]
     assert "wave optics" not in ray["ghost_note"]
 
 

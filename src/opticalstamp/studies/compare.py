@@ -18,7 +18,8 @@ Every design is evaluated with the definitions shared by both kinds:
   in every row —, as ``[low, high]`` relative to the nominal object
   plane, ``dof_span_mm`` their span; each end at the first crossing from the best height
   (``dof_detail``: whether an end is the grid's, and a note).
-* ``ghost_fraction``: the stamp's traced ghost light over all light; 0 for a rod-lens
+* ``ghost_fraction``: the stamp's traced ghost light over all traced light (by ray optics
+  whatever the optics of the light columns, as ``ghosts`` and the report); 0 for a rod-lens
   array, whose model has no stray path (skin and resin absorb: ``ghost_note`` says so).
 * ``fresnel_min``: the smallest Fresnel number a^2/(lambda d) of the stamp's masks over
   the gaps below them (:func:`~opticalstamp.analysis.wavebase.fresnel_numbers`); None
@@ -155,7 +156,13 @@ def stamp_row(design: Design, eff, r) -> dict:
     """A stamp's comparison figures from its efficiency and (traced) RMTF results."""
     key = f"{r.dof_dpi:g}"
     high = float(r.dof_mm[key])
-    ghost = eff.etendue_ghost_um2sr / eff.etendue_um2sr if eff.etendue_um2sr > 0 else 0.0
+    wave = eff.own_method.startswith("wave")
+    # the traced ghost light over all traced light, as `ghosts` and the report give it: the
+    # wave engine's band holds the own path and the near crosstalk together, so a ghost
+    # share over its light would divide ray ghosts by wave light (two engines in a ratio)
+    traced = eff.etendue_own_traced_um2sr + eff.etendue_ghost_um2sr if wave else eff.etendue_um2sr
+    ghost = eff.etendue_ghost_um2sr / traced if traced > 0 else 0.0
+    far = 1.0 - eff.etendue_own_um2sr / eff.etendue_um2sr if wave and eff.etendue_um2sr > 0 else 0.0
     return {
         "light_vs_f10": eff.ratio_own,
         "light_vs_f10_se": eff.etendue_own_se / eff.reference_etendue_um2sr,
@@ -174,9 +181,11 @@ def stamp_row(design: Design, eff, r) -> dict:
         "ghost_fraction": ghost,
         "ghost_note": "traced ghost (crosstalk) light over all light reaching the pixel"
         + (
-            " (all light by wave optics: the wave engine's band, own path and near crosstalk,"
-            " with the traced far ghosts; `opticalstamp ghosts` divides by the ray light)"
-            if eff.own_method.startswith("wave")
+            ", by ray optics as `opticalstamp ghosts` and the report give it (the light "
+            "columns are wave optics': its band holds the own path and the near crosstalk "
+            f"together; the traced light beyond the band, the far ghosts, is {far:.3g} of "
+            "all light there)"
+            if wave
             else ""
         ),
         "contrast": {
