@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Annotated
 
@@ -10,7 +9,7 @@ import typer
 
 from ..design.electronics import MIN_ILLUMINANCE_LUX
 from ..units import pitch_of_dpi, um_to_mm
-from ..validate import check_output_path
+from ..validate import check_output_path, parse_numbers
 from .common import (
     BOTH_KINDS,
     DesignOpt,
@@ -399,7 +398,9 @@ def chart(
                 fail(f"{name}: for the text chart only (got KIND {kind!r})")
     if kind != "bars" and blocks is not None:
         fail(f"--blocks: for the bar chart only (got KIND {kind!r})")
-    bars = BAR_BLOCKS_DPI if blocks is None else _block_dpis(blocks)
+    bars = BAR_BLOCKS_DPI
+    if blocks is not None:
+        bars = parse_numbers(blocks, "--blocks", 10, 2400, max_count=12)
     if kind == "bars" and max(bars) > dpi / 2:
         name = "--blocks" if blocks is not None else "--dpi"
         fail(
@@ -415,17 +416,6 @@ def chart(
     if text is not None:
         write_atomic(output.with_suffix(".txt"), text + "\n")
     typer.echo(f"wrote {output} ({img.shape[1]} x {img.shape[0]} at {dpi:g} dpi)", err=True)
-
-
-def _block_dpis(text: str) -> tuple[float, ...]:
-    """``--blocks``: 1 to 12 chart resolutions (dpi), each finite and at least 10."""
-    try:
-        out = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        fail(f"--blocks: comma-separated numbers (dpi), e.g. 100,200,400 (got {text!r})")
-    if not 1 <= len(out) <= 12 or not all(math.isfinite(v) and v >= 10 for v in out):
-        fail(f"--blocks: 1 to 12 chart resolutions, each at least 10 dpi (got {text!r})")
-    return out
 
 
 #: ocr-eval without IMAGE: the text sizes (pt) and faces of its built-in charts by default

@@ -112,10 +112,10 @@ def design_from_dict(data: dict, source: str = "<dict>") -> AnyDesign:
             f"invalid design {source}:\n  kind: must be one of {', '.join(KINDS)} (got {kind!r})"
         )
     model = RodLensDesign if kind == RODLENS else Design
-    try:
-        if kind == RODLENS:
-            return RodLensDesign.model_validate(data)
-        return Design.model_validate({k: v for k, v in data.items() if k != "kind"})
+    try:  # a stamp's model has no ``kind`` field
+        return model.model_validate(
+            data if kind == RODLENS else {k: v for k, v in data.items() if k != "kind"}
+        )
     except ValidationError as err:
         raise DesignError(format_validation_error(err, source, data, model)) from None
     except RecursionError:

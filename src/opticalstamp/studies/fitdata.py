@@ -98,6 +98,11 @@ class Observation:
     noise: tuple[float, float] = (0.0, 0.0)
 
     @property
+    def items(self) -> tuple:
+        """Its chart's features: the bar blocks or the edge regions, by ``kind``."""
+        return self.blocks if self.kind == "bars" else self.edges
+
+    @property
     def n_data(self) -> int:
         return sum(b.value.size for b in self.blocks) + sum(e.value.size for e in self.edges)
 

@@ -249,7 +249,7 @@ def secant_estimate(prob, theta: np.ndarray, est: tuple, undetermined: float, ru
         ins = [p for p in points if inside(p)]
         pooled = None if runs is None else runs.refits(prob, ins)
         done = {} if pooled is None else {p.tobytes(): v for p, v in zip(ins, pooled, strict=True)}
-        new = [one(p) if done.get(p.tobytes()) is None else done[p.tobytes()] for p in points]
+        new = [done[k] if (k := p.tobytes()) in done else one(p) for p in points]
         probed.extend(new)
         return [v for _, v in new]
 

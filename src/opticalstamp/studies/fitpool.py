@@ -30,15 +30,13 @@ def refit_job(job):  # pragma: no cover - runs in the pool's processes
     squares, as :func:`~.fitident.secant_estimate` does them in the fit's own process:
     (point, sum or NaN, the run's spreads or None)."""
     wave, design, obs, lay, hold, prior, zs, smear, made, theta = job
-    if made is None:
-        with threadpool_limits(limits=1, user_api="blas"):
+    with threadpool_limits(limits=1, user_api="blas"):  # as the fit's own process
+        if made is None:
             try:
-                d = with_params(design, list(lay.params), lay.physical(theta))
-                made = wave(d, zs, smear)
+                made = wave(with_params(design, list(lay.params), lay.physical(theta)), zs, smear)
             except ValueError:  # a rule broken or no light: not measured
                 return theta, np.nan, None
-    prob = Problem(design, obs, lay, hold=hold, prior=prior, model=lambda d, z, s, v: made)
-    with threadpool_limits(limits=1, user_api="blas"):
+        prob = Problem(design, obs, lay, hold=hold, prior=prior, model=lambda d, z, s, v: made)
         q = prob.fit_nuisance(theta, search=False)
         return q, float(np.sum(prob.residuals(q) ** 2)), made
 

@@ -110,14 +110,23 @@ def item_fraction(obs: Observation, i: int, sp, nuis: np.ndarray) -> np.ndarray:
     return edge_fraction(sp, obs.edges[i], nuis[0], nuis[1])
 
 
+def _level(nu: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """An item's values ``black + (white - black) F`` under its nuisance ``nu``."""
+    return nu[2] + (nu[3] - nu[2]) * f
+
+
+def _sd(var: np.ndarray) -> np.ndarray:
+    """Standard deviations of data of variance ``var`` (at least 1e-9)."""
+    return np.maximum(np.sqrt(var), 1e-9)
+
+
 def predict(obs: Observation, sp, nuis: np.ndarray) -> np.ndarray:
     """The model's values of an observation's data (concatenated as in :func:`data_of`):
     per item ``black + (white - black) F``."""
-    items = obs.blocks if obs.kind == "bars" else obs.edges
     out = []
-    for i in range(len(items)):
+    for i in range(len(obs.items)):
         nu = nuis[4 * i : 4 * i + 4]
-        out.append(nu[2] + (nu[3] - nu[2]) * item_fraction(obs, i, sp, nu))
+        out.append(_level(nu, item_fraction(obs, i, sp, nu)))
     return np.concatenate(out)
 
 
@@ -126,9 +135,8 @@ def fit_items(obs: Observation, sp, nuis: np.ndarray, lo: np.ndarray, hi: np.nda
     spread ``sp`` held, each item (bar block, edge region) on its own
     (:func:`_fit_item`): its four parameters move its own data only, so the image's
     problem is block-diagonal and its minimum is the items' minima."""
-    items = obs.blocks if obs.kind == "bars" else obs.edges
     out = np.array(nuis, dtype=np.float64)
-    for i in range(len(items)):
+    for i in range(len(obs.items)):
         sl = slice(4 * i, 4 * i + 4)
         out[sl] = _fit_item(obs, i, sp, out[sl], lo[sl], hi[sl], steps[sl])
     return out
@@ -140,8 +148,8 @@ def _fit_item(obs: Observation, i: int, sp, nu0, lo, hi, h) -> np.ndarray:
     phase/pos and period/slope ones by forward differences of ``h`` (as
     :meth:`Problem.jacobian`): a twentieth of the image-wide finite differences'
     evaluations on the bar charts."""
-    it = (obs.blocks if obs.kind == "bars" else obs.edges)[i]
-    inv = 1.0 / np.maximum(np.sqrt(it.var), 1e-9)
+    it = obs.items[i]
+    inv = 1.0 / _sd(it.var)
     memo: dict = {}
 
     def frac(nu):  # F at the point, once for the residuals and the Jacobian
@@ -152,16 +160,16 @@ def _fit_item(obs: Observation, i: int, sp, nu0, lo, hi, h) -> np.ndarray:
         return memo[key]
 
     def res(nu):
-        return (nu[2] + (nu[3] - nu[2]) * frac(nu) - it.value) * inv
+        return (_level(nu, frac(nu)) - it.value) * inv
 
     def jac(nu):
         f = frac(nu)
-        r0 = nu[2] + (nu[3] - nu[2]) * f
+        r0 = _level(nu, f)
         j = np.empty((f.size, 4))
         for k in (0, 1):
             t = nu.copy()
             t[k] += h[k]
-            j[:, k] = (t[2] + (t[3] - t[2]) * item_fraction(obs, i, sp, t) - r0) * inv / h[k]
+            j[:, k] = (_level(t, item_fraction(obs, i, sp, t)) - r0) * inv / h[k]
         j[:, 2] = (1.0 - f) * inv
         j[:, 3] = f * inv
         return j
@@ -190,10 +198,8 @@ def _phase_search(obs: Observation, sp, nuis: np.ndarray, n: int = 24) -> np.nda
 
 def data_of(obs: Observation) -> tuple[np.ndarray, np.ndarray]:
     """(values, standard deviations) of an observation's data."""
-    items = obs.blocks if obs.kind == "bars" else obs.edges
-    v = np.concatenate([it.value for it in items])
-    s = np.sqrt(np.concatenate([it.var for it in items]))
-    return v, np.maximum(s, 1e-9)
+    v = np.concatenate([it.value for it in obs.items])
+    return v, _sd(np.concatenate([it.var for it in obs.items]))
 
 
 class Problem:
@@ -323,23 +329,19 @@ class Problem:
             unit[[m for m, n in enumerate(level) if n == "white"]] = 1.0
             inv = 1.0 / self.data[i][1]
             frac = predict(self.obs[i], sps[i], unit) * inv
-            items = self.obs[i].blocks if self.obs[i].kind == "bars" else self.obs[i].edges
-            ends = a + np.cumsum([0] + [it.value.size for it in items])
+            ends = a + np.cumsum([0] + [it.value.size for it in self.obs[i].items])
             for k in range(sl.start, sl.stop):
                 which = level[k - sl.start]
+                item = (k - sl.start) // 4
+                lo, hi = ends[item], ends[item + 1]
                 if which in ("black", "white"):  # (1 - F) / s, F / s on the item's rows
-                    item = (k - sl.start) // 4
-                    lo, hi = ends[item], ends[item + 1]
                     f = frac[lo - a : hi - a]
                     jac[lo:hi, k] = f if which == "white" else inv[lo - a : hi - a] - f
                     continue
                 # phase/pos, period/slope: its own item's rows only (the others' are 0)
-                item = (k - sl.start) // 4
-                lo, hi = ends[item], ends[item + 1]
                 nu = theta[sl.start + 4 * item : sl.start + 4 * item + 4].copy()
                 nu[(k - sl.start) % 4] += h[k]
-                f = item_fraction(self.obs[i], item, sps[i], nu)
-                pred = nu[2] + (nu[3] - nu[2]) * f
+                pred = _level(nu, item_fraction(self.obs[i], item, sps[i], nu))
                 v, s = self.data[i][0][lo - a : hi - a], self.data[i][1][lo - a : hi - a]
                 jac[lo:hi, k] = ((pred - v) / s - r0[lo:hi]) / h[k]
         return jac
