@@ -34,10 +34,23 @@ def half_scale_prototype():
     return with_stack(d, thicknesses_um=(500, 200, 225), name="paper2016-half")
 
 
-def test_estimator_within_its_stated_accuracy_of_the_exact_wave_figures():
+def test_estimator_within_its_stated_accuracy_of_the_exact_wave_figures(monkeypatch):
+    """... and the exact figures trace each ray of a pixel once: their analyses (ghosts,
+    light, far light, RMTF) share one tracer's pilots and rays (every launch of a pixel's
+    stream starts at rays no other launch of it traced)."""
+    from opticalstamp.raytrace import pixel as pixel_module
+
     d = half_scale_prototype()
     est = evaluate_wave(d, dpi=400)
+    launched, launch = [], pixel_module.launch
+
+    def spied(path, src, n, seed, **kw):
+        launched.append(((src.x, src.y), kw.get("stream", 0), kw.get("first_id", 0)))
+        return launch(path, src, n, seed, **kw)
+
+    monkeypatch.setattr(pixel_module, "launch", spied)
     ex = exact_wave_figures(d, dpi=400)
+    assert len(launched) >= 4 and len(set(launched)) == len(launched), launched
     err = wave_errors(est, ex)
     assert est["optics"] == ex["optics"] == "wave"
     for k, v in err.items():

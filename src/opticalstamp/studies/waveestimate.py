@@ -318,15 +318,19 @@ def exact_wave_figures(
     from ..analysis.rmtf import rmtf
 
     opt = resolve_optics(design, "wave")
-    g = analyse_ghosts(design, z_mm=GHOST_Z_MM, n_rays=ghost_rays, seed=seed)
-    eff = efficiency(design, seed=seed, ghosts=g, area_scales=(1.0,), optics=opt)
-    far = far_light(design, opt.band, n_rays=ghost_rays, seed=seed)
+    # one tracer for every analysis below: each pixel's pilot computed once, the rays
+    # the ghost analysis traced handed out again to the far light's tally (the same
+    # figures as with a tracer each)
+    tracer = PixelTracer(design, Sampling(ghost_rays, seed), replay=True)
+    g = analyse_ghosts(design, z_mm=GHOST_Z_MM, n_rays=ghost_rays, seed=seed, tracer=tracer)
+    eff = efficiency(design, seed=seed, ghosts=g, area_scales=(1.0,), optics=opt, tracer=tracer)
+    far = far_light(design, opt.band, n_rays=ghost_rays, seed=seed, tracer=tracer)
     zs = np.asarray(z_mm, dtype=np.float64)
     key = f"{dpi:g}"
     while True:
         r = rmtf(
             design, dpi=(dpi,), z_mm=zs, n_rays=lsf_rays, seed=seed, dof_dpi=dpi,
-            dof_threshold=dof_threshold, optics=opt,
+            dof_threshold=dof_threshold, optics=opt, tracer=tracer,
         )  # fmt: skip
         curve = np.asarray(r.rmtf_max[key])
         if curve.min() < dof_threshold or zs[-1] >= Z_LIMIT_MM:
