@@ -32,7 +32,7 @@ from opticalstamp.studies import fitident
 from opticalstamp.studies.fit import HELD, UNDETERMINED, fit, layout_for
 from opticalstamp.studies.fitdata import observation
 from opticalstamp.studies.fitident import starts_apart, weak_directions
-from opticalstamp.studies.fitmodel import bar_fraction, design_params, spread
+from opticalstamp.studies.fitmodel import bar_fraction, chart_blurred, design_params, spread
 
 CHART_DPI = 2400.0
 BAR_DPI = 4800.0
@@ -120,6 +120,27 @@ def test_edge_sum_is_the_interpolated_cumulative_summed():
         if outside.size:
             off = _edge_sum(u, c, outside, cross, w)
             assert np.all((off == 0.0) | (np.abs(off - 1.0) < 4e-15))
+
+
+def test_a_charts_pixels_blur_the_spread_by_a_triangle():
+    """A chart drawn in pixels of p um (each the mean of the ideal pattern over it, held
+    over it) is on average the ideal one convolved with a box of p twice: each
+    cumulative's variance grows by p^2 / 6, its mean and its ends stay; none at p = 0."""
+    sp = spread(NOMINAL, 1.0, 84.6)
+    assert chart_blurred(sp, 0.0) is sp
+
+    def moments(u, c):
+        p, m = np.diff(c), (u[1:] + u[:-1]) / 2
+        mu = float(p @ m)
+        return mu, float(p @ (m - mu) ** 2)
+
+    for pixel in (5.29, 10.58, 21.17):
+        b = chart_blurred(sp, pixel)
+        assert b.cx[0] == b.cy[0] == 0.0 and b.cx[-1] == pytest.approx(1.0, abs=1e-12)
+        for c0, c1 in ((sp.cx, b.cx), (sp.cy, b.cy)):
+            (m0, v0), (m1, v1) = moments(sp.u, c0), moments(b.u, c1)
+            assert m1 == pytest.approx(m0, abs=1e-9)
+            assert v1 - v0 == pytest.approx(pixel**2 / 6, rel=2e-3)
 
 
 @functools.cache
@@ -215,7 +236,11 @@ def test_degenerate_image_set_flagged():
     assert res.fitted.slabs[0].mask_top.offset_y_um == NOMINAL.slabs[0].mask_top.offset_y_um
     assert res.to_dict()["parameters"]["layer1.y"]["held"] == HELD
     assert any("layer1.y" in line and HELD in line for line in result_lines(res))
-    assert all(e is not None for e in res.errors)
+    # the x shifts' tilt held as a combination: each shift can move along it, so none
+    # has an error of its own (the held plane's errors alone were false precision)
+    (combo,) = res.held_combinations
+    assert set(combo) == {"layer1.x", "layer2.x", "layer3.x"}
+    assert res.errors == [None, None, None]
     x = dict(zip(res.names, res.values, strict=True))
     assert res.fitted.slabs[1].mask_top.offset_x_um == pytest.approx(x["layer2.x"])
 
@@ -308,6 +333,11 @@ def test_a_combination_held_at_nominal(monkeypatch):
     v = np.array([combo.get(n, 0.0) for n in free])
     assert abs(v @ np.array(res.values) / 3.0) < 1e-3 * np.linalg.norm(v)  # at nominal (0)
     assert any("combination" in m and HELD in m for m in res.degeneracies)
+    # each member can move along it: none has an error of its own (the held plane's
+    # errors alone would be false precision), nor a correlation
+    members = [n for n in free if abs(combo.get(n, 0.0)) >= fitmod.MEMBER]
+    assert members and all(res.errors[free.index(n)] is None for n in members)
+    assert all(np.isnan(res.correlation[free.index(n)]).all() for n in members)
     assert res.chi2 >= res0.chi2 - 1e-6 * res0.chi2
     assert res.to_dict()["held_combinations"][0]["reason"] == HELD
 
@@ -474,6 +504,48 @@ def _report_section_renders(rep, fitted, data, tmp_path):
         assert r.exit_code == 2 and "--fit" in r.output and words in r.output, r.output
 
 
+def test_image_spec_takes_an_optional_chart_resolution():
+    """IMAGE:Z_MM[:CHART_DPI]: a path may hold colons (read from the right); the chart's
+    resolution only where both last fields are numbers."""
+    from pathlib import Path
+
+    from opticalstamp.cli.fit import _image_spec
+
+    assert _image_spec("e.tif:2") == (Path("e.tif"), 2.0, None)
+    assert _image_spec("e.tif:2:2400") == (Path("e.tif"), 2.0, 2400.0)
+    assert _image_spec("C:/scans/e.tif:0.5") == (Path("C:/scans/e.tif"), 0.5, None)
+    assert _image_spec("a:b/e.tif:0.5:4800") == (Path("a:b/e.tif"), 0.5, 4800.0)
+
+
+def test_an_edges_chart_pixels_are_modelled():
+    """The slanted edge drawn at 1200 dpi (21-um pixels, each the mean of the ideal edge
+    over it): told so, the edge's model (the spread convolved by the pixels' triangle)
+    fits its scans better than an ideal edge's, with the same parameters."""
+    from opticalstamp.studies.fitproblem import Problem, nuisance_start
+
+    doc = edge_chart(1200.0)
+    zs = (0.5, 2.0)
+    kc = _kernels(1)
+    scans = [simulate_scan(doc, 1200.0, TRUE, z_mm=z, seed=1, kernels=kc, ghosts=False) for z in zs]
+    chi = {}
+    for chart in (None, 1200.0):
+        obs = [
+            observation(r.image, 300.0, z, name=f"e{z}", chart_dpi=chart)
+            for r, z in zip(scans, zs, strict=True)
+        ]
+        assert obs[0].chart_um == (0.0 if chart is None else pytest.approx(21.1667, abs=1e-3))
+        pinned = {"layer2.x": 4.0, "slab2": 420.0, "ref": 200.0}
+        lay = layout_for(NOMINAL, obs, ["pixel.x"], pinned)
+        prob = Problem(NOMINAL, obs, lay)
+        n_nu = sum(sl.stop - sl.start for sl, _ in lay.nuis)
+        theta = np.concatenate([lay.fixed[list(lay.free)], np.zeros(n_nu)])
+        for o, (sl, _) in zip(obs, lay.nuis, strict=True):
+            theta[sl] = nuisance_start(o)
+        theta = prob.fit_nuisance(theta)
+        chi[chart] = float(np.sum(prob.residuals(theta) ** 2))
+    assert chi[1200.0] < chi[None] - 100, chi  # 1656 against 2016
+
+
 def test_cli_bad_input_exit_2(tmp_path):
     bars = _write(tmp_path, "bars", 0.5)
     blank = tmp_path / "blank.tif"
@@ -487,6 +559,8 @@ def test_cli_bad_input_exit_2(tmp_path):
         ([f"{bars}:0.5", f"{other}:0.5"], "dpi"),
         ([f"{bars}:0.5", "--pin", "hole9=3"], "unknown parameter"),
         ([f"{bars}"], "IMAGE:Z_MM"),
+        ([f"{bars}:0.5:5"], "chart resolution 5 dpi outside"),
+        ([f"{bars}:0.5:2400"], "slanted edge only"),
     ]
     for args, words in cases:
         r = CliRunner().invoke(app, ["fit", *args, "-o", out])

@@ -24,13 +24,28 @@ from .metrics import DpiOpt, LinearOpt, read_scan_image
 from .optics import OpticsOpt
 
 
-def _image_spec(text: str) -> tuple[Path, float]:
-    """IMAGE:Z_MM, the height in the modelled range."""
+def _image_spec(text: str) -> tuple[Path, float, float | None]:
+    """IMAGE:Z_MM[:CHART_DPI], the height in the modelled range and the resolution the
+    chart was drawn at (None: an ideal chart)."""
     from ..imaging.heightmap import Z_RANGE_MM
 
-    path, sep, z = text.rpartition(":")
+    chart = None
+    parts = text.rsplit(":", 2)
+    if len(parts) == 3 and parts[0] and _is_number(parts[1]) and _is_number(parts[2]):
+        text_z, chart = f"{parts[0]}:{parts[1]}", float(parts[2])
+        if not CHART_DPI[0] <= chart <= CHART_DPI[1]:
+            fail(
+                f"{text}: chart resolution {chart:g} dpi outside [{CHART_DPI[0]:g}, "
+                f"{CHART_DPI[1]:g}] (IMAGE:Z_MM:CHART_DPI, the dpi the chart was drawn at)"
+            )
+    else:
+        text_z = text
+    path, sep, z = text_z.rpartition(":")
     if not sep or not path:
-        fail(f"{text}: expected IMAGE:Z_MM (the chart's height above the scanner's top, mm)")
+        fail(
+            f"{text}: expected IMAGE:Z_MM or IMAGE:Z_MM:CHART_DPI (the chart's height above "
+            "the scanner's top, mm; the dpi it was drawn at)"
+        )
     try:
         zv = float(z)
     except ValueError:
@@ -38,7 +53,19 @@ def _image_spec(text: str) -> tuple[Path, float]:
     lo, hi = Z_RANGE_MM
     if not lo <= zv <= hi:
         fail(f"{text}: height {zv:g} mm outside the modelled range [{lo:g}, {hi:g}] mm")
-    return Path(path), zv
+    return Path(path), zv, chart
+
+
+#: The resolutions (dpi) a chart may be said to be drawn at (IMAGE:Z_MM:CHART_DPI).
+CHART_DPI = (100.0, 100000.0)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _names(text: str | None, option: str) -> list[str] | None:
@@ -72,7 +99,7 @@ def _observations(specs, dpi, linear, calibration_lines):
 
     obs, seen_dpi, designs = [], None, {}
     for text in specs:
-        path, z = _image_spec(text)
+        path, z, chart = _image_spec(text)
         img, use = read_scan_image(path, dpi, linear, min_px=16)
         if seen_dpi is not None and abs(use - seen_dpi) > 1e-6 * seen_dpi:
             fail(f"{text}: {use:g} dpi, the images before it {seen_dpi:g} dpi (one scanner)")
@@ -85,8 +112,11 @@ def _observations(specs, dpi, linear, calibration_lines):
             designs[text] = side["design_fingerprint"]
         try:
             obs.append(
-                observation(img, use, z, name=path.name, calibration_lines=calibration_lines)
-            )
+                observation(
+                    img, use, z, name=path.name, calibration_lines=calibration_lines,
+                    chart_dpi=chart,
+                )
+            )  # fmt: skip
         except ValueError as err:
             fail(f"{text}: {err}")
     if len(set(designs.values())) > 1:
@@ -105,7 +135,7 @@ def _write_report(folder: Path, res, obs, specs, dpi, linear, data: dict) -> Non
     folder.mkdir(parents=True, exist_ok=True)
     imgs = {}
     for text in specs:
-        path, _ = _image_spec(text)
+        path = _image_spec(text)[0]
         imgs[path.name] = read_scan_image(path, dpi, linear, min_px=16)[0]
     comp = rmtf_comparison(res, obs, imgs)
     res_items = residuals(res, obs)
@@ -154,8 +184,10 @@ def fit_cmd(
     images: Annotated[
         list[str],
         typer.Argument(
-            help="IMAGE:Z_MM, a scan of a bar chart (chart bars) or a slanted square "
-            "(chart edge) and its height above the scanner's top surface (mm)",
+            help="IMAGE:Z_MM[:CHART_DPI], a scan of a bar chart (chart bars) or a slanted "
+            "square (chart edge), its height above the scanner's top surface (mm) and, for "
+            "a slanted square, optionally the resolution it was drawn at (its pixels' blur "
+            "is then modelled; default an ideal edge)",
             show_default=False,
         ),
     ],

@@ -59,6 +59,9 @@ from .fitwave import WaveModel, held_sampling
 #: A standard error beyond this many times a parameter's assembly scale: the parameter
 #: is reported as not determined (its error None), not with false precision.
 UNDETERMINED = 10.0
+#: A held combination's member: a parameter whose component in it (a unit vector of
+#: assembly scales) is at least this; it has no error of its own (:func:`_fit`).
+MEMBER = 0.1
 #: Rounds of holding undetermined parameters at nominal and fitting the rest again.
 HOLD_ROUNDS = 3
 #: Times at most that a secant probe below the optimum takes the fit on from there.
@@ -258,20 +261,28 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
         jobs.append((design, observations, lay, model, t0, max_nfev))
     # the starts side by side where the wave fit has its pool (the same numbers)
     done = pool(_start, jobs) if pool is not None and len(jobs) > 1 else map(_start, jobs)
-    runs, ends, best = [], [], None
+    runs, ends = [], []
     for s, r in enumerate(done):
         runs.append({"start": s, "chi2": 2 * r["cost"], "nfev": r["nfev"], "status": r["status"]})
         ends.append(r["x"])
-        if best is None or r["cost"] < best["cost"]:
-            best = r
-    theta = best["x"]
-    for r in runs:  # how far each start's minimum is from the best one
-        r["delta_chi2"] = r["chi2"] - 2 * best["cost"]
+    chis = np.array([r["chi2"] for r in runs])
+    if wave is not None:
+        # each start's minimum judged by the model fitted: the fast model corrected about
+        # the nominal design holds near it only, and its minima far from it can fit the
+        # wave model badly (docs/fit.md, "The starts judged by the wave model")
+        judged = _wave_chi2(prob, at, ends)
+        ends = [q for q, _ in judged]
+        chis = np.array([c if np.isfinite(c) else np.inf for _, c in judged])
+        for r, c in zip(runs, chis, strict=True):
+            r["wave_chi2"] = float(c)
+    k_best = int(np.argmin(chis))
+    theta = ends[k_best]
+    for r, c in zip(runs, chis, strict=True):  # how far each start's minimum is from the best
+        r["delta_chi2"] = float(c - chis[k_best])
     chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     names_now = [lay.params[j].name for j in lay.free]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))[: lay.n_free]
     delta = scale2 * chdtri(max(lay.n_free, 1), 0.05)  # chi2's 95 % quantile
-    chis = np.array([r["chi2"] for r in runs])
     apart = starts_apart(np.array(ends)[:, : lay.n_free], chis, theta[: lay.n_free], sd, delta)
     for k, (lo, hi) in apart.items():
         msgs.append(
@@ -314,7 +325,8 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
                 terms = " ".join(f"{c:+.2f} {n}" for n, c in combos[-1].items())
                 said.append(
                     f"the combination {terms} (each in its assembly scale) is {HELD}: its "
-                    "members' values and errors are given it; pin one to choose otherwise"
+                    "members are where the hold puts them, and none has an error of its "
+                    "own (each can move along it); pin one to choose otherwise"
                 )
             rows = np.vstack([rows[:, keep]] + [v[None] for v in new])
             lay = layout_for(
@@ -387,6 +399,12 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     nf = lay.n_free
     names = [lay.params[j].name for j in lay.free]
+    # a held combination's members can each move along it (the images do not say
+    # where): their values are where the hold puts them, none has an error of its own
+    # (the errors on the held plane alone had stated 0.08 um for a layer shift 20 of
+    # them from the truth: docs/fit.md)
+    members = {n for c in combos for n, v in c.items() if abs(v) >= MEMBER}
+    blind = sorted(set(blind) | {k for k in range(nf) if names[k] in members})
     errors = [None if k in blind else float(sd[k]) for k in range(nf)]
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov[:nf, :nf] / np.outer(sd[:nf], sd[:nf])
@@ -434,6 +452,27 @@ def _schemes(schemes: list[dict]) -> dict:
         out[key] = sum(sc[key] for sc in schemes)
     out["wave_chi2"] = [schemes[0]["wave_chi2"][0], last["wave_chi2"][1]]
     out["polishes"] = len(schemes)
+    return out
+
+
+def _wave_chi2(prob: Problem, runs: WaveRuns, points: list) -> list[tuple[np.ndarray, float]]:
+    """Each point of ``prob`` with its images' nuisance fitted again under the wave model
+    (``runs``, the fit's) and its chi2 there: side by side on the pool where there is one
+    (:meth:`~.fitpool.WaveRuns.refits`), else here; NaN where the point's design breaks
+    a rule or passes no light."""
+    pooled = runs.refits(prob, points, min_runs=1)
+    if pooled is not None:
+        return pooled
+    exact = Problem(
+        prob.design, prob.obs, prob.lay, hold=prob.hold, model=lambda d, z, s, v: runs(v)
+    )
+    out = []
+    for p in points:
+        try:
+            q = exact.fit_nuisance(p, search=False)
+            out.append((q, float(np.sum(exact.residuals(q) ** 2))))
+        except ValueError:
+            out.append((p, float("nan")))
     return out
 
 

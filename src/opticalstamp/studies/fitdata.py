@@ -21,7 +21,7 @@ removes.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -87,6 +87,8 @@ class Observation:
     ``z_mm``: the height the experimenter set, from the scanner's top surface (the
     design's reference plane as drawn). ``kind``: "bars" or "edge"; ``blocks`` or
     ``edges`` hold the data. ``noise``: (a, b) of one pixel's variance a + b v.
+    ``chart_um``: the pixel (um) the chart was drawn in (0: an ideal chart;
+    :func:`~.fitmodel.chart_blurred`).
     """
 
     name: str
@@ -96,6 +98,7 @@ class Observation:
     blocks: tuple[BarBlock, ...] = ()
     edges: tuple[EdgeRegion, ...] = ()
     noise: tuple[float, float] = (0.0, 0.0)
+    chart_um: float = 0.0
 
     @property
     def items(self) -> tuple:
@@ -295,8 +298,14 @@ def observation(
     *,
     name: str = "image",
     calibration_lines: int = CALIBRATION_LINES,
+    chart_dpi: float | None = None,
 ) -> Observation:
     """Bar blocks where the image holds them, else a slanted dark square's edges.
+    ``chart_dpi``: the resolution a slanted edge was drawn at (its pixels' blur is then
+    part of the model, :func:`~.fitmodel.chart_blurred`); None: an ideal chart. Refused
+    for bars: a block whose period is a whole number of the chart's pixels (the
+    project's 100/200/300-dpi blocks at 2400 or 4800 dpi) has every edge at one phase of
+    them, so no average blur describes it (docs/fit.md).
 
     Raises
     ------
@@ -306,12 +315,22 @@ def observation(
     img = np.asarray(image, dtype=np.float64)
     if img.ndim != 2 or min(img.shape) < 16:
         raise ValueError(f"expected a grey image of 16 x 16 pixels or more (got {img.shape})")
+    if chart_dpi is not None and not chart_dpi > 0:
+        raise ValueError(f"chart_dpi: must be > 0 (got {chart_dpi!r})")
+    chart = {} if chart_dpi is None else {"chart_um": float(pitch_of_dpi(chart_dpi))}
     try:
-        return bar_observation(img, dpi, z_mm, name=name, calibration_lines=calibration_lines)
+        o = bar_observation(img, dpi, z_mm, name=name, calibration_lines=calibration_lines)
     except ValueError as bar_err:
         try:
-            return edge_observation(img, dpi, z_mm, name=name, calibration_lines=calibration_lines)
+            o = edge_observation(img, dpi, z_mm, name=name, calibration_lines=calibration_lines)
         except ValueError as edge_err:
             raise ValueError(
                 f"no chart found: {bar_err}; and no slanted dark square ({edge_err})"
             ) from None
+    if chart and o.kind == "bars":
+        raise ValueError(
+            "chart_dpi: modelled for a slanted edge only (it crosses the chart's pixels at "
+            "every phase); a bar block's edges lie at one phase of them, which no average "
+            "blur describes: draw the bars finer, or leave CHART_DPI out"
+        )
+    return replace(o, **chart)

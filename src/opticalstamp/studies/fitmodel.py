@@ -173,6 +173,27 @@ def spread(
     return Spread(u, cx / gx, cy / gy, max(half, reach_um)).widened(n)
 
 
+def chart_blurred(sp: Spread, pixel_um: float) -> Spread:
+    """``sp`` as seen on a chart drawn in square pixels of ``pixel_um`` (0: an ideal
+    chart, ``sp`` itself). Each pixel of the project's charts holds the mean of the ideal
+    pattern over it (``chart bars``/``chart edge``: supersampled), held over the pixel;
+    over where the pixel grid falls under the pattern's edges (a block's bars, a slanted
+    edge's length), that is the ideal pattern convolved with the pixel's box twice: a
+    triangle of half width ``pixel_um`` along x and y (variance pixel^2 / 6), which
+    convolves each cumulative of the spread (the charts' blur and the optics' commute).
+    The triangle is summed on the table's grid (``TABLE_UM``); the table grows by its
+    half width each side."""
+    if pixel_um <= 0:
+        return sp
+    k = int(np.ceil(pixel_um / TABLE_UM))
+    w = np.clip(1.0 - np.abs(np.arange(-k, k + 1) * TABLE_UM) / pixel_um, 0.0, None)
+    w /= w.sum()
+    n = (sp.u.size - 1) // 2 + k
+    wide = sp.widened(n + k)  # 0 before, 1 after: the convolution's ends
+    cx, cy = (np.convolve(c, w, mode="valid") for c in (wide.cx, wide.cy))
+    return Spread(np.arange(-n, n + 1) * TABLE_UM, cx, cy, sp.half_um + pixel_um)
+
+
 def spreads(design: Design, zs, smear_um: float, phys=None) -> dict[float, Spread]:
     """The fast model (:func:`spread`, the paraxial own path) at each height: {Z: spread}
     (``phys``, the physical values that made ``design``, is not needed here)."""

@@ -25,6 +25,7 @@ from .fitmodel import (
     Param,
     Spread,
     bar_fraction,
+    chart_blurred,
     design_params,
     edge_fraction,
     smear_of,
@@ -268,7 +269,8 @@ class Problem:
             try:
                 d = with_params(self.design, list(self.lay.params), phys)
                 by_z = self.model(d, sorted({o.z_mm for o in self.obs}), self.smear, phys)
-                self._cache[key] = [by_z[o.z_mm] for o in self.obs]
+                # each image's chart drawn in its own pixels (none: the spread itself)
+                self._cache[key] = [chart_blurred(by_z[o.z_mm], o.chart_um) for o in self.obs]
             except ValueError:  # DesignError is one too
                 self._cache[key] = None
         return self._cache[key]
