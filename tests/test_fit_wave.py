@@ -198,7 +198,7 @@ def test_secant_refits_on_the_pool_are_the_fits_own():
     whose design breaks a rule is NaN, a batch below ``min_runs`` is left to the caller;
     and the secant check itself (:func:`~opticalstamp.studies.fitident.secant_estimate`)
     gives the same covariance and record with the pool as without."""
-    from opticalstamp.studies.fit import UNDETERMINED, _estimate, _exact
+    from opticalstamp.studies.fit import UNDETERMINED, _estimate, _exact, _wave_chi2
     from opticalstamp.studies.fitident import secant_estimate
     from opticalstamp.studies.fitpool import WaveRuns, wave_pool
     from opticalstamp.studies.fitproblem import nuisance_start
@@ -236,5 +236,10 @@ def test_secant_refits_on_the_pool_are_the_fits_own():
         assert np.array_equal(q, want_q)
         assert value == float(np.sum(serial.residuals(want_q) ** 2))
     assert np.isnan(got[-1][1])
+    # the starts' judge (_wave_chi2): the same points and sums here as on the pool
+    here = _wave_chi2(Problem(NOMINAL, obs, lay), runs_on(None), points + [broken])
+    for (q, v), (gq, gv) in zip(here[:-1], got[:-1], strict=True):
+        assert np.array_equal(q, gq) and v == gv
+    assert np.isnan(here[-1][1])
     assert np.array_equal(pooled[0][3], alone[0][3])  # the covariance
     assert json.dumps(pooled[1], default=str) == json.dumps(alone[1], default=str)

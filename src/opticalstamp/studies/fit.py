@@ -269,7 +269,7 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
     if wave is not None:
         # each start's minimum judged by the model fitted: the fast model corrected about
         # the nominal design holds near it only, and its minima far from it can fit the
-        # wave model badly (docs/fit.md, "The starts judged by the wave model")
+        # wave model badly (docs/fit.md, "Held at nominal": the starts disagree)
         judged = _wave_chi2(prob, at, ends)
         ends = [q for q, _ in judged]
         chis = np.array([c if np.isfinite(c) else np.inf for _, c in judged])
@@ -463,16 +463,14 @@ def _wave_chi2(prob: Problem, runs: WaveRuns, points: list) -> list[tuple[np.nda
     pooled = runs.refits(prob, points, min_runs=1)
     if pooled is not None:
         return pooled
-    exact = Problem(
-        prob.design, prob.obs, prob.lay, hold=prob.hold, model=lambda d, z, s, v: runs(v)
-    )
+    exact = _exact(prob, runs)
     out = []
     for p in points:
-        try:
-            q = exact.fit_nuisance(p, search=False)
-            out.append((q, float(np.sum(exact.residuals(q) ** 2))))
-        except ValueError:
+        if exact.spreads(exact.lay.physical(p)) is None:  # a rule broken or no light
             out.append((p, float("nan")))
+            continue
+        q = exact.fit_nuisance(p, search=False)
+        out.append((q, float(np.sum(exact.residuals(q) ** 2))))
     return out
 
 
