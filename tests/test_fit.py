@@ -313,6 +313,34 @@ def test_starts_that_fit_as_well_but_disagree():
     assert starts_apart(ends, chi2s, ends[0], sd, 60.0) == {0: (1.0, 9.0), 1: (10.0, 50.0)}
 
 
+def test_the_best_start_is_judged_by_the_wave_model_where_it_runs():
+    """judge_starts: the wave chi2 picks the best start (not the fast model's lowest); a
+    start is as good as the best only where both models say so; a start the wave model
+    cannot run (NaN) is never best, and where none runs the fast model judges."""
+    from opticalstamp.cli.fit import starts_lines
+    from opticalstamp.studies.fitident import judge_starts
+
+    fast = [100.0, 101.0, 130.0, 100.5]
+    wave = [400.0, 200.0, 201.0, float("nan")]
+    k, lowest, dist, by_wave = judge_starts(fast, wave)
+    assert by_wave and k == 1
+    assert np.allclose(lowest, [0.0, 1.0, 30.0, 0.5])
+    # start 0: the fast model's lowest, the wave model's worst; start 2: as good by the
+    # wave model, 29 worse by the fast one; start 3: not run by the wave model
+    assert np.allclose(dist[:3], [200.0, 0.0, 29.0]) and dist[3] == np.inf
+    assert judge_starts(fast)[:1] == (0,) and not judge_starts(fast)[3]
+    k, _, dist, by_wave = judge_starts(fast, [float("nan")] * 4)
+    assert not by_wave and k == 0 and np.allclose(dist, [0.0, 1.0, 30.0, 0.5])
+    starts = [
+        {"start": s, "chi2": f, "delta_chi2": float(lo), "wave_chi2": w, "best": s == 1}
+        for s, (f, lo, w) in enumerate(zip(fast, lowest, [400.0, 200.0, 200.5, None], strict=True))
+    ]
+    lines = starts_lines(starts)
+    assert lines[0].startswith("2 of 4 starts reached the lowest minimum")
+    assert "judged start 1's minimum best (wave chi2 200.0" in lines[1]
+    assert "1 more within 1" in lines[1]
+
+
 def test_a_combination_held_at_nominal(monkeypatch):
     """Bars at two heights see the three layers' x shifts nearly only in two
     combinations: with the threshold lowered to make the third undetermined, the fit
@@ -335,7 +363,7 @@ def test_a_combination_held_at_nominal(monkeypatch):
     assert any("combination" in m and HELD in m for m in res.degeneracies)
     # each member can move along it: none has an error of its own (the held plane's
     # errors alone would be false precision), nor a correlation
-    members = [n for n in free if abs(combo.get(n, 0.0)) >= fitmod.MEMBER]
+    members = [n for n in free if n in combo]
     assert members and all(res.errors[free.index(n)] is None for n in members)
     assert all(np.isnan(res.correlation[free.index(n)]).all() for n in members)
     assert res.chi2 >= res0.chi2 - 1e-6 * res0.chi2
@@ -515,6 +543,27 @@ def test_image_spec_takes_an_optional_chart_resolution():
     assert _image_spec("e.tif:2:2400") == (Path("e.tif"), 2.0, 2400.0)
     assert _image_spec("C:/scans/e.tif:0.5") == (Path("C:/scans/e.tif"), 0.5, None)
     assert _image_spec("a:b/e.tif:0.5:4800") == (Path("a:b/e.tif"), 0.5, 4800.0)
+
+
+def test_image_spec_keeps_a_file_named_with_a_trailing_number(tmp_path, monkeypatch, capsys):
+    """A file whose name ends in ':number' (``run:5``) given with its height alone is
+    read as IMAGE:Z_MM, not as a chart's resolution; a trailing ':' is named."""
+    from pathlib import Path
+
+    import typer
+
+    from opticalstamp.cli.fit import _image_spec
+
+    monkeypatch.chdir(tmp_path)
+    Path("run:5").write_bytes(b"")
+    assert _image_spec("run:5:1.5") == (Path("run:5"), 1.5, None)
+    Path("run").write_bytes(b"")  # both exist: the three fields, as documented
+    with pytest.raises(typer.Exit):
+        _image_spec("run:5:1.5")
+    assert "chart resolution 1.5 dpi" in capsys.readouterr().err
+    with pytest.raises(typer.Exit):
+        _image_spec("e.tif:2:")
+    assert "empty field after the last ':'" in capsys.readouterr().err
 
 
 def test_an_edges_chart_pixels_are_modelled():

@@ -45,12 +45,20 @@ def test_estimator_within_its_stated_accuracy_of_the_exact_wave_figures(monkeypa
     launched, launch = [], pixel_module.launch
 
     def spied(path, src, n, seed, **kw):
-        launched.append(((src.x, src.y), kw.get("stream", 0), kw.get("first_id", 0)))
+        first = kw.get("first_id", 0)
+        launched.append(((src.x, src.y), kw.get("stream", 0), first, first + n))
         return launch(path, src, n, seed, **kw)
 
     monkeypatch.setattr(pixel_module, "launch", spied)
     ex = exact_wave_figures(d, dpi=400)
-    assert len(launched) >= 4 and len(set(launched)) == len(launched), launched
+    assert len(launched) >= 4, launched
+    streams: dict = {}
+    for pix, stream, lo, hi in launched:
+        assert hi > lo
+        streams.setdefault((pix, stream), []).append((lo, hi))
+    for ranges in streams.values():  # no ray of a stream traced twice
+        ranges.sort()
+        assert all(a[1] <= b[0] for a, b in zip(ranges[:-1], ranges[1:], strict=True)), ranges
     err = wave_errors(est, ex)
     assert est["optics"] == ex["optics"] == "wave"
     for k, v in err.items():

@@ -30,8 +30,17 @@ def _image_spec(text: str) -> tuple[Path, float, float | None]:
     from ..imaging.heightmap import Z_RANGE_MM
 
     chart = None
+    if text.endswith(":"):
+        fail(
+            f"{text}: an empty field after the last ':' (IMAGE:Z_MM or "
+            "IMAGE:Z_MM:CHART_DPI: the chart's height above the scanner's top, mm; the dpi "
+            "it was drawn at)"
+        )
     parts = text.rsplit(":", 2)
-    if len(parts) == 3 and parts[0] and _is_number(parts[1]) and _is_number(parts[2]):
+    three = len(parts) == 3 and parts[0] and _is_number(parts[1]) and _is_number(parts[2])
+    if three and not Path(parts[0]).exists() and Path(f"{parts[0]}:{parts[1]}").exists():
+        three = False  # a file whose name ends in ':number' (IMAGE:Z_MM)
+    if three:
         text_z, chart = f"{parts[0]}:{parts[1]}", float(parts[2])
         if not CHART_DPI[0] <= chart <= CHART_DPI[1]:
             fail(
@@ -66,6 +75,24 @@ def _is_number(text: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+def starts_lines(starts: list[dict]) -> list[str]:
+    """How the starts ended: how many reached the fast model's lowest minimum (chi2
+    within 1) and, under wave optics, which the wave model judged best."""
+    good = sum(1 for s in starts if s["delta_chi2"] is not None and s["delta_chi2"] < 1.0)
+    out = [f"{good} of {len(starts)} starts reached the lowest minimum (delta chi2 < 1)"]
+    best = next((s for s in starts if s.get("best")), None)
+    if best is not None and best.get("wave_chi2") is not None:
+        near = [
+            s for s in starts if s is not best and s.get("wave_chi2") is not None
+            and s["wave_chi2"] < best["wave_chi2"] + 1.0
+        ]  # fmt: skip
+        out.append(
+            f"the wave model judged start {best['start']}'s minimum best (wave chi2 "
+            f"{best['wave_chi2']:.1f} there, before the polish; {len(near)} more within 1)"
+        )
+    return out
 
 
 def _names(text: str | None, option: str) -> list[str] | None:
@@ -169,8 +196,7 @@ def result_lines(res) -> list[str]:
         lines.append(f"combination {terms} (assembly scales): {HELD}")
     for n, v in res.pinned.items():
         lines.append(f"{n:12s} pinned at {v:g}")
-    good = sum(1 for s in res.starts if s["delta_chi2"] < 1.0)
-    lines.append(f"{good} of {len(res.starts)} starts reached the best minimum (delta chi2 < 1)")
+    lines += starts_lines(res.starts)
     lines.append(optics_words(res.optics))
     lines += [f"warning: {m}" for m in res.degeneracies]
     warning = fit_optics(res.design, res.optics)

@@ -31,6 +31,7 @@ from .fitident import (
     degeneracies,
     descend,
     joined,
+    judge_starts,
     name_undetermined,
     names_in,
     secant_estimate,
@@ -59,9 +60,11 @@ from .fitwave import WaveModel, held_sampling
 #: A standard error beyond this many times a parameter's assembly scale: the parameter
 #: is reported as not determined (its error None), not with false precision.
 UNDETERMINED = 10.0
-#: A held combination's member: a parameter whose component in it (a unit vector of
-#: assembly scales) is at least this; it has no error of its own (:func:`_fit`).
-MEMBER = 0.1
+#: Said where no start's minimum runs under the wave model.
+NO_WAVE_START = (
+    "no start's minimum runs under the wave model (a rule broken or no light): the best "
+    "start is the fast model's"
+)
 #: Rounds of holding undetermined parameters at nominal and fitting the rest again.
 HOLD_ROUNDS = 3
 #: Times at most that a secant probe below the optimum takes the fit on from there.
@@ -265,25 +268,31 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
     for s, r in enumerate(done):
         runs.append({"start": s, "chi2": 2 * r["cost"], "nfev": r["nfev"], "status": r["status"]})
         ends.append(r["x"])
-    chis = np.array([r["chi2"] for r in runs])
+    said: list[str] = []  # why each held parameter or combination is held
+    fast = [r["chi2"] for r in runs]
+    wchis = None
     if wave is not None:
         # each start's minimum judged by the model fitted: the fast model corrected about
         # the nominal design holds near it only, and its minima far from it can fit the
         # wave model badly (docs/fit.md, "Held at nominal": the starts disagree)
         judged = _wave_chi2(prob, at, ends)
+        wchis = [c for _, c in judged]
+        for r, c in zip(runs, wchis, strict=True):
+            r["wave_chi2"] = float(c) if np.isfinite(c) else None
+    k_best, lowest, dist, by_wave = judge_starts(fast, wchis)
+    if by_wave:
         ends = [q for q, _ in judged]
-        chis = np.array([c if np.isfinite(c) else np.inf for _, c in judged])
-        for r, c in zip(runs, chis, strict=True):
-            r["wave_chi2"] = float(c)
-    k_best = int(np.argmin(chis))
+    elif wave is not None:
+        said.append(NO_WAVE_START)
     theta = ends[k_best]
-    for r, c in zip(runs, chis, strict=True):  # how far each start's minimum is from the best
-        r["delta_chi2"] = float(c - chis[k_best])
+    for r, lo in zip(runs, lowest, strict=True):
+        r["delta_chi2"] = float(lo) if np.isfinite(lo) else None
+        r["best"] = r["start"] == k_best
     chi2, dof, scale2, cov, msgs, blind, weak = _estimate(prob, theta)
     names_now = [lay.params[j].name for j in lay.free]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))[: lay.n_free]
     delta = scale2 * chdtri(max(lay.n_free, 1), 0.05)  # chi2's 95 % quantile
-    apart = starts_apart(np.array(ends)[:, : lay.n_free], chis, theta[: lay.n_free], sd, delta)
+    apart = starts_apart(np.array(ends)[:, : lay.n_free], dist, theta[: lay.n_free], sd, delta)
     for k, (lo, hi) in apart.items():
         msgs.append(
             f"{names_now[k]} is not determined by these images: starts that fit them as "
@@ -292,7 +301,6 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
         )
     held: dict[str, float] = {}
     combos: list[dict[str, float]] = []
-    said: list[str] = []  # why each held parameter or combination is held
     rows = np.zeros((0, lay.n_free))  # the combinations held, in assembly scales
     extra = set(apart)  # held in the first round with the single directions
 
@@ -403,7 +411,7 @@ def _fit(design, observations, free, pinned, starts, seed, max_nfev, opt, pool=N
     # where): their values are where the hold puts them, none has an error of its own
     # (the errors on the held plane alone had stated 0.08 um for a layer shift 20 of
     # them from the truth: docs/fit.md)
-    members = {n for c in combos for n, v in c.items() if abs(v) >= MEMBER}
+    members = {n for c in combos for n in c}  # its terms: components >= MEMBER
     blind = sorted(set(blind) | {k for k in range(nf) if names[k] in members})
     errors = [None if k in blind else float(sd[k]) for k in range(nf)]
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -304,8 +304,8 @@ def observation(
     ``chart_dpi``: the resolution a slanted edge was drawn at (its pixels' blur is then
     part of the model, :func:`~.fitmodel.chart_blurred`); None: an ideal chart. Refused
     for bars: a block whose period is a whole number of the chart's pixels (the
-    project's 100/200/300-dpi blocks at 2400 or 4800 dpi) has every edge at one phase of
-    them, so no average blur describes it (docs/fit.md).
+    project's 100/150/200-dpi blocks at 2400 or 4800 dpi; its 247-dpi one is not) has
+    every edge at one phase of them, so no average blur describes it (docs/fit.md).
 
     Raises
     ------

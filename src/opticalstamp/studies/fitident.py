@@ -87,15 +87,48 @@ def weak_directions(jac: np.ndarray, lay: Layout, scale2: float, undetermined: f
     return vt[sv < np.sqrt(scale2) / undetermined]
 
 
+#: A held combination's member: a parameter whose component in it (a unit vector of
+#: assembly scales) is at least this; it is named in the combination and has no error of
+#: its own (``fit._fit``).
+MEMBER = 0.1
+
+
 def combination(v: np.ndarray, names: list[str]) -> dict[str, float]:
-    """A held direction as {name: coefficient}, its largest coefficient positive."""
+    """A held direction as {name: coefficient} over its members (components of at least
+    MEMBER), its largest coefficient positive."""
     v = v * np.sign(v[np.argmax(np.abs(v))])
-    return {n: round(float(c), 3) for n, c in zip(names, v, strict=True) if abs(c) > 0.05}
+    return {n: round(float(c), 3) for n, c in zip(names, v, strict=True) if abs(c) >= MEMBER}
 
 
 def names_in(message: str, name: str) -> bool:
     """Whether ``message`` names the parameter ``name`` (as a whole word)."""
     return re.search(rf"(?<![\w.]){re.escape(name)}(?![\w]|\.\w)", message) is not None
+
+
+def judge_starts(
+    fast: list[float], wave: list[float] | None = None
+) -> tuple[int, np.ndarray, np.ndarray, bool]:
+    """The best of the starts' minima, by their fast-model chi2 ``fast`` or, where given
+    and any is finite, by the wave model's chi2 at them ``wave`` (NaN: a design that
+    breaks a rule or passes no light, as infinity).
+
+    Returns (the best start, each start's fast chi2 above the lowest, each start's
+    distance from the best for :func:`starts_apart`, whether the wave model judged). The
+    distance is the larger of the two models' chi2 differences from the best start: a
+    start fits the images as well as the best only where both say so (the fast model's
+    minima far from nominal can fit the wave model badly, and the wave chi2 at a fast
+    minimum, not polished, only bounds that start's own from above).
+    """
+    f = np.asarray(fast, dtype=float)
+    f = np.where(np.isfinite(f), f, np.inf)
+    lowest = f - f.min() if np.isfinite(f).any() else np.full(f.shape, np.inf)
+    w = None if wave is None else np.asarray(wave, dtype=float)
+    by_wave = w is not None and bool(np.isfinite(w).any())
+    chis = np.where(np.isfinite(w), w, np.inf) if by_wave else f
+    k = int(np.argmin(chis))
+    with np.errstate(invalid="ignore"):
+        dist = np.maximum(chis - chis[k], f - f[k]) if by_wave else chis - chis[k]
+    return k, lowest, np.where(np.isnan(dist), np.inf, dist), by_wave
 
 
 def starts_apart(
