@@ -107,17 +107,13 @@ def names_in(message: str, name: str) -> bool:
 
 def judge_starts(
     fast: list[float], wave: list[float] | None = None
-) -> tuple[int, np.ndarray, np.ndarray, bool]:
-    """The best of the starts' minima, by their fast-model chi2 ``fast`` or, where given
+) -> tuple[int, np.ndarray, bool]:
+    """The best of the starts' points, by their fast-model chi2 ``fast`` or, where given
     and any is finite, by the wave model's chi2 at them ``wave`` (NaN: a design that
     breaks a rule or passes no light, as infinity).
 
-    Returns (the best start, each start's fast chi2 above the lowest, each start's
-    distance from the best for :func:`starts_apart`, whether the wave model judged). The
-    distance is the larger of the two models' chi2 differences from the best start: a
-    start fits the images as well as the best only where both say so (the fast model's
-    minima far from nominal can fit the wave model badly, and the wave chi2 at a fast
-    minimum, not polished, only bounds that start's own from above).
+    Returns (the best point, each point's fast chi2 above the lowest, whether the wave
+    model judged).
     """
     f = np.asarray(fast, dtype=float)
     f = np.where(np.isfinite(f), f, np.inf)
@@ -125,10 +121,7 @@ def judge_starts(
     w = None if wave is None else np.asarray(wave, dtype=float)
     by_wave = w is not None and bool(np.isfinite(w).any())
     chis = np.where(np.isfinite(w), w, np.inf) if by_wave else f
-    k = int(np.argmin(chis))
-    with np.errstate(invalid="ignore"):
-        dist = np.maximum(chis - chis[k], f - f[k]) if by_wave else chis - chis[k]
-    return k, lowest, np.where(np.isnan(dist), np.inf, dist), by_wave
+    return int(np.argmin(chis)), lowest, by_wave
 
 
 def starts_apart(
